@@ -1,0 +1,2 @@
+//! The `dgstereo` command-line tool.
+fn main() {}

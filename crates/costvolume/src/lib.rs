@@ -1,0 +1,125 @@
+//! The 1-D correlation cost volume of RAFT-Stereo and its lookup.
+//!
+//! Rectified stereo only matches along rows, so the volume is `corr[n,h,x1,x2] = <f1[:,h,x1],
+//! f2[:,h,x2]> / sqrt(C)`, pooled by 2 along `x2` into a pyramid and sampled by linear
+//! interpolation at `x = coords / 2^level + dx`, `dx = -r..=r` (zero outside the row).
+//! Two implementations sit behind the [`CostVolume`] trait: [`CorrelationPyramid`] materialises
+//! the `W x W` volume per row once (fast lookups; "reg" in the reference) and
+//! [`OnTheFlyCorrelation`] stores only the pooled features and takes the dot products at the
+//! sampled positions (memory linear in `W`; "alt"). They agree to float rounding.
+#![deny(missing_docs)]
+
+mod lookup;
+mod on_the_fly;
+mod pyramid;
+
+use burn::tensor::Tensor;
+use serde::{Deserialize, Serialize};
+
+pub use on_the_fly::OnTheFlyCorrelation;
+pub use pyramid::CorrelationPyramid;
+
+/// The stage trait: correlation features around the current match positions.
+///
+/// # Shapes
+/// - `coords_x`: `[N, 1, H, W]`, x position in the right feature map of each left pixel
+/// - output: `[N, levels · (2·radius + 1), H, W]`, level-major, offsets ascending
+pub trait CostVolume {
+    /// Samples the volume around `coords_x`.
+    fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4>;
+}
+
+/// Which implementation builds the volume.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum CorrelationImplementation {
+    /// Materialised all-pairs pyramid ("reg").
+    #[default]
+    Reg,
+    /// On-the-fly dot products, never storing the `W x W` volume ("alt").
+    Alt,
+}
+
+/// Configuration of the correlation stage.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CorrelationConfig {
+    /// Implementation.
+    #[serde(default)]
+    pub implementation: CorrelationImplementation,
+    /// Pyramid levels looked up (`corr_levels`, 4).
+    #[serde(default = "default_levels")]
+    pub levels: usize,
+    /// Lookup radius (`corr_radius`, 4).
+    #[serde(default = "default_radius")]
+    pub radius: usize,
+}
+
+fn default_levels() -> usize {
+    4
+}
+fn default_radius() -> usize {
+    4
+}
+
+impl Default for CorrelationConfig {
+    fn default() -> Self {
+        Self { implementation: CorrelationImplementation::Reg, levels: 4, radius: 4 }
+    }
+}
+
+impl CorrelationConfig {
+    /// Channels of a lookup: `levels · (2·radius + 1)`.
+    pub fn channels(&self) -> usize {
+        self.levels * (2 * self.radius + 1)
+    }
+
+    /// Builds the volume of `fmap1` against `fmap2` (`[N, C, H, W]` each).
+    pub fn build(&self, fmap1: Tensor<4>, fmap2: Tensor<4>) -> Correlation {
+        self.build_with(self.implementation, fmap1, fmap2)
+    }
+
+    /// Builds the volume with an explicit implementation.
+    pub fn build_with(&self, implementation: CorrelationImplementation, fmap1: Tensor<4>, fmap2: Tensor<4>) -> Correlation {
+        match implementation {
+            CorrelationImplementation::Reg => {
+                Correlation::Reg(CorrelationPyramid::new(fmap1, fmap2, self.levels, self.radius))
+            }
+            CorrelationImplementation::Alt => {
+                Correlation::Alt(OnTheFlyCorrelation::new(fmap1, fmap2, self.levels, self.radius))
+            }
+        }
+    }
+
+    /// Bytes the materialised pyramid of a `[N, C, H, W]` feature pair would hold (float32).
+    pub fn pyramid_bytes(&self, n: usize, h: usize, w: usize) -> usize {
+        let mut per_row = 0;
+        let mut width = w;
+        for _ in 0..=self.levels {
+            per_row += width;
+            width /= 2;
+        }
+        4 * n * h * w * per_row
+    }
+}
+
+/// A built volume of either implementation.
+#[derive(Debug, Clone)]
+pub enum Correlation {
+    /// Materialised pyramid.
+    Reg(CorrelationPyramid),
+    /// On-the-fly.
+    Alt(OnTheFlyCorrelation),
+}
+
+impl CostVolume for Correlation {
+    fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
+        match self {
+            Self::Reg(c) => c.lookup(coords_x),
+            Self::Alt(c) => c.lookup(coords_x),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

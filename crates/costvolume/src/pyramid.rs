@@ -1,0 +1,85 @@
+//! The materialised all-pairs pyramid ("reg").
+
+use burn::tensor::Tensor;
+
+use crate::CostVolume;
+use crate::lookup::{interpolate_taps, taps};
+
+/// All-pairs correlation per row and its average-pooled levels.
+///
+/// Level 0 is `corr[n,h,x1,x2] = <f1, f2> / sqrt(C)`, computed as one batched matrix product;
+/// level `i` pools level `i-1` by 2 along `x2` (floor), as `avg_pool2d([1,2])` in the reference.
+/// It keeps `levels + 1` entries, as the reference's `CorrBlock1D`, and looks up the first
+/// `levels`.
+///
+/// # Shapes
+/// - `levels()[i]`: `[N·H·W1, W2 / 2^i]`
+#[derive(Debug, Clone)]
+pub struct CorrelationPyramid {
+    pyramid: Vec<Tensor<2>>,
+    dims: [usize; 3],
+    levels: usize,
+    radius: usize,
+}
+
+impl CorrelationPyramid {
+    /// Builds the pyramid of `fmap1` (`[N, C, H, W1]`) against `fmap2` (`[N, C, H, W2]`).
+    pub fn new(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize) -> Self {
+        let [n, c, h, w1] = fmap1.dims();
+        let [_, _, _, w2] = fmap2.dims();
+        let corr = all_pairs(fmap1, fmap2).reshape([n * h * w1, w2]);
+        let mut pyramid = vec![corr];
+        for _ in 0..levels {
+            let last = pyramid.last().expect("level 0").clone();
+            pyramid.push(pool_pairs(last));
+        }
+        let _ = c;
+        Self { pyramid, dims: [n, h, w1], levels, radius }
+    }
+
+    /// The stored levels (`levels + 1` of them).
+    pub fn levels(&self) -> &[Tensor<2>] {
+        &self.pyramid
+    }
+}
+
+/// `[N, C, H, W1] x [N, C, H, W2] -> [N, H, W1, W2]`, scaled by `1/sqrt(C)`.
+pub fn all_pairs(fmap1: Tensor<4>, fmap2: Tensor<4>) -> Tensor<4> {
+    let c = fmap1.dims()[1];
+    let a = fmap1.permute([0, 2, 3, 1]); // N H W1 C
+    let b = fmap2.permute([0, 2, 1, 3]); // N H C W2
+    a.matmul(b).div_scalar((c as f64).sqrt())
+}
+
+/// Averages neighbouring pairs along the last axis, dropping an odd last column.
+fn pool_pairs(x: Tensor<2>) -> Tensor<2> {
+    let [m, w] = x.dims();
+    let half = w / 2;
+    if half == 0 {
+        return x.slice([0..m, 0..0]);
+    }
+    x.slice([0..m, 0..2 * half]).reshape([m, half, 2]).mean_dim(2).reshape([m, half])
+}
+
+impl CostVolume for CorrelationPyramid {
+    fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
+        let [n, h, w1] = self.dims;
+        let m = n * h * w1;
+        let k = 2 * self.radius + 1;
+        let x = coords_x.reshape([m, 1]);
+        let mut out = Vec::with_capacity(self.levels);
+        for (i, level) in self.pyramid.iter().take(self.levels).enumerate() {
+            let width = level.dims()[1];
+            let xi = x.clone().div_scalar((1u64 << i) as f64);
+            let (idx, inside, w) = taps(xi, self.radius, width.max(1));
+            let values = if width == 0 {
+                inside.zeros_like()
+            } else {
+                level.clone().gather(1, idx) * inside
+            };
+            out.push(interpolate_taps(values, w, self.radius));
+        }
+        let levels = self.levels;
+        Tensor::cat(out, 1).reshape([n, h, w1, levels * k]).permute([0, 3, 1, 2])
+    }
+}

@@ -1,0 +1,377 @@
+//! Folder layouts of Middlebury 2014, ETH3D two-view, KITTI 2012/2015, DrivingStereo and plain
+//! folders of pairs, plus Middlebury's `calib.txt`.
+
+use std::path::{Path, PathBuf};
+
+use dgstereo_core::{Error, Result};
+
+use super::sceneflow::walk;
+use super::{FileDataset, SampleFiles, ValidRule};
+
+fn subdirs(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| Error::io(dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
+fn some_file(p: PathBuf) -> Option<PathBuf> {
+    p.is_file().then_some(p)
+}
+
+fn file_name(p: &Path) -> String {
+    p.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// Middlebury 2014 (and MiddEval3) scenes: every sub-folder of `root` holding `im0.png` and
+/// `im1.png`; ground truth `disp0GT.pfm` (inf = unknown) or `disp0.pfm`, non-occlusion mask
+/// `mask0nocc.png` (255 = visible in both views). Valid ground truth: finite.
+pub fn middlebury2014(root: &Path) -> Result<FileDataset> {
+    let mut files = Vec::new();
+    for dir in subdirs(root)? {
+        let (left, right) = (dir.join("im0.png"), dir.join("im1.png"));
+        if !left.is_file() || !right.is_file() {
+            continue;
+        }
+        files.push(SampleFiles {
+            name: file_name(&dir),
+            group: None,
+            left,
+            right,
+            disparity: some_file(dir.join("disp0GT.pfm"))
+                .or_else(|| some_file(dir.join("disp0.pfm"))),
+            nonoccluded: some_file(dir.join("mask0nocc.png")),
+        });
+    }
+    Ok(FileDataset {
+        files,
+        rule: ValidRule::Finite,
+    })
+}
+
+/// The contents of a Middlebury `calib.txt`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MiddleburyCalib {
+    /// Left camera matrix, row-major 3x3.
+    pub cam0: [[f64; 3]; 3],
+    /// Right camera matrix.
+    pub cam1: [[f64; 3]; 3],
+    /// x-difference of the principal points (`disparity + doffs` is the true disparity).
+    pub doffs: f64,
+    /// Baseline (mm).
+    pub baseline: f64,
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+    /// Conservative bound on the disparity range.
+    pub ndisp: usize,
+}
+
+impl MiddleburyCalib {
+    /// Depth (in the baseline's unit) of a disparity `d`: `baseline · f / (d + doffs)`.
+    pub fn depth(&self, d: f64) -> f64 {
+        self.baseline * self.cam0[0][0] / (d + self.doffs)
+    }
+}
+
+fn parse_matrix(s: &str) -> Option<[[f64; 3]; 3]> {
+    let inner = s.trim().strip_prefix('[')?.strip_suffix(']')?;
+    let rows: Vec<&str> = inner.split(';').collect();
+    if rows.len() != 3 {
+        return None;
+    }
+    let mut m = [[0.0; 3]; 3];
+    for (r, row) in rows.iter().enumerate() {
+        let vals: Vec<f64> = row
+            .split_whitespace()
+            .map(str::parse)
+            .collect::<std::result::Result<_, _>>()
+            .ok()?;
+        if vals.len() != 3 {
+            return None;
+        }
+        m[r].copy_from_slice(&vals);
+    }
+    Some(m)
+}
+
+/// Parses a Middlebury `calib.txt` (`key=value` lines; `cam0=[f 0 cx; 0 f cy; 0 0 1]`).
+/// Unknown keys (`isint`, `vmin`, `vmax`, `dyavg`, `dymax`) are ignored; the keys of
+/// [`MiddleburyCalib`] are required.
+pub fn read_middlebury_calib(path: impl AsRef<Path>) -> Result<MiddleburyCalib> {
+    let path = path.as_ref();
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let mut kv = std::collections::HashMap::new();
+    for line in text.lines() {
+        if let Some((k, v)) = line.split_once('=') {
+            kv.insert(k.trim().to_string(), v.trim().to_string());
+        }
+    }
+    let get = |k: &str| {
+        kv.get(k)
+            .ok_or_else(|| Error::format(path, format!("calib: missing key {k:?}")))
+    };
+    let num = |k: &str| -> Result<f64> {
+        get(k)?
+            .parse::<f64>()
+            .map_err(|_| Error::format(path, format!("calib: {k} is not a number")))
+    };
+    let mat = |k: &str| -> Result<[[f64; 3]; 3]> {
+        parse_matrix(get(k)?).ok_or_else(|| {
+            Error::format(
+                path,
+                format!("calib: {k} is not a 3x3 matrix [a b c; d e f; g h i]"),
+            )
+        })
+    };
+    Ok(MiddleburyCalib {
+        cam0: mat("cam0")?,
+        cam1: mat("cam1")?,
+        doffs: num("doffs")?,
+        baseline: num("baseline")?,
+        width: num("width")? as usize,
+        height: num("height")? as usize,
+        ndisp: num("ndisp")? as usize,
+    })
+}
+
+/// ETH3D two-view: scenes in `root/two_view_training/<scene>/{im0,im1}.png` (or
+/// `root/two_view_test`, or scene folders directly in `root`), ground truth in
+/// `root/two_view_training_gt/<scene>/{disp0GT.pfm, mask0nocc.png}` or beside the images.
+/// Valid ground truth: finite and `< 512` (RAFT; occluded pixels included).
+pub fn eth3d(root: &Path) -> Result<FileDataset> {
+    let images = ["two_view_training", "two_view_test"]
+        .iter()
+        .map(|d| root.join(d))
+        .find(|p| p.is_dir());
+    let (img_root, gt_root) = match images {
+        Some(p) => {
+            let gt = PathBuf::from(format!("{}_gt", p.display()));
+            (p, Some(gt))
+        }
+        None => (root.to_path_buf(), None),
+    };
+    let mut files = Vec::new();
+    for dir in subdirs(&img_root)? {
+        let (left, right) = (dir.join("im0.png"), dir.join("im1.png"));
+        if !left.is_file() || !right.is_file() {
+            continue;
+        }
+        let scene = file_name(&dir);
+        let gt_dir = gt_root
+            .as_ref()
+            .map(|g| g.join(&scene))
+            .filter(|g| g.is_dir())
+            .unwrap_or_else(|| dir.clone());
+        files.push(SampleFiles {
+            name: scene,
+            group: None,
+            left,
+            right,
+            disparity: some_file(gt_dir.join("disp0GT.pfm")),
+            nonoccluded: some_file(gt_dir.join("mask0nocc.png")),
+        });
+    }
+    Ok(FileDataset {
+        files,
+        rule: ValidRule::Below(512.0),
+    })
+}
+
+/// KITTI version.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KittiVersion {
+    /// KITTI 2012: `colored_0`, `colored_1`, `disp_occ`, `disp_noc`.
+    K2012,
+    /// KITTI 2015: `image_2`, `image_3`, `disp_occ_0`, `disp_noc_0`.
+    K2015,
+}
+
+/// KITTI stereo: `root` is the `training` (or `testing`) folder; pairs are the `*_10.png` frames.
+/// Ground truth `disp_occ` (16-bit PNG /256, 0 = unknown) when present; the non-occluded mask is
+/// the `disp_noc` map's non-zero pixels. Valid ground truth: `> 0`.
+pub fn kitti(root: &Path, version: KittiVersion) -> Result<FileDataset> {
+    let (l, r, occ, noc) = match version {
+        KittiVersion::K2012 => ("colored_0", "colored_1", "disp_occ", "disp_noc"),
+        KittiVersion::K2015 => ("image_2", "image_3", "disp_occ_0", "disp_noc_0"),
+    };
+    let left_dir = root.join(l);
+    let mut names: Vec<String> = std::fs::read_dir(&left_dir)
+        .map_err(|e| Error::io(&left_dir, e))?
+        .filter_map(|e| e.ok().map(|e| file_name(&e.path())))
+        .filter(|n| n.ends_with("_10.png"))
+        .collect();
+    names.sort();
+    let files = names
+        .into_iter()
+        .map(|n| SampleFiles {
+            name: n.trim_end_matches(".png").to_string(),
+            group: None,
+            left: left_dir.join(&n),
+            right: root.join(r).join(&n),
+            disparity: some_file(root.join(occ).join(&n)),
+            nonoccluded: some_file(root.join(noc).join(&n)),
+        })
+        .collect();
+    Ok(FileDataset {
+        files,
+        rule: ValidRule::Positive,
+    })
+}
+
+/// The four DrivingStereo weather subsets.
+pub const DRIVINGSTEREO_WEATHERS: [&str; 4] = ["sunny", "cloudy", "foggy", "rainy"];
+
+/// DrivingStereo weather subsets: `root/<weather>/left-image-full-size/*.jpg|png`,
+/// `right-image-full-size/`, `disparity-map-full-size/*.png` (16-bit /256, 0 = unknown); the
+/// `half-size` folders are used when the full-size ones are missing. `weathers` selects subsets
+/// (empty = all four present); each sample's group is its weather. Valid ground truth: `> 0`.
+pub fn drivingstereo(root: &Path, weathers: &[&str]) -> Result<FileDataset> {
+    let chosen: Vec<&str> = if weathers.is_empty() {
+        DRIVINGSTEREO_WEATHERS.to_vec()
+    } else {
+        weathers.to_vec()
+    };
+    let mut files = Vec::new();
+    for w in chosen {
+        let wdir = root.join(w);
+        if !wdir.is_dir() {
+            if weathers.is_empty() {
+                continue;
+            }
+            return Err(Error::format(
+                &wdir,
+                "DrivingStereo weather folder not found",
+            ));
+        }
+        let size = if wdir.join("left-image-full-size").is_dir() {
+            "full-size"
+        } else {
+            "half-size"
+        };
+        let left_dir = wdir.join(format!("left-image-{size}"));
+        let mut lefts = Vec::new();
+        walk(&left_dir, &mut lefts)?;
+        for left in lefts {
+            let name = file_name(&left);
+            let stem = left
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            files.push(SampleFiles {
+                name: format!("{w}/{stem}"),
+                group: Some(w.to_string()),
+                right: wdir.join(format!("right-image-{size}")).join(&name),
+                disparity: some_file(
+                    wdir.join(format!("disparity-map-{size}"))
+                        .join(format!("{stem}.png")),
+                ),
+                left,
+                nonoccluded: None,
+            });
+        }
+    }
+    Ok(FileDataset {
+        files,
+        rule: ValidRule::Positive,
+    })
+}
+
+fn is_image(p: &Path) -> bool {
+    p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+        matches!(
+            e.to_ascii_lowercase().as_str(),
+            "png" | "jpg" | "jpeg" | "bmp" | "tif" | "tiff" | "ppm"
+        )
+    })
+}
+
+/// A folder (searched recursively) of pairs, named either `<x>left<y>.<ext>` / `<x>right<y>.<ext>`
+/// (e.g. `desk_left.png`, `left_rgb.png`) or `im0.<ext>` / `im1.<ext>`.
+///
+/// Ground truth and masks are looked up beside the left image: `<x>disp<y>.{pfm,png,npy}`
+/// (the image name with `left` replaced by `disp`), `disp0GT.pfm`/`disp0.pfm` for `im0`, and
+/// `mask0nocc.png` or `<x>occ<y>.png`; in a folder holding a single pair also `disp_left.*`
+/// and `occlusion.png`. Files whose name contains `disp`, `occ` or `mask` are never images.
+/// Valid ground truth: finite and `> 0`.
+pub fn folder_pairs(root: &Path) -> Result<FileDataset> {
+    let mut all = Vec::new();
+    walk(root, &mut all)?;
+    let mut pairs: Vec<(PathBuf, PathBuf, String)> = Vec::new();
+    for p in &all {
+        let name = file_name(p);
+        let lower = name.to_ascii_lowercase();
+        if !is_image(p) || ["disp", "occ", "mask"].iter().any(|k| lower.contains(k)) {
+            continue;
+        }
+        let stem = p
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let right_stem = if stem == "im0" {
+            "im1".to_string()
+        } else if stem.contains("left") {
+            stem.replacen("left", "right", 1)
+        } else {
+            continue;
+        };
+        let dir = p.parent().unwrap_or(Path::new(""));
+        let right = all.iter().find(|q| {
+            q.parent() == Some(dir)
+                && q.file_stem()
+                    .is_some_and(|s| s.to_string_lossy() == right_stem)
+                && is_image(q)
+        });
+        if let Some(right) = right {
+            pairs.push((p.clone(), right.clone(), stem));
+        }
+    }
+    let mut files = Vec::new();
+    for (left, right, stem) in &pairs {
+        let dir = left.parent().unwrap_or(Path::new(""));
+        let alone = pairs
+            .iter()
+            .filter(|(l, _, _)| l.parent() == Some(dir))
+            .count()
+            == 1;
+        let mut disp_names: Vec<String> = Vec::new();
+        let mut mask_names: Vec<String> = Vec::new();
+        if stem == "im0" {
+            disp_names
+                .extend(["disp0GT.pfm", "disp0.pfm", "disp0GT.png", "disp0.npy"].map(String::from));
+            mask_names.push("mask0nocc.png".into());
+        } else {
+            let d = stem.replacen("left", "disp", 1);
+            disp_names.extend(["pfm", "png", "npy"].map(|e| format!("{d}.{e}")));
+            mask_names.push(format!("{}.png", stem.replacen("left", "occ", 1)));
+        }
+        if alone {
+            disp_names
+                .extend(["disp_left.pfm", "disp_left.png", "disp_left.npy"].map(String::from));
+            mask_names.extend(["occlusion.png", "mask0nocc.png"].map(String::from));
+        }
+        let rel = left.strip_prefix(root).unwrap_or(left);
+        let name = rel
+            .with_file_name(stem.as_str())
+            .to_string_lossy()
+            .replace('\\', "/");
+        files.push(SampleFiles {
+            name,
+            group: None,
+            left: left.clone(),
+            right: right.clone(),
+            disparity: disp_names.iter().find_map(|n| some_file(dir.join(n))),
+            nonoccluded: mask_names.iter().find_map(|n| some_file(dir.join(n))),
+        });
+    }
+    Ok(FileDataset {
+        files,
+        rule: ValidRule::Positive,
+    })
+}

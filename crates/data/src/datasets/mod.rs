@@ -1,0 +1,182 @@
+//! Datasets: layouts list the files of each sample ([`SampleFiles`]); a [`FileDataset`] reads
+//! them on demand into [`Sample`]s, applying the dataset's validity rule.
+//!
+//! Layout functions ([`middlebury2014`], [`eth3d`], [`sceneflow`], [`drivingstereo`],
+//! [`kitti`], [`folder_pairs`]) only walk folders, so listing is cheap and reading can happen on
+//! worker threads ([`crate::loader`]). [`SyntheticDataset`] renders samples instead of reading.
+
+mod layouts;
+mod sceneflow;
+
+pub use layouts::{
+    DRIVINGSTEREO_WEATHERS, KittiVersion, MiddleburyCalib, drivingstereo, eth3d, folder_pairs,
+    kitti, middlebury2014, read_middlebury_calib,
+};
+pub use sceneflow::{SceneFlowPass, SceneFlowSubset, sceneflow};
+
+use std::path::PathBuf;
+
+use dgstereo_core::Result;
+
+use crate::image::{DisparityMap, Mask, RgbImage, load_mask, load_rgb};
+use crate::read_disparity;
+use crate::synthetic::{SyntheticConfig, generate};
+
+/// Which ground-truth values are valid (always also finite).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ValidRule {
+    /// Finite and `> 0` (KITTI, DrivingStereo: 0 marks no ground truth).
+    Positive,
+    /// Finite (Middlebury: inf marks no ground truth).
+    Finite,
+    /// Finite and `|d| <` the bound (SceneFlow and ETH3D: 512).
+    Below(f32),
+}
+
+impl ValidRule {
+    /// Whether a ground-truth value is valid.
+    pub fn accepts(self, d: f32) -> bool {
+        d.is_finite()
+            && match self {
+                ValidRule::Positive => d > 0.0,
+                ValidRule::Finite => true,
+                ValidRule::Below(m) => d.abs() < m,
+            }
+    }
+
+    /// The valid mask of a disparity map.
+    pub fn mask(self, d: &DisparityMap) -> Mask {
+        Mask {
+            width: d.width,
+            height: d.height,
+            data: d.data.iter().map(|v| self.accepts(*v)).collect(),
+        }
+    }
+}
+
+/// The files of one sample.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SampleFiles {
+    /// A name unique in the dataset (relative path or scene name).
+    pub name: String,
+    /// Group label (weather, scene type), if any.
+    pub group: Option<String>,
+    /// Left image.
+    pub left: PathBuf,
+    /// Right image.
+    pub right: PathBuf,
+    /// Left disparity (`.pfm`, KITTI `.png`, `.npy`), if there is ground truth.
+    pub disparity: Option<PathBuf>,
+    /// Non-occlusion mask picture (non-zero = visible in both views), if any.
+    pub nonoccluded: Option<PathBuf>,
+}
+
+/// One loaded sample.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sample {
+    /// Name.
+    pub name: String,
+    /// Group label.
+    pub group: Option<String>,
+    /// Left view.
+    pub left: RgbImage,
+    /// Right view.
+    pub right: RgbImage,
+    /// Left disparity, if known.
+    pub disparity: Option<DisparityMap>,
+    /// Valid ground truth (by the dataset's rule), if there is ground truth.
+    pub valid: Option<Mask>,
+    /// Visible in both views, if the dataset says.
+    pub nonoccluded: Option<Mask>,
+}
+
+/// A random-access collection of samples, shareable across threads.
+pub trait Dataset: Send + Sync {
+    /// Number of samples.
+    fn len(&self) -> usize;
+    /// Whether there are no samples.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Loads sample `index`.
+    fn get(&self, index: usize) -> Result<Sample>;
+}
+
+/// A dataset of files with a validity rule.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FileDataset {
+    /// The samples' files.
+    pub files: Vec<SampleFiles>,
+    /// Which ground-truth values are valid.
+    pub rule: ValidRule,
+}
+
+impl FileDataset {
+    /// Reads one sample's files.
+    pub fn load(files: &SampleFiles, rule: ValidRule) -> Result<Sample> {
+        let left = load_rgb(&files.left)?;
+        let right = load_rgb(&files.right)?;
+        let disparity = files.disparity.as_ref().map(read_disparity).transpose()?;
+        let valid = disparity.as_ref().map(|d| rule.mask(d));
+        let nonoccluded = files.nonoccluded.as_ref().map(load_mask).transpose()?;
+        Ok(Sample {
+            name: files.name.clone(),
+            group: files.group.clone(),
+            left,
+            right,
+            disparity,
+            valid,
+            nonoccluded,
+        })
+    }
+}
+
+impl Dataset for FileDataset {
+    fn len(&self) -> usize {
+        self.files.len()
+    }
+
+    fn get(&self, index: usize) -> Result<Sample> {
+        let f = self.files.get(index).ok_or_else(|| {
+            dgstereo_core::Error::Other(format!(
+                "sample {index} out of range (dataset of {})",
+                self.files.len()
+            ))
+        })?;
+        Self::load(f, self.rule)
+    }
+}
+
+/// Synthetic samples: sample `i` is the scene of seed `seed + i`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SyntheticDataset {
+    /// Generator settings.
+    pub config: SyntheticConfig,
+    /// Seed of sample 0.
+    pub seed: u64,
+    /// Number of samples.
+    pub len: usize,
+}
+
+impl Dataset for SyntheticDataset {
+    fn len(&self) -> usize {
+        self.len
+    }
+
+    fn get(&self, index: usize) -> Result<Sample> {
+        let s = generate(&self.config, self.seed.wrapping_add(index as u64));
+        let nonoccluded = Mask {
+            data: s.occlusion.data.iter().map(|o| !o).collect(),
+            ..s.occlusion
+        };
+        Ok(Sample {
+            name: format!("synthetic/{}", self.seed.wrapping_add(index as u64)),
+            group: None,
+            left: s.left,
+            right: s.right,
+            disparity: Some(s.disparity),
+            valid: Some(s.valid),
+            nonoccluded: Some(nonoccluded),
+        })
+    }
+}

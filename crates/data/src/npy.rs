@@ -1,0 +1,221 @@
+//! NumPy `.npy` arrays of `float32` / `float64` (read and write, any rank, C order).
+//!
+//! # Layout on disk
+//! `\x93NUMPY`, version `major minor`, a little-endian header length (`u16` for 1.0, `u32` for
+//! 2.0/3.0), a Python-literal dict `{'descr': '<f4', 'fortran_order': False, 'shape': (H, W), }`
+//! padded with spaces and a newline to a multiple of 64 bytes, then the raw samples.
+//! Reading accepts `<f4 >f4 <f8 >f8` (`float64` is converted to `f32`); Fortran order is refused.
+
+use std::path::Path;
+
+use dgstereo_core::{Error, Result};
+
+use crate::image::DisparityMap;
+
+/// A decoded array: `shape` and its samples in C (row-major) order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NpyArray {
+    /// Dimensions, outermost first.
+    pub shape: Vec<usize>,
+    /// Samples, row-major.
+    pub data: Vec<f32>,
+}
+
+/// Sample type of a written `.npy`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NpyDtype {
+    /// `<f4`
+    F32,
+    /// `<f8`
+    F64,
+}
+
+const MAGIC: &[u8] = b"\x93NUMPY";
+
+/// Parses `.npy` bytes; `path` only names the file in errors.
+pub fn decode_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
+    let err = |m: String| Error::format(path, format!("npy: {m}"));
+    if bytes.len() < 10 || &bytes[..6] != MAGIC {
+        return Err(err("not a .npy file (bad magic)".into()));
+    }
+    let major = bytes[6];
+    let (hlen, start) = match major {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
+        2 | 3 => {
+            if bytes.len() < 12 {
+                return Err(err("truncated header".into()));
+            }
+            (
+                u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+                12,
+            )
+        }
+        v => return Err(err(format!("unsupported version {v}"))),
+    };
+    if bytes.len() < start + hlen {
+        return Err(err("truncated header".into()));
+    }
+    let header = std::str::from_utf8(&bytes[start..start + hlen])
+        .map_err(|_| err("header is not text".into()))?;
+    let descr = dict_value(header, "descr").ok_or_else(|| err("header lacks 'descr'".into()))?;
+    let descr = descr.trim().trim_matches(|c| c == '\'' || c == '"');
+    let fortran = dict_value(header, "fortran_order")
+        .ok_or_else(|| err("header lacks 'fortran_order'".into()))?;
+    if fortran.trim().starts_with("True") {
+        return Err(err("Fortran-order arrays are not supported".into()));
+    }
+    let shape_s = dict_value(header, "shape").ok_or_else(|| err("header lacks 'shape'".into()))?;
+    let shape_s = shape_s.trim();
+    let inner = shape_s
+        .strip_prefix('(')
+        .and_then(|s| s.split(')').next())
+        .ok_or_else(|| err(format!("bad shape {shape_s:?}")))?;
+    let shape = inner
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| s.trim_end_matches('L').parse::<usize>())
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(|_| err(format!("bad shape {shape_s:?}")))?;
+    let n: usize = shape.iter().product();
+    let body = &bytes[start + hlen..];
+    let (size, little, is64) = match descr {
+        "<f4" => (4, true, false),
+        ">f4" => (4, false, false),
+        "<f8" => (8, true, true),
+        ">f8" => (8, false, true),
+        d => {
+            return Err(err(format!(
+                "unsupported dtype {d:?} (need float32 or float64)"
+            )));
+        }
+    };
+    if body.len() < n * size {
+        return Err(err(format!(
+            "truncated: shape {shape:?} needs {} data bytes, found {}",
+            n * size,
+            body.len()
+        )));
+    }
+    let data = body[..n * size]
+        .chunks_exact(size)
+        .map(|c| match (is64, little) {
+            (false, true) => f32::from_le_bytes([c[0], c[1], c[2], c[3]]),
+            (false, false) => f32::from_be_bytes([c[0], c[1], c[2], c[3]]),
+            (true, le) => {
+                let b = [c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]];
+                (if le {
+                    f64::from_le_bytes(b)
+                } else {
+                    f64::from_be_bytes(b)
+                }) as f32
+            }
+        })
+        .collect();
+    Ok(NpyArray { shape, data })
+}
+
+/// The text after `'key':` in a header dict, up to the next top-level comma.
+fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
+    let pat_sq = format!("'{key}'");
+    let pat_dq = format!("\"{key}\"");
+    let at = header
+        .find(&pat_sq)
+        .map(|i| i + pat_sq.len())
+        .or_else(|| header.find(&pat_dq).map(|i| i + pat_dq.len()))?;
+    let rest = header[at..].trim_start().strip_prefix(':')?;
+    let mut depth = 0i32;
+    for (i, c) in rest.char_indices() {
+        match c {
+            '(' => depth += 1,
+            ')' => depth -= 1,
+            ',' | '}' if depth == 0 => return Some(&rest[..i]),
+            _ => {}
+        }
+    }
+    Some(rest)
+}
+
+/// Encodes an array as `.npy` version 1.0.
+pub fn encode_npy(arr: &NpyArray, dtype: NpyDtype) -> Result<Vec<u8>> {
+    let n: usize = arr.shape.iter().product();
+    if n != arr.data.len() {
+        return Err(Error::Shape(format!(
+            "npy shape {:?} needs {n} samples, got {}",
+            arr.shape,
+            arr.data.len()
+        )));
+    }
+    let shape = match arr.shape.len() {
+        1 => format!("({},)", arr.shape[0]),
+        _ => format!(
+            "({})",
+            arr.shape
+                .iter()
+                .map(|d| d.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    };
+    let descr = if dtype == NpyDtype::F32 { "<f4" } else { "<f8" };
+    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
+    let total = 10 + header.len() + 1;
+    header.push_str(&" ".repeat((64 - total % 64) % 64));
+    header.push('\n');
+    let mut out = Vec::with_capacity(10 + header.len() + n * 8);
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&[1, 0]);
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    for v in &arr.data {
+        match dtype {
+            NpyDtype::F32 => out.extend_from_slice(&v.to_le_bytes()),
+            NpyDtype::F64 => out.extend_from_slice(&f64::from(*v).to_le_bytes()),
+        }
+    }
+    Ok(out)
+}
+
+/// Reads a `.npy` file.
+pub fn read_npy(path: impl AsRef<Path>) -> Result<NpyArray> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    decode_npy(&bytes, path)
+}
+
+/// Writes a `.npy` file.
+pub fn write_npy(path: impl AsRef<Path>, arr: &NpyArray, dtype: NpyDtype) -> Result<()> {
+    let path = path.as_ref();
+    let bytes = encode_npy(arr, dtype).map_err(|e| Error::format(path, e.to_string()))?;
+    std::fs::write(path, bytes).map_err(|e| Error::io(path, e))
+}
+
+/// Reads a `.npy` disparity: shape `(H, W)`, or 3-D with one dimension of size 1
+/// (`(1, H, W)` or `(H, W, 1)`).
+pub fn read_npy_disparity(path: impl AsRef<Path>) -> Result<DisparityMap> {
+    let path = path.as_ref();
+    let arr = read_npy(path)?;
+    let (h, w) = match arr.shape.as_slice() {
+        [h, w] | [1, h, w] | [h, w, 1] => (*h, *w),
+        s => {
+            return Err(Error::format(
+                path,
+                format!("npy disparity must be (H, W), (1, H, W) or (H, W, 1), found {s:?}"),
+            ));
+        }
+    };
+    Ok(DisparityMap {
+        width: w,
+        height: h,
+        data: arr.data,
+    })
+}
+
+/// Writes a disparity map as a `(H, W)` `float32` `.npy`.
+pub fn write_npy_disparity(path: impl AsRef<Path>, disp: &DisparityMap) -> Result<()> {
+    let arr = NpyArray {
+        shape: vec![disp.height, disp.width],
+        data: disp.data.clone(),
+    };
+    write_npy(path, &arr, NpyDtype::F32)
+}

@@ -1,0 +1,193 @@
+//! PFM (portable float map): `PF` colour or `Pf` grayscale, `f32`, either endianness.
+//!
+//! # Layout on disk
+//! A text header `PF|Pf <ws> width <ws> height <ws> scale`, one whitespace byte, then
+//! `width * height * channels` `f32` samples, interleaved, rows **bottom to top**. A negative
+//! scale means little-endian samples, a positive one big-endian. Reading flips the rows so
+//! memory is top to bottom; writing flips them back.
+
+use std::path::Path;
+
+use dgstereo_core::{Error, Result};
+
+use crate::image::DisparityMap;
+
+/// A decoded PFM: `channels` is 1 (`Pf`) or 3 (`PF`), samples interleaved, rows top to bottom.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pfm {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// 1 or 3.
+    pub channels: usize,
+    /// Samples, `HWC`, top row first.
+    pub data: Vec<f32>,
+}
+
+/// Byte order of the samples of a written PFM.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Endian {
+    /// Little-endian (negative scale in the header), what most tools write.
+    Little,
+    /// Big-endian (positive scale).
+    Big,
+}
+
+/// Parses PFM bytes; `path` only names the file in errors.
+pub fn decode_pfm(bytes: &[u8], path: &Path) -> Result<Pfm> {
+    let err = |m: String| Error::format(path, format!("PFM: {m}"));
+    let mut pos = 0usize;
+    let mut token = |what: &str| -> Result<String> {
+        while pos < bytes.len() && bytes[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        let start = pos;
+        while pos < bytes.len() && !bytes[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        if start == pos {
+            return Err(err(format!("header ends before the {what}")));
+        }
+        if pos - start > 32 {
+            return Err(err(format!("the {what} is not a header token")));
+        }
+        Ok(String::from_utf8_lossy(&bytes[start..pos]).into_owned())
+    };
+    let magic = token("magic")?;
+    let channels = match magic.as_str() {
+        "PF" => 3,
+        "Pf" => 1,
+        m => return Err(err(format!("bad magic {m:?}, expected \"PF\" or \"Pf\""))),
+    };
+    let width: usize = token("width")?
+        .parse()
+        .map_err(|_| err("bad width".into()))?;
+    let height: usize = token("height")?
+        .parse()
+        .map_err(|_| err("bad height".into()))?;
+    let scale: f32 = token("scale")?
+        .parse()
+        .map_err(|_| err("bad scale".into()))?;
+    if scale == 0.0 || !scale.is_finite() {
+        return Err(err(format!("scale {scale} must be finite and non-zero")));
+    }
+    // Exactly one whitespace byte separates the header from the samples.
+    if pos >= bytes.len() || !bytes[pos].is_ascii_whitespace() {
+        return Err(err("missing whitespace after the header".into()));
+    }
+    pos += 1;
+    let little = scale < 0.0;
+    let n = width
+        .checked_mul(height)
+        .and_then(|v| v.checked_mul(channels))
+        .ok_or_else(|| err(format!("size {width}x{height} overflows")))?;
+    let body = &bytes[pos..];
+    if body.len() < n * 4 {
+        return Err(err(format!(
+            "truncated: {width}x{height}x{channels} needs {} data bytes, found {}",
+            n * 4,
+            body.len()
+        )));
+    }
+    let row = width * channels;
+    let mut data = vec![0f32; n];
+    for (i, chunk) in body[..n * 4].chunks_exact(4).enumerate() {
+        let b = [chunk[0], chunk[1], chunk[2], chunk[3]];
+        let v = if little {
+            f32::from_le_bytes(b)
+        } else {
+            f32::from_be_bytes(b)
+        };
+        // File row r (bottom first) goes to memory row height-1-r.
+        let (r, c) = (i / row, i % row);
+        data[(height - 1 - r) * row + c] = v;
+    }
+    Ok(Pfm {
+        width,
+        height,
+        channels,
+        data,
+    })
+}
+
+/// Encodes a PFM with the given byte order.
+pub fn encode_pfm(pfm: &Pfm, endian: Endian) -> Result<Vec<u8>> {
+    if pfm.channels != 1 && pfm.channels != 3 {
+        return Err(Error::Shape(format!(
+            "PFM needs 1 or 3 channels, got {}",
+            pfm.channels
+        )));
+    }
+    let row = pfm.width * pfm.channels;
+    if pfm.data.len() != row * pfm.height {
+        return Err(Error::Shape(format!(
+            "PFM {}x{}x{} needs {} samples, got {}",
+            pfm.width,
+            pfm.height,
+            pfm.channels,
+            row * pfm.height,
+            pfm.data.len()
+        )));
+    }
+    let magic = if pfm.channels == 3 { "PF" } else { "Pf" };
+    let scale = if endian == Endian::Little {
+        "-1.0"
+    } else {
+        "1.0"
+    };
+    let mut out = format!("{magic}\n{} {}\n{scale}\n", pfm.width, pfm.height).into_bytes();
+    out.reserve(pfm.data.len() * 4);
+    for r in (0..pfm.height).rev() {
+        for v in &pfm.data[r * row..(r + 1) * row] {
+            let b = if endian == Endian::Little {
+                v.to_le_bytes()
+            } else {
+                v.to_be_bytes()
+            };
+            out.extend_from_slice(&b);
+        }
+    }
+    Ok(out)
+}
+
+/// Reads a PFM file.
+pub fn read_pfm(path: impl AsRef<Path>) -> Result<Pfm> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    decode_pfm(&bytes, path)
+}
+
+/// Writes a PFM file.
+pub fn write_pfm(path: impl AsRef<Path>, pfm: &Pfm, endian: Endian) -> Result<()> {
+    let path = path.as_ref();
+    let bytes = encode_pfm(pfm, endian).map_err(|e| Error::format(path, e.to_string()))?;
+    std::fs::write(path, bytes).map_err(|e| Error::io(path, e))
+}
+
+/// Reads a PFM as a disparity map: `Pf` as is, `PF` by its first channel (SceneFlow stores
+/// disparity as `Pf`; some tools write three equal channels). Values are kept, inf included.
+pub fn read_pfm_disparity(path: impl AsRef<Path>) -> Result<DisparityMap> {
+    let pfm = read_pfm(path)?;
+    let data = if pfm.channels == 1 {
+        pfm.data
+    } else {
+        pfm.data.chunks_exact(pfm.channels).map(|c| c[0]).collect()
+    };
+    Ok(DisparityMap {
+        width: pfm.width,
+        height: pfm.height,
+        data,
+    })
+}
+
+/// Writes a disparity map as a little-endian grayscale (`Pf`) PFM.
+pub fn write_pfm_disparity(path: impl AsRef<Path>, disp: &DisparityMap) -> Result<()> {
+    let pfm = Pfm {
+        width: disp.width,
+        height: disp.height,
+        channels: 1,
+        data: disp.data.clone(),
+    };
+    write_pfm(path, &pfm, Endian::Little)
+}

@@ -1,0 +1,272 @@
+//! Random scene generation: how many surfaces, of which kinds, where, at which disparity.
+
+use std::f64::consts::PI;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::SyntheticScene;
+use super::surface::{DisparityField, Grating, Outline, Surface, Texture};
+
+/// Parameters of the synthetic scene generator.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SyntheticConfig {
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+    /// Fewest foreground surfaces.
+    pub min_surfaces: usize,
+    /// Most foreground surfaces.
+    pub max_surfaces: usize,
+    /// Smallest disparity (the far end of the background), > 0.
+    pub min_disparity: f64,
+    /// Largest disparity of any surface point.
+    pub max_disparity: f64,
+    /// Largest disparity slope `|∂d/∂x|`, `|∂d/∂y|` of slanted surfaces (< 1).
+    pub max_slant: f64,
+    /// Probabilities of the kinds fronto-parallel, slanted, curved, thin (normalised).
+    pub kind_weights: [f64; 4],
+    /// Shortest texture wavelength in pixels (smaller = sharper texture).
+    pub min_wavelength: f64,
+    /// Longest texture wavelength in pixels.
+    pub max_wavelength: f64,
+}
+
+impl Default for SyntheticConfig {
+    fn default() -> Self {
+        Self {
+            width: 640,
+            height: 384,
+            min_surfaces: 3,
+            max_surfaces: 10,
+            min_disparity: 1.0,
+            max_disparity: 96.0,
+            max_slant: 0.3,
+            kind_weights: [0.3, 0.3, 0.2, 0.2],
+            min_wavelength: 4.0,
+            max_wavelength: 64.0,
+        }
+    }
+}
+
+impl SyntheticConfig {
+    /// The default configuration at another size, disparities scaled with the width
+    /// (`max_disparity = 0.15 · width`, at least 4).
+    pub fn with_size(width: usize, height: usize) -> Self {
+        Self {
+            width,
+            height,
+            max_disparity: (0.15 * width as f64).max(4.0),
+            ..Self::default()
+        }
+    }
+}
+
+fn texture(rng: &mut ChaCha8Rng, cfg: &SyntheticConfig) -> Texture {
+    let base = [
+        rng.gen_range(40.0..215.0),
+        rng.gen_range(40.0..215.0),
+        rng.gen_range(40.0..215.0),
+    ];
+    let (lo, hi) = (
+        cfg.min_wavelength.max(2.0).ln(),
+        cfg.max_wavelength.max(cfg.min_wavelength.max(2.0)).ln(),
+    );
+    let n = rng.gen_range(2..=4);
+    let gratings = (0..n)
+        .map(|_| {
+            let wl = if hi > lo {
+                rng.gen_range(lo..=hi).exp()
+            } else {
+                lo.exp()
+            };
+            let t: f64 = rng.gen_range(0.0..PI);
+            let f = 2.0 * PI / wl;
+            let a: f64 = rng.gen_range(8.0..40.0);
+            let tint = [
+                rng.gen_range(0.5..1.0),
+                rng.gen_range(0.5..1.0),
+                rng.gen_range(0.5..1.0),
+            ];
+            Grating {
+                k: [f * t.cos(), f * t.sin()],
+                phase: rng.gen_range(0.0..2.0 * PI),
+                amp: tint.map(|c| a * c),
+            }
+        })
+        .collect();
+    let wl_min = cfg.min_wavelength.max(2.0);
+    let noise_cell = rng.gen_range(wl_min..=cfg.max_wavelength.max(wl_min)) * 0.5 + wl_min * 0.5;
+    let na: f64 = rng.gen_range(10.0..40.0);
+    Texture {
+        base,
+        gratings,
+        noise_cell,
+        noise_amp: [
+            na,
+            na * rng.gen_range(0.5..1.0),
+            na * rng.gen_range(0.5..1.0),
+        ],
+        noise_seed: rng.r#gen(),
+    }
+}
+
+fn angle(rng: &mut ChaCha8Rng) -> (f64, f64) {
+    let t: f64 = rng.gen_range(0.0..PI);
+    (t.cos(), t.sin())
+}
+
+/// A random scene; see [`SyntheticScene::random`].
+pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (w, h) = (cfg.width as f64, cfg.height as f64);
+    let (dmin, dmax) = (
+        cfg.min_disparity,
+        cfg.max_disparity.max(cfg.min_disparity + 1.0),
+    );
+    let range = dmax - dmin;
+    let slant = cfg.max_slant.clamp(0.0, 0.9);
+
+    // Background: d = c + a x + b y, at least dmin over the region both views can see
+    // (x in [-dmax, w + dmax], y in [0, h]) and at most dmin + 0.25 range.
+    let span_x = w + 2.0 * dmax;
+    let budget = 0.2 * range;
+    let a = rng.gen_range(-1.0..=1.0) * (budget * 0.3 / span_x).min(slant);
+    let b = rng.gen_range(0.0..=1.0) * (budget * 0.7 / h.max(1.0)).min(slant);
+    let corners = [(-dmax, 0.0), (w + dmax, 0.0), (-dmax, h), (w + dmax, h)];
+    let low = corners
+        .iter()
+        .map(|(x, y)| a * x + b * y)
+        .fold(f64::INFINITY, f64::min);
+    let c = dmin - low + rng.gen_range(0.0..=0.05 * range);
+    let background = Surface::new(
+        Outline::Everything,
+        DisparityField {
+            c,
+            a,
+            b,
+            kx: 0.0,
+            ky: 0.0,
+            x0: 0.0,
+            y0: 0.0,
+        },
+        texture(&mut rng, cfg),
+    );
+    let mut surfaces = vec![background];
+
+    let n = if cfg.max_surfaces > cfg.min_surfaces {
+        rng.gen_range(cfg.min_surfaces..=cfg.max_surfaces)
+    } else {
+        cfg.min_surfaces
+    };
+    let total: f64 = cfg
+        .kind_weights
+        .iter()
+        .map(|v| v.max(0.0))
+        .sum::<f64>()
+        .max(1e-9);
+    let side = w.min(h).max(4.0);
+    for _ in 0..n {
+        let mut pick = rng.gen_range(0.0..total);
+        let mut kind = 3;
+        for (i, wgt) in cfg.kind_weights.iter().enumerate() {
+            if pick < wgt.max(0.0) {
+                kind = i;
+                break;
+            }
+            pick -= wgt.max(0.0);
+        }
+        // Surfaces may stick out of the left view by up to the largest disparity on the right,
+        // so the right view's border columns are populated as well.
+        let cx = rng.gen_range(-0.1 * w..1.1 * w + 0.5 * dmax);
+        let cy = rng.gen_range(-0.1 * h..1.1 * h);
+        let outline = if kind == 3 {
+            let (cos, sin) = angle(&mut rng);
+            let hw = rng.gen_range(0.8..3.5);
+            let hh = rng.gen_range(0.2..0.7) * side;
+            Outline::Rect {
+                cx,
+                cy,
+                hw,
+                hh,
+                cos,
+                sin,
+            }
+        } else {
+            let r = rng.gen_range(0.06..0.3) * side;
+            match rng.gen_range(0..3) {
+                0 => {
+                    let (cos, sin) = angle(&mut rng);
+                    Outline::Rect {
+                        cx,
+                        cy,
+                        hw: r * rng.gen_range(0.4..1.0),
+                        hh: r * rng.gen_range(0.4..1.0),
+                        cos,
+                        sin,
+                    }
+                }
+                1 => {
+                    let (cos, sin) = angle(&mut rng);
+                    Outline::Ellipse {
+                        cx,
+                        cy,
+                        rx: r * rng.gen_range(0.5..1.0),
+                        ry: r * rng.gen_range(0.5..1.0),
+                        cos,
+                        sin,
+                    }
+                }
+                _ => {
+                    let mut harmonics = [(0.0, 0.0); 3];
+                    for hm in harmonics.iter_mut() {
+                        *hm = (rng.gen_range(0.0..0.18), rng.gen_range(0.0..2.0 * PI));
+                    }
+                    Outline::Blob {
+                        cx,
+                        cy,
+                        r0: r,
+                        harmonics,
+                    }
+                }
+            }
+        };
+        let bb = outline.bounds();
+        let radius = ((bb[1] - bb[0]).max(bb[3] - bb[2]) / 2.0).max(1.0);
+        // Disparity at the centre, then slopes and curvature that keep the surface in range.
+        let c = rng.gen_range(dmin + 0.1 * range..=dmax);
+        let room = (c - dmin).min(dmax - c).max(0.0) * 0.9;
+        let (mut a, mut b, mut kx, mut ky) = (0.0, 0.0, 0.0, 0.0);
+        if kind == 1 || kind == 2 || (kind == 3 && rng.gen_bool(0.5)) {
+            let smax = (room / (2.0 * radius)).min(slant);
+            a = rng.gen_range(-1.0..=1.0) * smax;
+            b = rng.gen_range(-1.0..=1.0) * smax;
+        }
+        if kind == 2 {
+            let used = (a.abs() + b.abs()) * radius;
+            let left_room = (room - used).max(0.0);
+            // Each right ray meets the patch once: |2 kx u| <= (1 - a) / 2 over the patch.
+            let kmax_x = ((1.0 - a) / (4.0 * radius)).min(left_room / (2.0 * radius * radius));
+            let kmax_y = left_room / (2.0 * radius * radius);
+            kx = rng.gen_range(-1.0..=1.0) * kmax_x;
+            ky = rng.gen_range(-1.0..=1.0) * kmax_y;
+        }
+        let field = DisparityField {
+            c,
+            a,
+            b,
+            kx,
+            ky,
+            x0: (bb[0] + bb[1]) / 2.0,
+            y0: (bb[2] + bb[3]) / 2.0,
+        };
+        surfaces.push(Surface::new(outline, field, texture(&mut rng, cfg)));
+    }
+    SyntheticScene {
+        width: cfg.width,
+        height: cfg.height,
+        surfaces,
+    }
+}

@@ -1,0 +1,349 @@
+//! Surfaces of a synthetic scene: an outline, a disparity field and a texture, all expressed in
+//! left-view pixel coordinates (pixel `(i, j)` has its centre at `x = i, y = j`).
+
+/// The outline of a surface in the left view.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Outline {
+    /// Covers the whole plane (the background).
+    Everything,
+    /// A rectangle of half sizes `hw x hh` rotated by the angle whose cosine and sine are given;
+    /// thin structures are rectangles with `hw` of a few pixels.
+    Rect {
+        /// Centre x.
+        cx: f64,
+        /// Centre y.
+        cy: f64,
+        /// Half width (along the rotated x axis).
+        hw: f64,
+        /// Half height (along the rotated y axis).
+        hh: f64,
+        /// Cosine of the rotation.
+        cos: f64,
+        /// Sine of the rotation.
+        sin: f64,
+    },
+    /// An ellipse of radii `rx, ry`, rotated.
+    Ellipse {
+        /// Centre x.
+        cx: f64,
+        /// Centre y.
+        cy: f64,
+        /// Radius along the rotated x axis.
+        rx: f64,
+        /// Radius along the rotated y axis.
+        ry: f64,
+        /// Cosine of the rotation.
+        cos: f64,
+        /// Sine of the rotation.
+        sin: f64,
+    },
+    /// A star-shaped blob: radius `r0 · (1 + Σ amp_k cos(k θ + phase_k))` for `k = 2, 3, 4`.
+    Blob {
+        /// Centre x.
+        cx: f64,
+        /// Centre y.
+        cy: f64,
+        /// Mean radius.
+        r0: f64,
+        /// `(amplitude, phase)` of harmonics 2, 3, 4; the amplitudes sum below 0.6.
+        harmonics: [(f64, f64); 3],
+    },
+}
+
+impl Outline {
+    /// Whether the point `(x, y)` lies inside.
+    pub fn contains(&self, x: f64, y: f64) -> bool {
+        match *self {
+            Outline::Everything => true,
+            Outline::Rect {
+                cx,
+                cy,
+                hw,
+                hh,
+                cos,
+                sin,
+            } => {
+                let (dx, dy) = (x - cx, y - cy);
+                (dx * cos + dy * sin).abs() <= hw && (-dx * sin + dy * cos).abs() <= hh
+            }
+            Outline::Ellipse {
+                cx,
+                cy,
+                rx,
+                ry,
+                cos,
+                sin,
+            } => {
+                let (dx, dy) = (x - cx, y - cy);
+                let (u, v) = ((dx * cos + dy * sin) / rx, (-dx * sin + dy * cos) / ry);
+                u * u + v * v <= 1.0
+            }
+            Outline::Blob {
+                cx,
+                cy,
+                r0,
+                harmonics,
+            } => {
+                let (dx, dy) = (x - cx, y - cy);
+                let r2 = dx * dx + dy * dy;
+                if r2 > (r0 * 1.6).powi(2) {
+                    return false;
+                }
+                let t = dy.atan2(dx);
+                let mut r = 1.0;
+                for (k, (a, p)) in harmonics.iter().enumerate() {
+                    r += a * ((k as f64 + 2.0) * t + p).cos();
+                }
+                r2 <= (r0 * r).powi(2)
+            }
+        }
+    }
+
+    /// An axis-aligned box `[x0, x1] x [y0, y1]` holding the outline (infinite for the background).
+    pub fn bounds(&self) -> [f64; 4] {
+        match *self {
+            Outline::Everything => [
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+            ],
+            Outline::Rect {
+                cx,
+                cy,
+                hw,
+                hh,
+                cos,
+                sin,
+            } => {
+                let ex = hw * cos.abs() + hh * sin.abs();
+                let ey = hw * sin.abs() + hh * cos.abs();
+                [cx - ex, cx + ex, cy - ey, cy + ey]
+            }
+            Outline::Ellipse { cx, cy, rx, ry, .. } => {
+                let r = rx.max(ry);
+                [cx - r, cx + r, cy - r, cy + r]
+            }
+            Outline::Blob { cx, cy, r0, .. } => {
+                let r = r0 * 1.6;
+                [cx - r, cx + r, cy - r, cy + r]
+            }
+        }
+    }
+}
+
+/// Disparity over a surface, in left-view coordinates:
+/// `d(x, y) = c + a·u + b·v + kx·u² + ky·v²` with `u = x - x0`, `v = y - y0`.
+///
+/// With `kx = ky = 0` the surface is a plane in space (disparity is affine in image coordinates
+/// for planes); `kx`, `ky` bend it into a cylinder-like patch. Generators keep
+/// `1 - a - 2·kx·u > 0` over the surface, so each right-view ray meets it at most once.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DisparityField {
+    /// Disparity at `(x0, y0)`.
+    pub c: f64,
+    /// Slope along x.
+    pub a: f64,
+    /// Slope along y.
+    pub b: f64,
+    /// Curvature along x.
+    pub kx: f64,
+    /// Curvature along y.
+    pub ky: f64,
+    /// Reference x.
+    pub x0: f64,
+    /// Reference y.
+    pub y0: f64,
+}
+
+impl DisparityField {
+    /// A fronto-parallel field of constant disparity.
+    pub fn constant(c: f64) -> Self {
+        Self {
+            c,
+            a: 0.0,
+            b: 0.0,
+            kx: 0.0,
+            ky: 0.0,
+            x0: 0.0,
+            y0: 0.0,
+        }
+    }
+
+    /// The disparity at left-view point `(x, y)`.
+    pub fn at(&self, x: f64, y: f64) -> f64 {
+        let (u, v) = (x - self.x0, y - self.y0);
+        self.c + self.a * u + self.b * v + self.kx * u * u + self.ky * v * v
+    }
+
+    /// The left-view x of the surface point seen at right-view `(xr, y)`, i.e. the solution of
+    /// `xr = x - d(x, y)` on the branch where `x - d` increases with `x`; `None` if there is none.
+    pub fn left_x_from_right(&self, xr: f64, y: f64) -> Option<f64> {
+        let v = y - self.y0;
+        let g = self.c + self.b * v + self.ky * v * v;
+        // kx u² + (a - 1) u + (g + xr - x0) = 0, root with 2 kx u + (a - 1) < 0.
+        let (qa, qb, qc) = (self.kx, self.a - 1.0, g + xr - self.x0);
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc < 0.0 {
+            return None;
+        }
+        let den = -qb + disc.sqrt();
+        if den <= 0.0 {
+            return None;
+        }
+        Some(self.x0 + 2.0 * qc / den)
+    }
+}
+
+/// One sinusoidal grating of a texture.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Grating {
+    /// Spatial frequency vector (radians per pixel) along x and y.
+    pub k: [f64; 2],
+    /// Phase.
+    pub phase: f64,
+    /// Amplitude per channel.
+    pub amp: [f64; 3],
+}
+
+/// A smooth colour texture: a base colour, sinusoidal gratings and smooth value noise.
+///
+/// Every component is band-limited (wavelengths at least a few pixels), so the texture is well
+/// approximated by linear interpolation between pixel centres.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Texture {
+    /// Base colour, 0..255.
+    pub base: [f64; 3],
+    /// Gratings added to the base.
+    pub gratings: Vec<Grating>,
+    /// Noise lattice spacing in pixels (0 = no noise).
+    pub noise_cell: f64,
+    /// Noise amplitude per channel.
+    pub noise_amp: [f64; 3],
+    /// Noise hash seed.
+    pub noise_seed: u64,
+}
+
+impl Texture {
+    /// The colour at left-view point `(x, y)`, clamped to 0..255.
+    pub fn at(&self, x: f64, y: f64) -> [f32; 3] {
+        let mut c = self.base;
+        for g in &self.gratings {
+            let s = (g.k[0] * x + g.k[1] * y + g.phase).sin();
+            for (ch, a) in c.iter_mut().zip(g.amp) {
+                *ch += a * s;
+            }
+        }
+        if self.noise_cell > 0.0 {
+            for (i, ch) in c.iter_mut().enumerate() {
+                *ch += self.noise_amp[i]
+                    * value_noise(
+                        x / self.noise_cell,
+                        y / self.noise_cell,
+                        self.noise_seed ^ (i as u64 * 0x9e37),
+                    );
+            }
+        }
+        [
+            c[0].clamp(0.0, 255.0) as f32,
+            c[1].clamp(0.0, 255.0) as f32,
+            c[2].clamp(0.0, 255.0) as f32,
+        ]
+    }
+}
+
+fn hash2(ix: i64, iy: i64, seed: u64) -> f64 {
+    let mut z = seed
+        ^ (ix as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (iy as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+}
+
+/// Smooth value noise in `[-1, 1]` on a unit lattice, with smoothstep blending.
+fn value_noise(x: f64, y: f64, seed: u64) -> f64 {
+    let (fx, fy) = (x.floor(), y.floor());
+    let (tx, ty) = (x - fx, y - fy);
+    let (sx, sy) = (tx * tx * (3.0 - 2.0 * tx), ty * ty * (3.0 - 2.0 * ty));
+    let (ix, iy) = (fx as i64, fy as i64);
+    let v00 = hash2(ix, iy, seed);
+    let v10 = hash2(ix + 1, iy, seed);
+    let v01 = hash2(ix, iy + 1, seed);
+    let v11 = hash2(ix + 1, iy + 1, seed);
+    let top = v00 + (v10 - v00) * sx;
+    let bot = v01 + (v11 - v01) * sx;
+    top + (bot - top) * sy
+}
+
+/// A surface of the scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Surface {
+    /// Where it is in the left view.
+    pub outline: Outline,
+    /// Its disparity.
+    pub field: DisparityField,
+    /// Its colour.
+    pub texture: Texture,
+    /// Left-view box `[x0, x1, y0, y1]` of the outline.
+    pub bounds: [f64; 4],
+    /// Bounds `[min, max]` of the disparity over `bounds` (with a margin).
+    pub disparity_bounds: [f64; 2],
+}
+
+impl Surface {
+    /// A surface, computing its bounds.
+    pub fn new(outline: Outline, field: DisparityField, texture: Texture) -> Self {
+        let bounds = outline.bounds();
+        let disparity_bounds = if bounds[0].is_finite() {
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            let n = 8;
+            for i in 0..=n {
+                for j in 0..=n {
+                    let x = bounds[0] + (bounds[1] - bounds[0]) * i as f64 / n as f64;
+                    let y = bounds[2] + (bounds[3] - bounds[2]) * j as f64 / n as f64;
+                    let d = field.at(x, y);
+                    lo = lo.min(d);
+                    hi = hi.max(d);
+                }
+            }
+            let vertex = field.at(field.x0, field.y0);
+            [lo.min(vertex) - 1.0, hi.max(vertex) + 1.0]
+        } else {
+            [f64::NEG_INFINITY, f64::INFINITY]
+        };
+        Self {
+            outline,
+            field,
+            texture,
+            bounds,
+            disparity_bounds,
+        }
+    }
+
+    /// The disparity if the left-view point `(x, y)` is on this surface.
+    #[inline]
+    pub fn hit_left(&self, x: f64, y: f64) -> Option<f64> {
+        let b = &self.bounds;
+        if x < b[0] || x > b[1] || y < b[2] || y > b[3] || !self.outline.contains(x, y) {
+            return None;
+        }
+        Some(self.field.at(x, y))
+    }
+
+    /// `(left x, disparity)` if the right-view point `(xr, y)` sees this surface.
+    #[inline]
+    pub fn hit_right(&self, xr: f64, y: f64) -> Option<(f64, f64)> {
+        let b = &self.bounds;
+        if y < b[2]
+            || y > b[3]
+            || xr < b[0] - self.disparity_bounds[1]
+            || xr > b[1] - self.disparity_bounds[0]
+        {
+            return None;
+        }
+        let x = self.field.left_x_from_right(xr, y)?;
+        self.hit_left(x, y).map(|d| (x, d))
+    }
+}

@@ -1,0 +1,223 @@
+//! The synthetic generator: exact correspondence, determinism, speed.
+
+use dgstereo_data::RgbImage;
+use dgstereo_data::synthetic::{
+    DisparityField, Outline, Surface, SyntheticConfig, SyntheticScene, Texture, generate,
+};
+
+fn small(seed_wl: f64) -> SyntheticConfig {
+    SyntheticConfig {
+        min_wavelength: seed_wl,
+        max_wavelength: 48.0,
+        max_disparity: 24.0,
+        ..SyntheticConfig::with_size(96, 64)
+    }
+}
+
+/// Samples `img` at `(x, y)` with linear interpolation along x (clamped at the borders).
+fn sample_x(img: &RgbImage, x: f64, y: usize) -> [f32; 3] {
+    let x = x.clamp(0.0, (img.width - 1) as f64);
+    let x0 = x.floor() as usize;
+    let x1 = (x0 + 1).min(img.width - 1);
+    let t = (x - x0 as f64) as f32;
+    let (a, b) = (img.get(x0, y), img.get(x1, y));
+    [0, 1, 2].map(|c| a[c] * (1.0 - t) + b[c] * t)
+}
+
+#[test]
+fn same_seed_same_scene_other_seed_other_scene() {
+    let cfg = small(6.0);
+    let a = generate(&cfg, 7);
+    assert_eq!(a, generate(&cfg, 7));
+    assert_ne!(a.left, generate(&cfg, 8).left);
+    assert_eq!((a.left.width, a.left.height), (96, 64));
+}
+
+#[test]
+fn right_view_at_the_disparity_reproduces_the_left_view_exactly() {
+    let cfg = small(4.0);
+    for seed in 0..4 {
+        let scene = SyntheticScene::random(&cfg, seed);
+        let s = scene.render();
+        let mut checked = 0;
+        for y in 0..s.left.height {
+            for x in 0..s.left.width {
+                let d = f64::from(s.disparity.get(x, y));
+                assert!(
+                    d.is_finite() && d >= cfg.min_disparity - 1e-6 && d <= cfg.max_disparity + 1e-6,
+                    "d {d}"
+                );
+                if s.occlusion.get(x, y) {
+                    continue;
+                }
+                // Continuous right view at x - d (the exact sampling position).
+                let r = scene.right_colour(x as f64 - d, y as f64);
+                let l = s.left.get(x, y);
+                for c in 0..3 {
+                    assert!(
+                        (r[c] - l[c]).abs() < 1e-3,
+                        "seed {seed} ({x},{y}) {l:?} vs {r:?}"
+                    );
+                }
+                checked += 1;
+            }
+        }
+        let n = s.left.width * s.left.height;
+        assert!(
+            checked > n / 2,
+            "seed {seed}: only {checked} of {n} pixels visible in both views"
+        );
+    }
+}
+
+#[test]
+fn warping_the_right_image_by_the_left_disparity_reproduces_the_left_image() {
+    // Smooth textures (wavelengths >= 16 px): linear interpolation error stays small.
+    let cfg = small(16.0);
+    for seed in 10..13 {
+        let s = generate(&cfg, seed);
+        let (mut n, mut sum, mut worst) = (0usize, 0f64, 0f32);
+        for y in 0..s.left.height {
+            for x in 0..s.left.width {
+                if s.occlusion.get(x, y) {
+                    continue;
+                }
+                let xr = x as f64 - f64::from(s.disparity.get(x, y));
+                // Skip points whose interpolation mixes two surfaces of the right view.
+                let own = s.surface_left[y * s.left.width + x];
+                let (x0, x1) = (
+                    xr.floor().max(0.0) as usize,
+                    (xr.ceil().max(0.0) as usize).min(s.left.width - 1),
+                );
+                let w = s.left.width;
+                if s.surface_right[y * w + x0] != own || s.surface_right[y * w + x1] != own {
+                    continue;
+                }
+                let r = sample_x(&s.right, xr, y);
+                let l = s.left.get(x, y);
+                for c in 0..3 {
+                    let e = (r[c] - l[c]).abs();
+                    worst = worst.max(e);
+                    sum += f64::from(e);
+                }
+                n += 1;
+            }
+        }
+        let mean = sum / (3 * n) as f64;
+        assert!(n > 2000, "seed {seed}: {n} pixels compared");
+        assert!(
+            mean < 0.5 && worst < 6.0,
+            "seed {seed}: mean {mean}, worst {worst}"
+        );
+    }
+}
+
+#[test]
+fn slanted_plane_disparity_is_exact_and_occludes_the_background() {
+    let tex = |v: f64| Texture {
+        base: [v; 3],
+        gratings: vec![],
+        noise_cell: 0.0,
+        noise_amp: [0.0; 3],
+        noise_seed: 0,
+    };
+    let plane = DisparityField {
+        c: 10.0,
+        a: 0.1,
+        b: -0.05,
+        kx: 0.0,
+        ky: 0.0,
+        x0: 20.0,
+        y0: 10.0,
+    };
+    let fg = Surface::new(
+        Outline::Rect {
+            cx: 20.0,
+            cy: 10.0,
+            hw: 6.0,
+            hh: 5.0,
+            cos: 1.0,
+            sin: 0.0,
+        },
+        plane.clone(),
+        tex(200.0),
+    );
+    let bg = Surface::new(
+        Outline::Everything,
+        DisparityField::constant(2.0),
+        tex(50.0),
+    );
+    let scene = SyntheticScene {
+        width: 40,
+        height: 20,
+        surfaces: vec![bg, fg],
+    };
+    let s = scene.render();
+    for y in 0..20 {
+        for x in 0..40 {
+            let inside = (x as f64 - 20.0).abs() <= 6.0 && (y as f64 - 10.0).abs() <= 5.0;
+            let want = if inside {
+                plane.at(x as f64, y as f64) as f32
+            } else {
+                2.0
+            };
+            assert!((s.disparity.get(x, y) - want).abs() < 1e-5);
+            assert_eq!(s.left.get(x, y)[0], if inside { 200.0 } else { 50.0 });
+        }
+    }
+    // At y = 10 the plane spans left x 14..=26 with d 9.4..10.6, i.e. right x 4.6..15.4, so
+    // the background (d = 2) at left x 7..=13 (right x 5..=11) is hidden; x 6 and 27 are not.
+    for x in 7..=13 {
+        assert!(s.occlusion.get(x, 10), "x {x}");
+    }
+    for x in [6, 14, 20, 26, 27] {
+        assert!(!s.occlusion.get(x, 10), "x {x}");
+    }
+    // Out of the right frame at the left border.
+    assert!(s.occlusion.get(0, 0) && s.occlusion.get(1, 0) && !s.occlusion.get(2, 0));
+    // Right-view disparity: the plane seen at right x = 10 (left x = 10 + d).
+    let d = s.disparity_right.get(10, 10);
+    assert!((plane.at(10.0 + f64::from(d), 10.0) as f32 - d).abs() < 1e-4);
+}
+
+#[test]
+fn curved_patch_right_solution_is_consistent() {
+    let f = DisparityField {
+        c: 20.0,
+        a: 0.05,
+        b: 0.02,
+        kx: 0.004,
+        ky: -0.003,
+        x0: 50.0,
+        y0: 30.0,
+    };
+    for xl in [30.0, 45.0, 50.0, 61.5, 70.0] {
+        for y in [20.0, 30.0, 41.0] {
+            let xr = xl - f.at(xl, y);
+            let back = f.left_x_from_right(xr, y).unwrap();
+            assert!((back - xl).abs() < 1e-9, "{xl} {y} -> {back}");
+        }
+    }
+}
+
+#[test]
+fn generator_is_fast_and_covers_all_kinds() {
+    let cfg = SyntheticConfig::with_size(320, 240);
+    let t = std::time::Instant::now();
+    let s = generate(&cfg, 3);
+    let el = t.elapsed();
+    assert!(el.as_secs_f64() < 2.0, "320x240 took {el:?}");
+    let occ = s.occlusion.count() as f64 / (320.0 * 240.0);
+    assert!(occ > 0.0 && occ < 0.5, "occluded fraction {occ}");
+    assert!(s.left.data.iter().all(|v| (0.0..=255.0).contains(v)));
+    // Over a few seeds every kind of surface appears, including thin bars.
+    let mut thin = false;
+    let mut curved = false;
+    for seed in 0..10 {
+        for srf in &SyntheticScene::random(&cfg, seed).surfaces {
+            thin |= matches!(srf.outline, Outline::Rect { hw, .. } if hw < 4.0);
+            curved |= srf.field.kx != 0.0 || srf.field.ky != 0.0;
+        }
+    }
+    assert!(thin && curved);
+}

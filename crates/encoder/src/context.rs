@@ -1,0 +1,117 @@
+//! The context encoder (`cnet`, the reference's `MultiBasicEncoder`).
+
+use burn::module::Module;
+use burn::nn::conv::Conv2d;
+use burn::tensor::{Device, Tensor, activation::relu};
+use dgstereo_core::layers::{ConvInit, conv2d};
+
+use crate::feature::trunk_strides;
+use crate::norm::{Norm, NormKind};
+use crate::residual::{ResidualBlock, forward_layer, make_layer};
+use crate::{ContextExtractor, ContextFeatures};
+
+/// A head of the 1/4 and 1/8 levels: a residual block and a 3x3 convolution
+/// (`outputsXX.j.0` and `outputsXX.j.1` in the reference).
+#[derive(Module, Debug)]
+pub struct ContextHead {
+    /// Residual block.
+    pub block: ResidualBlock,
+    /// 3x3 convolution to the head's width.
+    pub conv: Conv2d,
+}
+
+impl ContextHead {
+    fn new(dim: usize, norm: NormKind, device: &Device) -> Self {
+        Self {
+            block: ResidualBlock::new(128, 128, norm, 1, device),
+            conv: conv2d([128, dim], 3, 1, 1, ConvInit::KaimingFanOut, device),
+        }
+    }
+
+    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        self.conv.forward(self.block.forward(x))
+    }
+}
+
+/// Context at three resolutions, two heads per level: `j = 0` becomes the GRU's initial hidden
+/// state (after tanh), `j = 1` its context input (after ReLU).
+///
+/// All five trunk layers and all three levels of heads are built whatever the number of GRU
+/// levels, as in the reference (its checkpoints hold them).
+///
+/// # Shapes
+/// - input `[N, 3, H, W]`, level `l` outputs `[N, dims[2-l], H/(f·2^l), W/(f·2^l)]`
+#[derive(Module, Debug)]
+pub struct ContextEncoder {
+    /// 7x7 stem convolution.
+    pub conv1: Conv2d,
+    /// Norm of the stem.
+    pub norm1: Norm,
+    /// 64 channels.
+    pub layer1: Vec<ResidualBlock>,
+    /// 96 channels.
+    pub layer2: Vec<ResidualBlock>,
+    /// 128 channels, resolution 1/f.
+    pub layer3: Vec<ResidualBlock>,
+    /// 128 channels, 1/(2f).
+    pub layer4: Vec<ResidualBlock>,
+    /// 128 channels, 1/(4f).
+    pub layer5: Vec<ResidualBlock>,
+    /// Heads at 1/f.
+    pub outputs08: Vec<ContextHead>,
+    /// Heads at 1/(2f).
+    pub outputs16: Vec<ContextHead>,
+    /// Heads at 1/(4f): a single convolution each.
+    pub outputs32: Vec<Conv2d>,
+}
+
+impl ContextEncoder {
+    /// `dims` are the reference's `hidden_dims` (`[1/16, 1/8, 1/4]` order), used for both the
+    /// hidden and the context heads (`context_dims = hidden_dims`).
+    pub fn new(dims: [usize; 3], norm: NormKind, n_downsample: usize, device: &Device) -> Self {
+        let [s1, s2, s3] = trunk_strides(n_downsample);
+        Self {
+            conv1: conv2d([3, 64], 7, s1, 3, ConvInit::KaimingFanOut, device),
+            norm1: norm.init(64, device),
+            layer1: make_layer(64, 64, norm, 1, device),
+            layer2: make_layer(64, 96, norm, s2, device),
+            layer3: make_layer(96, 128, norm, s3, device),
+            layer4: make_layer(128, 128, norm, 2, device),
+            layer5: make_layer(128, 128, norm, 2, device),
+            outputs08: (0..2).map(|_| ContextHead::new(dims[2], norm, device)).collect(),
+            outputs16: (0..2).map(|_| ContextHead::new(dims[1], norm, device)).collect(),
+            outputs32: (0..2)
+                .map(|_| conv2d([128, dims[0]], 3, 1, 1, ConvInit::KaimingFanOut, device))
+                .collect(),
+        }
+    }
+
+    /// The trunk output at 1/f (`[N, 128, H/f, W/f]`).
+    pub fn trunk(&self, image: Tensor<4>) -> Tensor<4> {
+        let x = relu(self.norm1.forward(self.conv1.forward(image)));
+        let x = forward_layer(&self.layer1, x);
+        let x = forward_layer(&self.layer2, x);
+        forward_layer(&self.layer3, x)
+    }
+
+    /// The heads of `levels` levels from a trunk output.
+    pub fn heads(&self, trunk: Tensor<4>, levels: usize) -> ContextFeatures {
+        let pair = |heads: &[ContextHead], x: &Tensor<4>| [heads[0].forward(x.clone()), heads[1].forward(x.clone())];
+        let mut out = vec![pair(&self.outputs08, &trunk)];
+        if levels >= 2 {
+            let y = forward_layer(&self.layer4, trunk);
+            out.push(pair(&self.outputs16, &y));
+            if levels >= 3 {
+                let z = forward_layer(&self.layer5, y);
+                out.push([self.outputs32[0].forward(z.clone()), self.outputs32[1].forward(z)]);
+            }
+        }
+        ContextFeatures { levels: out }
+    }
+}
+
+impl ContextExtractor for ContextEncoder {
+    fn context(&self, image: Tensor<4>, levels: usize) -> ContextFeatures {
+        self.heads(self.trunk(image), levels)
+    }
+}

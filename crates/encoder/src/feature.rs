@@ -1,0 +1,88 @@
+//! The feature encoder (`fnet`, the reference's `BasicEncoder`).
+
+use burn::module::Module;
+use burn::nn::conv::Conv2d;
+use burn::tensor::{Device, Tensor, activation::relu};
+use dgstereo_core::layers::{ConvInit, conv2d};
+
+use crate::FeatureExtractor;
+use crate::norm::{Norm, NormKind};
+use crate::residual::{ResidualBlock, forward_layer, make_layer};
+
+/// The strides of the trunk's conv1, layer2 and layer3 for `n_downsample` (the reference's
+/// `1 + (downsample > 2)`, `1 + (downsample > 1)`, `1 + (downsample > 0)`).
+pub(crate) fn trunk_strides(n_downsample: usize) -> [usize; 3] {
+    [1 + (n_downsample > 2) as usize, 1 + (n_downsample > 1) as usize, 1 + (n_downsample > 0) as usize]
+}
+
+/// Matching features at `1/2^n_downsample` resolution: a residual trunk and a 1x1 projection.
+///
+/// # Shapes
+/// - input `[N, 3, H, W]` (normalised to -1..1), output `[N, output_dim, H/f, W/f]`
+#[derive(Module, Debug)]
+pub struct FeatureEncoder {
+    /// 7x7 stem convolution.
+    pub conv1: Conv2d,
+    /// Norm of the stem.
+    pub norm1: Norm,
+    /// 64 channels, full stem resolution.
+    pub layer1: Vec<ResidualBlock>,
+    /// 96 channels.
+    pub layer2: Vec<ResidualBlock>,
+    /// 128 channels.
+    pub layer3: Vec<ResidualBlock>,
+    /// 1x1 projection to `output_dim`.
+    pub conv2: Conv2d,
+}
+
+impl FeatureEncoder {
+    /// The encoder with `output_dim` channels (256 in RAFT-Stereo) and `norm` (instance).
+    pub fn new(output_dim: usize, norm: NormKind, n_downsample: usize, device: &Device) -> Self {
+        let [s1, s2, s3] = trunk_strides(n_downsample);
+        let init = ConvInit::KaimingFanOut;
+        Self {
+            conv1: conv2d([3, 64], 7, s1, 3, init, device),
+            norm1: norm.init(64, device),
+            layer1: make_layer(64, 64, norm, 1, device),
+            layer2: make_layer(64, 96, norm, s2, device),
+            layer3: make_layer(96, 128, norm, s3, device),
+            conv2: conv2d([128, output_dim], 1, 1, 0, init, device),
+        }
+    }
+}
+
+impl FeatureExtractor for FeatureEncoder {
+    fn features(&self, images: Tensor<4>) -> Tensor<4> {
+        let x = relu(self.norm1.forward(self.conv1.forward(images)));
+        let x = forward_layer(&self.layer1, x);
+        let x = forward_layer(&self.layer2, x);
+        let x = forward_layer(&self.layer3, x);
+        self.conv2.forward(x)
+    }
+}
+
+/// The feature head of the shared-backbone variant (the reference's top-level `conv2`):
+/// a residual block with instance norm and a 3x3 convolution to 256 channels, applied to the
+/// context trunk's output.
+#[derive(Module, Debug)]
+pub struct SharedFeatureHead {
+    /// Residual block (`conv2.0`).
+    pub block: ResidualBlock,
+    /// 3x3 projection (`conv2.1`).
+    pub conv: Conv2d,
+}
+
+impl SharedFeatureHead {
+    /// The head from 128 trunk channels to `output_dim`.
+    pub fn new(output_dim: usize, device: &Device) -> Self {
+        Self {
+            block: ResidualBlock::new(128, 128, NormKind::Instance, 1, device),
+            conv: conv2d([128, output_dim], 3, 1, 1, ConvInit::TorchDefault, device),
+        }
+    }
+
+    /// Features from the trunk output `[N, 128, H, W]`.
+    pub fn forward(&self, trunk: Tensor<4>) -> Tensor<4> {
+        self.conv.forward(self.block.forward(trunk))
+    }
+}

@@ -1,0 +1,41 @@
+//! RAFT-Stereo's encoders: matching features and multi-level context.
+//!
+//! Both encoders share the reference's residual trunk; the feature encoder ends in a 1x1
+//! projection at 1/4 resolution, the context encoder in two heads per level at 1/4, 1/8 and
+//! 1/16. Field names mirror the reference's state dict so official checkpoints load by path.
+//! The stage traits [`FeatureExtractor`] and [`ContextExtractor`] are what the model calls; the
+//! normalisations ([`norm`]) are swappable by [`NormKind`].
+#![deny(missing_docs)]
+
+pub mod context;
+pub mod feature;
+pub mod norm;
+pub mod residual;
+
+use burn::tensor::Tensor;
+
+pub use context::ContextEncoder;
+pub use feature::{FeatureEncoder, SharedFeatureHead};
+pub use norm::NormKind;
+
+/// Context of each GRU level, finest first: `[hidden, context]` before their activations.
+#[derive(Debug, Clone)]
+pub struct ContextFeatures {
+    /// One `[hidden_head, context_head]` pair per level (1/4, 1/8, 1/16).
+    pub levels: Vec<[Tensor<4>; 2]>,
+}
+
+/// The feature-encoder stage.
+///
+/// # Shapes
+/// - `images`: `[N, 3, H, W]`, normalised to -1..1; output `[N, C, H/f, W/f]`
+pub trait FeatureExtractor {
+    /// Matching features of a batch of images.
+    fn features(&self, images: Tensor<4>) -> Tensor<4>;
+}
+
+/// The context-encoder stage.
+pub trait ContextExtractor {
+    /// Context for `levels` GRU levels of a batch of (left) images.
+    fn context(&self, image: Tensor<4>, levels: usize) -> ContextFeatures;
+}

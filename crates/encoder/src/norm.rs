@@ -1,0 +1,152 @@
+//! The normalisations of RAFT-Stereo's encoders, with PyTorch's parameter names.
+
+use burn::module::{Module, Param};
+use burn::nn::Identity;
+use burn::tensor::{Device, Tensor};
+use dgstereo_core::tensor::instance_norm;
+use serde::{Deserialize, Serialize};
+
+const EPS: f64 = 1e-5;
+
+/// Which normalisation a residual block uses (`norm_fn` of the reference).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum NormKind {
+    /// BatchNorm, frozen: it always normalises with its running statistics.
+    #[default]
+    Batch,
+    /// GroupNorm with `channels / 8` groups.
+    Group,
+    /// InstanceNorm without affine parameters.
+    Instance,
+    /// No normalisation.
+    None,
+}
+
+/// A normalisation layer, chosen by [`NormKind`].
+#[derive(Module, Debug)]
+pub enum Norm {
+    /// Frozen BatchNorm.
+    Batch(FrozenBatchNorm),
+    /// GroupNorm.
+    Group(GroupNorm),
+    /// InstanceNorm (no parameters).
+    Instance(InstanceNorm),
+    /// Identity.
+    None(Identity),
+}
+
+impl NormKind {
+    /// Builds the layer for `channels` channels.
+    pub fn init(self, channels: usize, device: &Device) -> Norm {
+        match self {
+            Self::Batch => Norm::Batch(FrozenBatchNorm::new(channels, device)),
+            Self::Group => Norm::Group(GroupNorm::new(channels / 8, channels, device)),
+            Self::Instance => Norm::Instance(InstanceNorm { epsilon: EPS }),
+            Self::None => Norm::None(Identity::new()),
+        }
+    }
+}
+
+impl Norm {
+    /// Normalises `[N, C, H, W]`.
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        match self {
+            Self::Batch(n) => n.forward(x),
+            Self::Group(n) => n.forward(x),
+            Self::Instance(n) => n.forward(x),
+            Self::None(_) => x,
+        }
+    }
+}
+
+/// BatchNorm in evaluation mode at all times (RAFT-Stereo's `freeze_bn`).
+///
+/// The running statistics never update; `weight` and `bias` still train. Fields carry PyTorch's
+/// names so official checkpoints load without renaming.
+#[derive(Module, Debug)]
+pub struct FrozenBatchNorm {
+    /// Scale (`gamma`).
+    pub weight: Param<Tensor<1>>,
+    /// Shift (`beta`).
+    pub bias: Param<Tensor<1>>,
+    /// Running mean; not trained.
+    pub running_mean: Param<Tensor<1>>,
+    /// Running variance; not trained.
+    pub running_var: Param<Tensor<1>>,
+    /// Added to the variance.
+    pub epsilon: f64,
+}
+
+impl FrozenBatchNorm {
+    /// A fresh layer: identity statistics, unit scale, zero shift.
+    pub fn new(channels: usize, device: &Device) -> Self {
+        let frozen = |t: Tensor<1>| Param::from_tensor(t).set_require_grad(false);
+        Self {
+            weight: Param::from_tensor(Tensor::ones([channels], device)),
+            bias: Param::from_tensor(Tensor::zeros([channels], device)),
+            running_mean: frozen(Tensor::zeros([channels], device)),
+            running_var: frozen(Tensor::ones([channels], device)),
+            epsilon: EPS,
+        }
+    }
+
+    /// Normalises `[N, C, H, W]` with the running statistics.
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let c = self.weight.dims()[0];
+        let scale = self.weight.val() / self.running_var.val().detach().add_scalar(self.epsilon).sqrt();
+        let shift = self.bias.val() - self.running_mean.val().detach() * scale.clone();
+        x * scale.reshape([1, c, 1, 1]) + shift.reshape([1, c, 1, 1])
+    }
+}
+
+/// GroupNorm with affine parameters (PyTorch names).
+#[derive(Module, Debug)]
+pub struct GroupNorm {
+    /// Scale.
+    pub weight: Param<Tensor<1>>,
+    /// Shift.
+    pub bias: Param<Tensor<1>>,
+    /// Number of groups.
+    pub groups: usize,
+    /// Added to the variance.
+    pub epsilon: f64,
+}
+
+impl GroupNorm {
+    /// A fresh layer with unit scale and zero shift.
+    pub fn new(groups: usize, channels: usize, device: &Device) -> Self {
+        Self {
+            weight: Param::from_tensor(Tensor::ones([channels], device)),
+            bias: Param::from_tensor(Tensor::zeros([channels], device)),
+            groups: groups.max(1),
+            epsilon: EPS,
+        }
+    }
+
+    /// Normalises `[N, C, H, W]` over each group of channels and all pixels.
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let [n, c, h, w] = x.dims();
+        let g = self.groups;
+        let xg = x.reshape([n, g, (c / g) * h * w]);
+        let mean = xg.clone().mean_dim(2);
+        let centred = xg - mean;
+        let var = centred.clone().square().mean_dim(2);
+        let y = (centred / var.add_scalar(self.epsilon).sqrt()).reshape([n, c, h, w]);
+        y * self.weight.val().reshape([1, c, 1, 1]) + self.bias.val().reshape([1, c, 1, 1])
+    }
+}
+
+/// InstanceNorm2d without affine parameters (PyTorch's default), biased variance.
+#[derive(Module, Debug)]
+pub struct InstanceNorm {
+    /// Added to the variance.
+    pub epsilon: f64,
+}
+
+impl InstanceNorm {
+    /// Normalises each channel of each image over its pixels.
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        instance_norm(x, self.epsilon)
+    }
+}

@@ -1,0 +1,21 @@
+//! Evaluation for dgstereo: disparity metrics, benchmark protocols and result tables.
+//!
+//! [`metrics`] scores one prediction against ground truth on valid pixels into additive
+//! [`MetricSums`] (so images can be pooled) and [`Metrics`] with unambiguous names (`epe`,
+//! `bad-0.5` … `bad-4`, `d1-all`). [`protocol`] states, per benchmark, which pixels count and how
+//! images are aggregated (pooled or mean of per-image rates), following RAFT-Stereo's evaluation.
+//! [`table`] collects per-image rows into an [`EvalTable`] with aggregate rows, written as CSV,
+//! JSON or text. [`files`] is the file-level entry point behind `dgstereo metrics`.
+#![deny(missing_docs)]
+
+pub mod files;
+pub mod metrics;
+pub mod protocol;
+pub mod table;
+
+pub use files::{metrics_for_files, metrics_json};
+pub use metrics::{
+    BAD_THRESHOLDS, METRIC_NAMES, MetricSums, Metrics, ValidOptions, accumulate, evaluate,
+};
+pub use protocol::{Aggregation, Protocol};
+pub use table::{AggregateRow, EvalRow, EvalTable};

@@ -1,0 +1,196 @@
+//! Fusion of an image with its depth prior.
+//!
+//! The [`ImageFusion`] stage maps an image and its relative depth to the "enhanced image" that the
+//! encoders see, in the same 0..255 range as the input. Three kinds, chosen by [`FusionConfig`]:
+//!
+//! - `none`: the image passes unchanged (plain RAFT-Stereo);
+//! - `deformable`: DGIA, the paper's depth-guided image augmentation ([`DeformableFusion`]): 1x1
+//!   convs lift the image and the depth prior to `F = 8` channels each, a 3x3 conv on the depth
+//!   features predicts the offsets of a 3x3 deformable conv that maps both feature sets back to
+//!   RGB;
+//! - `conv`: the paper's "Depth+CNN" ablation ([`ConvFusion`]): the same with a plain 3x3 conv.
+//!
+//! # Design
+//! - The depth prior enters normalised per image to `[0, 1]` (min-max, guarded for constant
+//!   maps) and scaled by 255 like the images ([`normalize_depth`]); a prior at another resolution
+//!   is resized bilinearly to the image's.
+//! - One module serves both views (shared weights); images of a batch never interact, so the
+//!   model may fuse the views one at a time or stacked in one batch.
+//! - Both learned kinds start close to the identity on the image so the pretrained encoders see
+//!   what they expect at step 0; [`init`] documents how.
+//! - Where the enhanced image goes (both encoders, or the context encoder only while the feature
+//!   encoder keeps the raw image) is the model's decision; the config carries it as
+//!   [`FusionTarget`], read through [`FusionConfig::target`].
+//!
+//! # Config (TOML)
+//! ```toml
+//! [fusion]
+//! kind = "deformable"        # or "none" (default), "conv"
+//! target = "both"            # or "context-only"; default "both"
+//! features = 8               # channels of F_i and F_d; default 8
+//! ```
+#![deny(missing_docs)]
+
+pub mod conv;
+pub mod deformable;
+pub mod depth;
+pub mod init;
+pub mod projection;
+
+pub use conv::ConvFusion;
+pub use deformable::DeformableFusion;
+pub use depth::normalize_depth;
+pub use projection::FeatureProjection;
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor};
+use serde::{Deserialize, Serialize};
+
+/// The stage trait.
+///
+/// # Shapes
+/// - `image`: `[N, 3, H, W]`, 0..255
+/// - `depth`: `[N, 1, H, W]`, relative depth (any scale; the fusion normalises it per image)
+/// - output: `[N, 3, H, W]`, 0..255
+pub trait ImageFusion {
+    /// The enhanced image.
+    fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Tensor<4>;
+}
+
+/// Which encoders see the enhanced image. Applied by the model, not by the fusion.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum FusionTarget {
+    /// Feature and context encoders both see the enhanced image.
+    #[default]
+    Both,
+    /// Only the context encoder sees it; the feature (matching) encoder keeps the raw image.
+    ContextOnly,
+}
+
+/// The paper's feature channel count per branch.
+pub const DEFAULT_FEATURES: usize = 8;
+
+fn default_features() -> usize {
+    DEFAULT_FEATURES
+}
+
+/// Which fusion an experiment uses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum FusionConfig {
+    /// The image passes unchanged.
+    #[default]
+    None,
+    /// DGIA: depth-guided deformable conv ([`DeformableFusion`]).
+    Deformable {
+        /// Which encoders see the enhanced image.
+        #[serde(default)]
+        target: FusionTarget,
+        /// Channels of each of `F_i` and `F_d` (at least 3).
+        #[serde(default = "default_features")]
+        features: usize,
+    },
+    /// Depth+CNN: plain 3x3 conv over the image and depth features ([`ConvFusion`]).
+    Conv {
+        /// Which encoders see the enhanced image.
+        #[serde(default)]
+        target: FusionTarget,
+        /// Channels of each of `F_i` and `F_d` (at least 3).
+        #[serde(default = "default_features")]
+        features: usize,
+    },
+}
+
+impl FusionConfig {
+    /// The DGIA config with the paper's defaults (`target = "both"`, `features = 8`).
+    pub fn deformable() -> Self {
+        Self::Deformable { target: FusionTarget::default(), features: DEFAULT_FEATURES }
+    }
+
+    /// The Depth+CNN config with the paper's defaults.
+    pub fn conv() -> Self {
+        Self::Conv { target: FusionTarget::default(), features: DEFAULT_FEATURES }
+    }
+
+    /// Which encoders see the enhanced image; [`FusionTarget::Both`] for `none` (where the
+    /// enhanced image is the image itself).
+    pub fn target(&self) -> FusionTarget {
+        match self {
+            Self::None => FusionTarget::Both,
+            Self::Deformable { target, .. } | Self::Conv { target, .. } => *target,
+        }
+    }
+
+    /// Whether [`ImageFusion::fuse`] needs the depth prior (`Some(depth)`); the model can skip
+    /// running the prior network when it does not.
+    pub fn needs_prior(&self) -> bool {
+        !matches!(self, Self::None)
+    }
+
+    /// Checks the parameters.
+    ///
+    /// # Errors
+    /// [`dgstereo_core::Error::Config`] when `features < 3`.
+    pub fn validate(&self) -> dgstereo_core::Result<()> {
+        match self {
+            Self::None => Ok(()),
+            Self::Deformable { features, .. } | Self::Conv { features, .. } if *features < 3 => {
+                Err(dgstereo_core::Error::Config(format!(
+                    "fusion features must be at least 3, got {features}"
+                )))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Builds the module.
+    ///
+    /// # Panics
+    /// When [`validate`](Self::validate) fails.
+    pub fn init(&self, device: &Device) -> Fusion {
+        match self {
+            Self::None => Fusion::None(IdentityFusion),
+            Self::Deformable { features, .. } => {
+                Fusion::Deformable(DeformableFusion::new(*features, device))
+            }
+            Self::Conv { features, .. } => Fusion::Conv(ConvFusion::new(*features, device)),
+        }
+    }
+}
+
+/// The `none` fusion: returns the image unchanged. (burn's `Module` derive does not accept unit
+/// enum variants, hence this stateless module in [`Fusion::None`].)
+#[derive(Module, Debug, Default)]
+pub struct IdentityFusion;
+
+impl ImageFusion for IdentityFusion {
+    fn fuse(&self, image: Tensor<4>, _depth: Option<Tensor<4>>) -> Tensor<4> {
+        image
+    }
+}
+
+/// A built fusion module, chosen by [`FusionConfig`].
+// One per model: the size gap between the identity and the learned variants does not matter.
+#[allow(clippy::large_enum_variant)]
+#[derive(Module, Debug)]
+pub enum Fusion {
+    /// The image passes unchanged.
+    None(IdentityFusion),
+    /// DGIA.
+    Deformable(DeformableFusion),
+    /// Depth+CNN.
+    Conv(ConvFusion),
+}
+
+impl ImageFusion for Fusion {
+    /// # Panics
+    /// When a learned fusion gets `depth = None`.
+    fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Tensor<4> {
+        match self {
+            Self::None(fusion) => fusion.fuse(image, depth),
+            Self::Deformable(fusion) => fusion.fuse(image, depth),
+            Self::Conv(fusion) => fusion.fuse(image, depth),
+        }
+    }
+}

@@ -1,0 +1,138 @@
+//! Losses over the sequence of disparity predictions.
+//!
+//! RAFT-Stereo supervises every iteration's prediction with an exponentially growing weight.
+//! The [`DisparityLoss`] trait takes all predictions and a [`LossTarget`]; implementations
+//! differ in which pixels are supervised and how the per-iteration terms are normalised:
+//!
+//! - `sequence-l1` ([`SequenceL1Loss`]): RAFT-Stereo's loss, mean L1 over the valid pixels,
+//!   weights `gamma'^(N-k)` with `gamma' = gamma^(15/(N-1))`;
+//! - `edge-aware` ([`EdgeAwareLoss`]): the paper's EALS, which additionally drops pixels where the
+//!   bilinearly and nearest-resized ground truths disagree by more than `tau` ([`edge_mask`]),
+//!   normalises each term by the full pixel count and weights it `gamma^(N-k)`.
+//!
+//! In both, ground truth that is invalid (`valid < 0.5`), at or above `max_disparity` in
+//! magnitude, or not finite is excluded, and cannot leak NaN into the loss or its gradient.
+//!
+//! # Config (TOML)
+//! ```toml
+//! [loss]
+//! kind = "edge-aware"      # or "sequence-l1" (default)
+//! tau = 0.9                # edge-aware only
+//! gamma = 0.9
+//! max_disparity = 700.0
+//! ```
+#![deny(missing_docs)]
+
+pub mod edge_aware;
+pub mod mask;
+pub mod sequence;
+
+pub use edge_aware::EdgeAwareLoss;
+pub use mask::{edge_mask, supervised_mask};
+pub use sequence::{SequenceL1Loss, sequence_weights};
+
+use burn::tensor::Tensor;
+use serde::{Deserialize, Serialize};
+
+/// The ground truth a loss sees.
+///
+/// # Shapes
+/// All `[N, 1, H, W]`: positive disparity resized bilinearly and by nearest neighbour (equal when
+/// no resize happened), and the validity mask (1 = valid).
+#[derive(Debug, Clone)]
+pub struct LossTarget {
+    /// Ground truth resized bilinearly.
+    pub disparity_bilinear: Tensor<4>,
+    /// Ground truth resized by nearest neighbour.
+    pub disparity_nearest: Tensor<4>,
+    /// 1 where the ground truth is valid.
+    pub valid: Tensor<4>,
+}
+
+/// The stage trait.
+pub trait DisparityLoss {
+    /// The scalar loss of `predictions` (one `[N, 1, H, W]` positive disparity per iteration).
+    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Tensor<1>;
+}
+
+/// Which loss an experiment uses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum LossConfig {
+    /// RAFT-Stereo's sequence L1 loss ([`SequenceL1Loss`]).
+    SequenceL1 {
+        /// Base decay; adjusted to the iteration count as `gamma^(15/(N-1))`.
+        #[serde(default = "default_gamma")]
+        gamma: f64,
+        /// Pixels with |disparity| at or above this are excluded.
+        #[serde(default = "default_max_disparity")]
+        max_disparity: f64,
+    },
+    /// Edge-aware loss suppression ([`EdgeAwareLoss`]).
+    EdgeAware {
+        /// Pixels where bilinear and nearest ground truth differ by more than this are excluded.
+        #[serde(default = "default_tau")]
+        tau: f64,
+        /// Per-iteration decay, used as given: weight `gamma^(N-k)`.
+        #[serde(default = "default_gamma")]
+        gamma: f64,
+        /// Pixels with |disparity| at or above this are excluded.
+        #[serde(default = "default_max_disparity")]
+        max_disparity: f64,
+    },
+}
+
+/// Default decay of both losses.
+pub const DEFAULT_GAMMA: f64 = 0.9;
+/// Default largest supervised disparity.
+pub const DEFAULT_MAX_DISPARITY: f64 = 700.0;
+/// Default EALS threshold.
+pub const DEFAULT_TAU: f64 = 0.9;
+
+fn default_gamma() -> f64 {
+    DEFAULT_GAMMA
+}
+fn default_max_disparity() -> f64 {
+    DEFAULT_MAX_DISPARITY
+}
+fn default_tau() -> f64 {
+    DEFAULT_TAU
+}
+
+impl Default for LossConfig {
+    fn default() -> Self {
+        Self::SequenceL1 { gamma: DEFAULT_GAMMA, max_disparity: DEFAULT_MAX_DISPARITY }
+    }
+}
+
+impl LossConfig {
+    /// EALS with the paper's defaults (`tau = 0.9`, `gamma = 0.9`, `max_disparity = 700`).
+    pub fn edge_aware() -> Self {
+        Self::EdgeAware {
+            tau: DEFAULT_TAU,
+            gamma: DEFAULT_GAMMA,
+            max_disparity: DEFAULT_MAX_DISPARITY,
+        }
+    }
+
+    /// Whether the loss reads [`LossTarget::disparity_nearest`] (the data pipeline may then skip
+    /// the nearest resize and pass the bilinear ground truth twice).
+    pub fn needs_nearest(&self) -> bool {
+        matches!(self, Self::EdgeAware { .. })
+    }
+}
+
+impl DisparityLoss for LossConfig {
+    /// # Panics
+    /// When `predictions` is empty.
+    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Tensor<1> {
+        match *self {
+            Self::SequenceL1 { gamma, max_disparity } => {
+                SequenceL1Loss { gamma, max_disparity }.loss(predictions, target)
+            }
+            Self::EdgeAware { tau, gamma, max_disparity } => {
+                EdgeAwareLoss { tau, gamma, max_disparity }.loss(predictions, target)
+            }
+        }
+    }
+}

@@ -1,0 +1,217 @@
+//! Behaviour of the disparity losses: edge mask, EALS by hand, sequence weights, configs.
+
+use burn::tensor::{Device, Tensor};
+use dgstereo_core::default_device;
+use dgstereo_core::tensor::{from_vec, to_vec};
+use dgstereo_loss::{
+    DisparityLoss, EdgeAwareLoss, LossConfig, LossTarget, SequenceL1Loss, edge_mask,
+    sequence_weights,
+};
+use proptest::prelude::*;
+
+fn map(values: &[f32], shape: [usize; 4], device: &Device) -> Tensor<4> {
+    from_vec(values.to_vec(), shape, device)
+}
+
+fn scalar(t: Tensor<1>) -> f32 {
+    to_vec(t)[0]
+}
+
+fn count(mask: Tensor<4>) -> f32 {
+    to_vec(mask).iter().sum()
+}
+
+/// The 2x3 example of the EALS hand computation.
+///
+/// ```text
+/// bilinear  1  2    3        nearest  1  4    3.5      valid  1 1 1
+///           4  5  800                 4  5  800               0 1 1
+/// ```
+/// Kept by EALS (tau 0.9, max 700): (0,0), (0,2), (1,1) with ground truth 1, 3, 5. Pixel (0,1)
+/// is an edge (|2 - 4| > 0.9), (1,0) is invalid, (1,2) is beyond `max_disparity`.
+/// The invalid pixel holds infinity to check that it cannot poison the loss.
+fn example(device: &Device) -> LossTarget {
+    let inf = f32::INFINITY;
+    LossTarget {
+        disparity_bilinear: map(&[1.0, 2.0, 3.0, inf, 5.0, 800.0], [1, 1, 2, 3], device),
+        disparity_nearest: map(&[1.0, 4.0, 3.5, inf, 5.0, 800.0], [1, 1, 2, 3], device),
+        valid: map(&[1.0, 1.0, 1.0, 0.0, 1.0, 1.0], [1, 1, 2, 3], device),
+    }
+}
+
+/// Predictions: all zeros, then the (finite) ground truth plus one.
+fn example_predictions(device: &Device) -> Vec<Tensor<4>> {
+    vec![
+        Tensor::zeros([1, 1, 2, 3], device),
+        map(&[2.0, 3.0, 4.0, 5.0, 6.0, 801.0], [1, 1, 2, 3], device),
+    ]
+}
+
+#[test]
+fn eals_matches_hand_computation() {
+    let device = default_device();
+    let loss = EdgeAwareLoss { tau: 0.9, gamma: 0.9, max_disparity: 700.0 };
+    // L_1 = (1 + 3 + 5) / 6 = 1.5, L_2 = 3 * 1 / 6 = 0.5, L = 0.9 * 1.5 + 0.5 = 1.85.
+    let value = scalar(loss.loss(&example_predictions(&device), &example(&device)));
+    assert!((value - 1.85).abs() < 1e-5, "{value}");
+    // The single last prediction has weight 1.
+    let value = scalar(loss.loss(&example_predictions(&device)[1..], &example(&device)));
+    assert!((value - 0.5).abs() < 1e-6, "{value}");
+    assert_eq!(to_vec(loss.mask(&example(&device))), vec![1.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
+}
+
+#[test]
+fn eals_averages_over_the_batch_images() {
+    let device = default_device();
+    let one = example(&device);
+    // A second image with nothing valid halves every term: sum / (B * H * W).
+    let target = LossTarget {
+        disparity_bilinear: Tensor::cat(vec![one.disparity_bilinear.clone(); 2], 0),
+        disparity_nearest: Tensor::cat(vec![one.disparity_nearest.clone(); 2], 0),
+        valid: Tensor::cat(vec![one.valid.clone(), Tensor::zeros([1, 1, 2, 3], &device)], 0),
+    };
+    let predictions: Vec<_> =
+        example_predictions(&device).into_iter().map(|p| Tensor::cat(vec![p; 2], 0)).collect();
+    let value = scalar(LossConfig::edge_aware().loss(&predictions, &target));
+    assert!((value - 0.925).abs() < 1e-5, "{value}");
+}
+
+#[test]
+fn sequence_l1_matches_hand_computation() {
+    let device = default_device();
+    let loss = SequenceL1Loss { gamma: 0.9, max_disparity: 700.0 };
+    // Supervised: (0,0), (0,1), (0,2), (1,1) with ground truth 1, 2, 3, 5.
+    // L_1 = 11 / 4, L_2 = 1; weights 0.9^15 and 1.
+    let value = scalar(loss.loss(&example_predictions(&device), &example(&device)));
+    let expected = 0.9f32.powi(15) * 2.75 + 1.0;
+    assert!((value - expected).abs() < 1e-5, "{value} vs {expected}");
+    // N = 1: weight 1, no division by zero.
+    let value = scalar(loss.loss(&example_predictions(&device)[..1], &example(&device)));
+    assert!((value - 2.75).abs() < 1e-5, "{value}");
+}
+
+#[test]
+fn losses_without_supervised_pixels_are_zero() {
+    let device = default_device();
+    let mut target = example(&device);
+    target.valid = Tensor::zeros([1, 1, 2, 3], &device);
+    for config in [LossConfig::default(), LossConfig::edge_aware()] {
+        let value = scalar(config.loss(&example_predictions(&device), &target));
+        assert_eq!(value, 0.0, "{config:?}");
+    }
+}
+
+#[test]
+fn eals_equals_sequence_l1_without_resize_edges_or_invalid_pixels() {
+    let device = default_device();
+    let gt = map(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0], [1, 1, 2, 3], &device);
+    let target = LossTarget {
+        disparity_bilinear: gt.clone(),
+        disparity_nearest: gt,
+        valid: Tensor::ones([1, 1, 2, 3], &device),
+    };
+    let predictions = [Tensor::zeros([1, 1, 2, 3], &device)];
+    let eals = scalar(LossConfig::edge_aware().loss(&predictions, &target));
+    let l1 = scalar(LossConfig::default().loss(&predictions, &target));
+    assert!((eals - 3.5).abs() < 1e-6 && (l1 - 3.5).abs() < 1e-6, "{eals} {l1}");
+}
+
+#[test]
+fn gradients_stay_finite_next_to_infinite_ground_truth() {
+    let device = default_device().autodiff();
+    let target = example(&device);
+    let prediction = map(&[0.5, 0.5, 0.5, 0.5, 0.5, 0.5], [1, 1, 2, 3], &device).require_grad();
+    for config in [LossConfig::default(), LossConfig::edge_aware()] {
+        let loss = config.loss(std::slice::from_ref(&prediction), &target);
+        let grads = loss.backward();
+        let grad = to_vec(prediction.grad(&grads).expect("gradient"));
+        assert!(grad.iter().all(|g| g.is_finite()), "{config:?}: {grad:?}");
+        // Only supervised pixels get a gradient.
+        assert_eq!(grad[3], 0.0);
+        assert_eq!(grad[5], 0.0);
+    }
+}
+
+#[test]
+fn sequence_weights_follow_raft_stereo() {
+    assert_eq!(sequence_weights(1, 0.9, true), vec![1.0]);
+    assert_eq!(sequence_weights(1, 0.9, false), vec![1.0]);
+    let plain = sequence_weights(3, 0.9, false);
+    assert!((plain[0] - 0.81).abs() < 1e-12 && (plain[1] - 0.9).abs() < 1e-12 && plain[2] == 1.0);
+    for n in 2..=32 {
+        let w = sequence_weights(n, 0.9, true);
+        assert_eq!(w.len(), n);
+        assert_eq!(w[n - 1], 1.0);
+        // The first prediction always weighs 0.9^15, whatever the iteration count.
+        assert!((w[0] - 0.9f64.powi(15)).abs() < 1e-9, "n = {n}: {}", w[0]);
+        let ratio = w[0] / w[1];
+        assert!(w.windows(2).all(|p| (p[0] / p[1] - ratio).abs() < 1e-9));
+    }
+}
+
+#[test]
+fn configs_read_from_toml() {
+    let config: LossConfig = toml::from_str("kind = \"edge-aware\"").unwrap();
+    assert_eq!(config, LossConfig::edge_aware());
+    assert!(config.needs_nearest());
+    let config: LossConfig = toml::from_str("kind = \"edge-aware\"\ntau = 0.5").unwrap();
+    assert_eq!(config, LossConfig::EdgeAware { tau: 0.5, gamma: 0.9, max_disparity: 700.0 });
+    let config: LossConfig =
+        toml::from_str("kind = \"sequence-l1\"\ngamma = 0.8\nmax_disparity = 192.0").unwrap();
+    assert_eq!(config, LossConfig::SequenceL1 { gamma: 0.8, max_disparity: 192.0 });
+    assert!(!config.needs_nearest());
+    assert!(toml::from_str::<LossConfig>("kind = \"sequence-l1\"\ntau = 0.5").is_err());
+    let text = toml::to_string(&LossConfig::edge_aware()).unwrap();
+    assert_eq!(toml::from_str::<LossConfig>(&text).unwrap(), LossConfig::edge_aware());
+}
+
+/// Random small disparity maps: `(values, shape)`.
+fn disparity_map() -> impl Strategy<Value = (Vec<f32>, [usize; 4])> {
+    (1usize..3, 1usize..5, 1usize..6).prop_flat_map(|(n, h, w)| {
+        (proptest::collection::vec(0.0f32..200.0, n * h * w), Just([n, 1, h, w]))
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+
+    #[test]
+    fn edge_mask_is_all_ones_without_resize((values, shape) in disparity_map(), tau in 0.0f64..5.0) {
+        let device = default_device();
+        let d = map(&values, shape, &device);
+        let total = values.len() as f32;
+        prop_assert_eq!(count(edge_mask(d.clone(), d, tau)), total);
+    }
+
+    #[test]
+    fn edge_mask_is_all_ones_when_tau_exceeds_the_range(
+        (a, shape) in disparity_map(),
+        seed in any::<u64>(),
+    ) {
+        let device = default_device();
+        // A second map in the same range, shuffled by a cheap LCG.
+        let mut state = seed;
+        let b: Vec<f32> = a.iter().map(|_| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 * 200.0
+        }).collect();
+        let mask = edge_mask(map(&a, shape, &device), map(&b, shape, &device), 200.0);
+        prop_assert_eq!(count(mask), a.len() as f32);
+    }
+
+    #[test]
+    fn edge_mask_shrinks_as_tau_falls(
+        (a, shape) in disparity_map(),
+        offsets in proptest::collection::vec(-3.0f32..3.0, 30),
+        taus in proptest::collection::vec(0.0f64..4.0, 2..6),
+    ) {
+        let device = default_device();
+        let b: Vec<f32> = a.iter().zip(offsets.iter().cycle()).map(|(x, o)| x + o).collect();
+        let (a, b) = (map(&a, shape, &device), map(&b, shape, &device));
+        let mut taus = taus;
+        taus.sort_by(f64::total_cmp);
+        let counts: Vec<f32> =
+            taus.iter().map(|&tau| count(edge_mask(a.clone(), b.clone(), tau))).collect();
+        prop_assert!(counts.windows(2).all(|c| c[0] <= c[1]), "{:?} at {:?}", counts, taus);
+    }
+}

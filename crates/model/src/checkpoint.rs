@@ -1,0 +1,128 @@
+//! Loading official RAFT-Stereo checkpoints and saving/loading our own.
+//!
+//! Official `.pth` files (`raftstereo-*.pth`, saved from `DataParallel`, keys prefixed
+//! `module.`) load directly through burn-store's PyTorch reader. A few keys are renamed where a
+//! PyTorch `Sequential` index has no Rust field name (`outputs08.0.1` → `outputs08.0.conv`,
+//! `mask.2` → `mask.conv2`, `downsample.0` → `downsample`); `downsample.1` is the same module as
+//! `norm3` in the reference and `num_batches_tracked` is unused, so both are ignored. Any other
+//! unknown key, any missing key and any shape mismatch is an error naming the key, and
+//! non-finite weights are refused. Our own checkpoints are safetensors with the resolved config
+//! in the metadata.
+
+use std::path::Path;
+
+use burn::store::{ModuleSnapshot, PytorchStore, SafetensorsStore};
+use dgstereo_core::{Error, Result};
+
+use crate::RaftStereo;
+
+/// Renames from the reference's state-dict keys to our module paths, applied in order.
+const RENAMES: &[(&str, &str)] = &[
+    (r"^module\.", ""),
+    (r"(outputs08|outputs16)\.(\d+)\.0\.", "$1.$2.block."),
+    (r"(outputs08|outputs16)\.(\d+)\.1\.", "$1.$2.conv."),
+    (r"downsample\.0\.", "downsample."),
+    (r"^conv2\.0\.", "conv2.block."),
+    (r"^conv2\.1\.", "conv2.conv."),
+    (r"update_block\.mask\.0\.", "update_block.mask.conv1."),
+    (r"update_block\.mask\.2\.", "update_block.mask.conv2."),
+];
+
+/// Whether an unused checkpoint key is one the reference stores redundantly.
+fn ignorable(key: &str) -> bool {
+    key.ends_with("num_batches_tracked") || key.contains("downsample.1.")
+}
+
+/// Loads an official RAFT-Stereo `.pth` checkpoint into `model` (built with the matching config).
+pub fn load_pytorch(mut model: RaftStereo, path: &Path) -> Result<RaftStereo> {
+    if !path.is_file() {
+        return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
+    }
+    let mut store = PytorchStore::from_file(path).map_indices_contiguous(false).allow_partial(true).validate(false);
+    for (from, to) in RENAMES {
+        store = store.with_key_remapping(*from, *to);
+    }
+    let result = model
+        .load_from(&mut store)
+        .map_err(|e| Error::Checkpoint { path: path.into(), message: format!("cannot read checkpoint: {e}") })?;
+    let fail = |message: String| Err(Error::Checkpoint { path: path.into(), message });
+    if let Some(e) = result.errors.first() {
+        return fail(format!("{e} ({} errors in all)", result.errors.len()));
+    }
+    if !result.missing.is_empty() {
+        let keys: Vec<&str> = result.missing.iter().map(|(k, _)| k.as_str()).take(8).collect();
+        return fail(format!(
+            "missing key(s) for this model configuration: {} ({} in all; is the experiment's model config the checkpoint's?)",
+            keys.join(", "),
+            result.missing.len()
+        ));
+    }
+    let unknown: Vec<&str> = result.unused.iter().map(String::as_str).filter(|k| !ignorable(k)).collect();
+    if !unknown.is_empty() {
+        return fail(format!(
+            "unknown key(s) not used by this model configuration: {} ({} in all)",
+            unknown.iter().take(8).copied().collect::<Vec<_>>().join(", "),
+            unknown.len()
+        ));
+    }
+    check_finite(&model, path)?;
+    Ok(model)
+}
+
+/// Fails with the parameter's name when any weight is NaN or infinite.
+pub fn check_finite(model: &RaftStereo, path: &Path) -> Result<()> {
+    for t in model.collect(None, None, true) {
+        let data = burn::store::bridge::to_data(&t)
+            .map_err(|e| Error::Checkpoint { path: path.into(), message: format!("{}: {e}", t.name) })?;
+        let values = data.convert::<f32>().try_to_vec::<f32>().unwrap_or_default();
+        if let Some(v) = values.iter().find(|v| !v.is_finite()) {
+            return Err(Error::Checkpoint { path: path.into(), message: format!("{}: non-finite weight ({v})", t.name) });
+        }
+    }
+    Ok(())
+}
+
+/// Saves `model` as safetensors with `metadata` (e.g. the resolved config as JSON), atomically:
+/// the file appears complete or not at all (written to a temporary name, then renamed).
+pub fn save_safetensors(model: &RaftStereo, path: &Path, metadata: &[(&str, &str)]) -> Result<()> {
+    let tmp = path.with_extension("safetensors.tmp");
+    let mut store = SafetensorsStore::from_file(&tmp).overwrite(true);
+    for (k, v) in metadata {
+        store = store.metadata(*k, *v);
+    }
+    model
+        .save_into(&mut store)
+        .map_err(|e| Error::Checkpoint { path: path.into(), message: format!("cannot write: {e}") })?;
+    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+}
+
+/// Loads our own safetensors checkpoint into `model` (built with the config it was saved with).
+pub fn load_safetensors(mut model: RaftStereo, path: &Path) -> Result<RaftStereo> {
+    if !path.is_file() {
+        return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
+    }
+    let mut store = SafetensorsStore::from_file(path).allow_partial(true).validate(false);
+    let result = model
+        .load_from(&mut store)
+        .map_err(|e| Error::Checkpoint { path: path.into(), message: format!("cannot read checkpoint: {e}") })?;
+    let fail = |message: String| Err(Error::Checkpoint { path: path.into(), message });
+    if let Some(e) = result.errors.first() {
+        return fail(e.to_string());
+    }
+    if let Some((k, _)) = result.missing.first() {
+        return fail(format!("missing key '{k}' ({} in all): the checkpoint was saved from another model configuration", result.missing.len()));
+    }
+    if let Some(k) = result.unused.first() {
+        return fail(format!("unknown key '{k}' ({} in all): the checkpoint was saved from another model configuration", result.unused.len()));
+    }
+    check_finite(&model, path)?;
+    Ok(model)
+}
+
+/// Reads a metadata entry of a safetensors file (e.g. `config`).
+pub fn safetensors_metadata(path: &Path, key: &str) -> Result<Option<String>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
+        .map_err(|e| Error::format(path, format!("not a safetensors file: {e}")))?;
+    Ok(meta.metadata().as_ref().and_then(|m| m.get(key).cloned()))
+}

@@ -1,0 +1,95 @@
+//! Configuration of the stereo network.
+
+use burn::tensor::Device;
+use dgstereo_costvolume::CorrelationConfig;
+use dgstereo_encoder::NormKind;
+use dgstereo_fusion::FusionConfig;
+use dgstereo_updater::{GuidanceKind, UpdaterConfig};
+use serde::{Deserialize, Serialize};
+
+use crate::RaftStereo;
+
+/// Encoder options of RAFT-Stereo.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EncoderConfig {
+    /// Normalisation of the context encoder (`context_norm`: batch, group, instance, none).
+    #[serde(default)]
+    pub context_norm: NormKind,
+    /// One trunk for context and features (`shared_backbone`).
+    #[serde(default)]
+    pub shared_backbone: bool,
+    /// Channels of the matching features (256).
+    #[serde(default = "default_feature_dim")]
+    pub feature_dim: usize,
+}
+
+fn default_feature_dim() -> usize {
+    256
+}
+
+impl Default for EncoderConfig {
+    fn default() -> Self {
+        Self { context_norm: NormKind::Batch, shared_backbone: false, feature_dim: 256 }
+    }
+}
+
+/// The whole network: RAFT-Stereo's options plus the paper's fusion and guidance.
+///
+/// Every field has RAFT-Stereo's default, so an empty TOML table is the reference model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ModelConfig {
+    /// Encoders.
+    #[serde(default)]
+    pub encoder: EncoderConfig,
+    /// Correlation volume.
+    #[serde(default)]
+    pub correlation: CorrelationConfig,
+    /// Update operator (GRU levels, hidden widths, guidance).
+    #[serde(default)]
+    pub updater: UpdaterConfig,
+    /// Image/depth fusion before the encoders.
+    #[serde(default)]
+    pub fusion: FusionConfig,
+}
+
+impl ModelConfig {
+    /// Checks the combination of options; the message names the key.
+    pub fn validate(&self) -> dgstereo_core::Result<()> {
+        let err = |m: String| Err(dgstereo_core::Error::Config(m));
+        let u = &self.updater;
+        if !(1..=3).contains(&u.n_gru_layers) {
+            return err(format!("updater.n_gru_layers = {} (must be 1, 2 or 3)", u.n_gru_layers));
+        }
+        if !(2..=3).contains(&u.n_downsample) {
+            return err(format!("updater.n_downsample = {} (must be 2 or 3)", u.n_downsample));
+        }
+        if u.hidden_dims.contains(&0) {
+            return err("updater.hidden_dims must be positive".into());
+        }
+        if self.correlation.levels == 0 {
+            return err("correlation.levels must be at least 1".into());
+        }
+        if self.encoder.feature_dim == 0 {
+            return err("encoder.feature_dim must be positive".into());
+        }
+        Ok(())
+    }
+
+    /// Whether the network consumes a depth prior (fusion or guidance).
+    pub fn needs_prior(&self) -> bool {
+        self.fusion != FusionConfig::None || self.updater.guidance != GuidanceKind::None
+    }
+
+    /// The upsampling factor `2^n_downsample`.
+    pub fn factor(&self) -> usize {
+        1 << self.updater.n_downsample
+    }
+
+    /// Builds the network with fresh weights.
+    pub fn init(&self, device: &Device) -> dgstereo_core::Result<RaftStereo> {
+        self.validate()?;
+        Ok(RaftStereo::new(self, device))
+    }
+}

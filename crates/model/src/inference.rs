@@ -1,0 +1,96 @@
+//! The public inference API: any image size in, positive disparity out.
+
+use burn::tensor::{Device, Tensor};
+use dgstereo_core::{Error, InputPadder, Result};
+use dgstereo_costvolume::CorrelationImplementation;
+use dgstereo_core::DepthPrior;
+
+use crate::{ModelConfig, RaftStereo};
+
+/// A network ready for inference.
+///
+/// Inputs of any size are padded by replicating their border to a multiple of 32 (RAFT-Stereo's
+/// evaluation padder), and results are cropped back, so disparity maps have the input's size.
+/// Disparity is positive: `d = x_left - x_right = -flow`.
+#[derive(Debug)]
+pub struct StereoModel {
+    /// The network.
+    pub network: RaftStereo,
+    /// Its configuration.
+    pub config: ModelConfig,
+    /// Device of the weights.
+    pub device: Device,
+}
+
+/// What [`StereoModel::predict`] returns.
+///
+/// # Shapes
+/// - each disparity: `[N, 1, H, W]`, the input's size
+#[derive(Debug, Clone)]
+pub struct Prediction {
+    /// Disparity after each iteration (or only the last, see `all_iterations`).
+    pub disparities: Vec<Tensor<4>>,
+}
+
+impl Prediction {
+    /// The final disparity.
+    pub fn last(&self) -> Tensor<4> {
+        self.disparities.last().expect("at least one iteration").clone()
+    }
+}
+
+impl StereoModel {
+    /// Wraps a network.
+    pub fn new(network: RaftStereo, config: ModelConfig, device: Device) -> Self {
+        Self { network, config, device }
+    }
+
+    /// Disparity of rectified pairs (`[N, 3, H, W]`, RGB 0..255) after `iters` iterations.
+    ///
+    /// `all_iterations` keeps every iteration's map (for analysis and training); otherwise only
+    /// the last is upsampled. `implementation` overrides the configured cost volume.
+    pub fn predict(
+        &self,
+        left: Tensor<4>,
+        right: Tensor<4>,
+        prior: Option<&DepthPrior>,
+        iters: usize,
+        all_iterations: bool,
+        implementation: Option<CorrelationImplementation>,
+    ) -> Result<Prediction> {
+        let [n, c, h, w] = left.dims();
+        if right.dims() != [n, c, h, w] {
+            return Err(Error::Shape(format!(
+                "left image is {w}x{h} but right image is {}x{}: a rectified pair has one size",
+                right.dims()[3],
+                right.dims()[2]
+            )));
+        }
+        if c != 3 {
+            return Err(Error::Shape(format!("images must have 3 channels, found {c}")));
+        }
+        if iters == 0 {
+            return Err(Error::Config("iterations must be at least 1".into()));
+        }
+        if self.config.needs_prior() && prior.is_none() {
+            return Err(Error::Config(
+                "this model uses a depth prior (fusion or guidance) but none was given: set [prior] in the experiment or pass --prior".into(),
+            ));
+        }
+        let divisor = 32usize.max(1 << (self.config.updater.n_downsample + 3));
+        let padder = InputPadder::new(h, w, divisor);
+        let padded_prior = prior.map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
+        let out = self.network.forward_flow(
+            padder.pad(left),
+            padder.pad(right),
+            padded_prior.as_ref(),
+            iters,
+            None,
+            implementation,
+            all_iterations,
+            None,
+        );
+        let disparities = out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect();
+        Ok(Prediction { disparities })
+    }
+}

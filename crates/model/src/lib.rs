@@ -1,0 +1,19 @@
+//! The stereo network, composed from the stage crates.
+//!
+//! [`RaftStereo`] wires the fusion, encoder, cost-volume and updater stages in RAFT-Stereo's
+//! order; [`ModelConfig`] chooses each stage's variant and builds the module with one `init`.
+//! [`StereoModel`] is the public inference API: it pads any image size to a multiple of 32,
+//! runs the network and returns positive disparity at full resolution. Official RAFT-Stereo
+//! `.pth` checkpoints load directly ([`checkpoint`]), and [`verify`] compares a forward pass
+//! with the activations the official code computed.
+#![deny(missing_docs)]
+
+pub mod checkpoint;
+pub mod config;
+pub mod inference;
+pub mod network;
+pub mod verify;
+
+pub use config::{EncoderConfig, ModelConfig};
+pub use inference::StereoModel;
+pub use network::{FlowOutput, RaftStereo, Trace};

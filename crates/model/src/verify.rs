@@ -1,0 +1,137 @@
+//! Conformance check against activations computed by the official PyTorch code.
+//!
+//! The reference file (`../shared/golden/raft_stereo_random.activations.safetensors`, made by
+//! the official RAFT-Stereo code at commit 6068c1a in float32 on CPU, see its README) holds the
+//! inputs and every intermediate tensor of a short run. [`verify_raft_stereo`] loads the
+//! checkpoint, runs as many iterations as the file has `iter.K.flow_up` keys, and compares each
+//! tensor: flows within 1e-3 absolute, everything else within 1e-4 relative to the tensor's
+//! largest magnitude.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::Path;
+
+use burn::tensor::{Device, Tensor};
+use dgstereo_core::{Error, Result, tensor::from_vec, tensor::to_vec};
+use safetensors::SafeTensors;
+
+use crate::{ModelConfig, checkpoint};
+
+/// Tolerance on flows (absolute, pixels).
+pub const FLOW_TOLERANCE: f32 = 1e-3;
+/// Tolerance on other tensors (relative to their largest magnitude).
+pub const FEATURE_TOLERANCE: f32 = 1e-4;
+
+/// One compared tensor.
+#[derive(Debug, Clone)]
+pub struct VerifyLine {
+    /// Key in the reference file.
+    pub key: String,
+    /// Its shape.
+    pub shape: Vec<usize>,
+    /// Largest absolute difference.
+    pub max_abs_error: f32,
+    /// `max_abs_error` divided by the reference's largest magnitude.
+    pub relative_error: f32,
+    /// Whether it is within tolerance.
+    pub passed: bool,
+}
+
+/// The result of a verification.
+#[derive(Debug, Clone)]
+pub struct VerifyReport {
+    /// One line per compared key, in the file's key order.
+    pub lines: Vec<VerifyLine>,
+    /// Max absolute error of the last iteration's full-resolution flow.
+    pub final_flow_error: f32,
+    /// Keys of the reference that this implementation does not produce.
+    pub unmatched: Vec<String>,
+}
+
+impl VerifyReport {
+    /// Whether every tensor is within tolerance and every key was compared.
+    pub fn passed(&self) -> bool {
+        self.unmatched.is_empty() && self.lines.iter().all(|l| l.passed)
+    }
+}
+
+impl fmt::Display for VerifyReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for l in &self.lines {
+            writeln!(
+                f,
+                "{:<24} {:<18} max abs error {:.3e}  rel {:.3e}  {}",
+                l.key,
+                format!("{:?}", l.shape),
+                l.max_abs_error,
+                l.relative_error,
+                if l.passed { "ok" } else { "FAIL" }
+            )?;
+        }
+        for k in &self.unmatched {
+            writeln!(f, "{k:<24} not produced by this implementation  FAIL")?;
+        }
+        write!(f, "final flow max abs error: {:e}", self.final_flow_error)
+    }
+}
+
+/// Reads every float32 tensor of a safetensors file as `(shape, values)`.
+pub fn read_reference(path: &Path) -> Result<BTreeMap<String, (Vec<usize>, Vec<f32>)>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let st = SafeTensors::deserialize(&bytes).map_err(|e| Error::format(path, format!("not a safetensors file: {e}")))?;
+    let mut out = BTreeMap::new();
+    for (name, view) in st.tensors() {
+        if view.dtype() != safetensors::Dtype::F32 {
+            return Err(Error::format(path, format!("{name}: expected float32, found {:?}", view.dtype())));
+        }
+        let values = view.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        out.insert(name, (view.shape().to_vec(), values));
+    }
+    Ok(out)
+}
+
+fn tensor4(reference: &BTreeMap<String, (Vec<usize>, Vec<f32>)>, key: &str, path: &Path, device: &Device) -> Result<Tensor<4>> {
+    let (shape, values) = reference.get(key).ok_or_else(|| Error::format(path, format!("missing key '{key}'")))?;
+    let shape: [usize; 4] = shape.as_slice().try_into().map_err(|_| Error::format(path, format!("{key}: expected 4 dimensions, found {shape:?}")))?;
+    Ok(from_vec(values.clone(), shape, device))
+}
+
+/// Runs the default RAFT-Stereo with `weights` on the reference's inputs and compares.
+pub fn verify_raft_stereo(weights: &Path, reference: &Path, device: &Device) -> Result<VerifyReport> {
+    let refs = read_reference(reference)?;
+    let model = ModelConfig::default().init(device)?;
+    let model = checkpoint::load_pytorch(model, weights)?;
+    let left = tensor4(&refs, "input.left", reference, device)?;
+    let right = tensor4(&refs, "input.right", reference, device)?;
+    let iters = refs.keys().filter(|k| k.starts_with("iter.") && k.ends_with(".flow_up")).count();
+    let mut trace = BTreeMap::new();
+    let _ = model.forward_flow(left, right, None, iters, None, None, true, Some(&mut trace));
+
+    let mut lines = Vec::new();
+    let mut unmatched = Vec::new();
+    let mut final_flow_error = f32::NAN;
+    for (key, (shape, expected)) in &refs {
+        if key.starts_with("input.") {
+            continue;
+        }
+        let Some(actual) = trace.get(key) else {
+            unmatched.push(key.clone());
+            continue;
+        };
+        let dims = actual.dims().to_vec();
+        let actual = to_vec(actual.clone());
+        if dims != *shape {
+            return Err(Error::Shape(format!("{key}: produced {dims:?}, reference {shape:?}")));
+        }
+        let max_abs_error = actual.iter().zip(expected).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        let scale = expected.iter().map(|v| v.abs()).fold(0.0f32, f32::max).max(1e-6);
+        let relative_error = max_abs_error / scale;
+        let is_flow = key.contains("flow");
+        let passed = if is_flow { max_abs_error <= FLOW_TOLERANCE } else { relative_error <= FEATURE_TOLERANCE };
+        if key == &format!("iter.{}.flow_up", iters.saturating_sub(1)) {
+            final_flow_error = max_abs_error;
+        }
+        lines.push(VerifyLine { key: key.clone(), shape: shape.clone(), max_abs_error, relative_error, passed: passed && max_abs_error.is_finite() });
+    }
+    Ok(VerifyReport { lines, final_flow_error, unmatched })
+}

@@ -1,0 +1,164 @@
+//! Loading official Depth Anything V2 checkpoints (`depth_anything_v2_vit{s,b,l}.pth`).
+//!
+//! burn-store's [`PytorchStore`] reads the pickle and transposes `Linear` weights. The module's
+//! field names are the checkpoint's own except for four PyTorch names that are not Rust
+//! identifiers or index an `nn.Sequential`/`nn.ModuleList` with gaps; [`KEY_RENAMES`] maps those
+//! both ways. Index renumbering is off (`map_indices_contiguous(false)`): `resize_layers.{0,1,3}`
+//! and `output_conv2.{0,2}` would otherwise be silently shifted. Loading is strict: every
+//! checkpoint key must land in the module and every module parameter must come from the
+//! checkpoint, with the same shape; otherwise the error names the checkpoint key.
+
+use std::path::Path;
+
+use burn::store::{ApplyError, ModuleSnapshot, ModuleStore, PytorchStore};
+use dgstereo_core::{Error, Result};
+
+use super::{DepthAnythingV2, DepthAnythingV2Encoder};
+
+/// `(checkpoint prefix, module prefix)` pairs for keys whose PyTorch names are not field names.
+pub const KEY_RENAMES: [(&str, &str); 7] = [
+    ("depth_head.resize_layers.0.", "depth_head.upsample_4x."),
+    ("depth_head.resize_layers.1.", "depth_head.upsample_2x."),
+    ("depth_head.resize_layers.3.", "depth_head.downsample_2x."),
+    ("depth_head.scratch.output_conv2.0.", "depth_head.scratch.output_conv2_hidden."),
+    ("depth_head.scratch.output_conv2.2.", "depth_head.scratch.output_conv2_out."),
+    (".resConfUnit1.", ".res_conf_unit1."),
+    (".resConfUnit2.", ".res_conf_unit2."),
+];
+
+/// The module path of a checkpoint key.
+pub fn module_key(checkpoint_key: &str) -> String {
+    KEY_RENAMES.iter().fold(checkpoint_key.to_string(), |k, (from, to)| k.replace(from, to))
+}
+
+/// The checkpoint key of a module path (inverse of [`module_key`]).
+pub fn checkpoint_key(module_key: &str) -> String {
+    KEY_RENAMES.iter().fold(module_key.to_string(), |k, (from, to)| k.replace(to, from))
+}
+
+fn checkpoint_error(path: &Path, message: impl Into<String>) -> Error {
+    Error::Checkpoint { path: path.to_path_buf(), message: message.into() }
+}
+
+fn open_store(weights: &Path) -> Result<PytorchStore> {
+    if !weights.is_file() {
+        return Err(Error::io(weights, std::io::Error::new(std::io::ErrorKind::NotFound, "checkpoint not found")));
+    }
+    let mut store = PytorchStore::from_file(weights).map_indices_contiguous(false).allow_partial(true).validate(false);
+    for (from, to) in KEY_RENAMES {
+        store = store.with_key_remapping(regex_escape(from), to);
+    }
+    Ok(store)
+}
+
+fn regex_escape(s: &str) -> String {
+    s.chars().fold(String::new(), |mut out, c| {
+        if c == '.' {
+            out.push('\\');
+        }
+        out.push(c);
+        out
+    })
+}
+
+/// Loads every tensor of `weights` into `model`.
+///
+/// # Errors
+/// [`Error::Io`] when the file is missing; [`Error::Checkpoint`] naming the first offending key
+/// when a key is missing from the checkpoint, unknown to the model, or of the wrong shape.
+pub fn load_into(model: &mut DepthAnythingV2, weights: &Path) -> Result<()> {
+    let mut store = open_store(weights)?;
+    let result = model.load_from(&mut store).map_err(|e| checkpoint_error(weights, e.to_string()))?;
+    if let Some(error) = result.errors.first() {
+        let message = match error {
+            ApplyError::ShapeMismatch { path, expected, found } => format!(
+                "key '{}' has shape {:?}, the {} model expects {:?}",
+                checkpoint_key(path),
+                found.to_vec(),
+                model.encoder(),
+                expected.to_vec()
+            ),
+            ApplyError::DTypeMismatch { path, expected, found } => {
+                format!("key '{}' has dtype {found:?}, expected {expected:?}", checkpoint_key(path))
+            }
+            ApplyError::AdapterError { path, message } | ApplyError::LoadError { path, message } => {
+                format!("key '{}': {message}", checkpoint_key(path))
+            }
+        };
+        return Err(checkpoint_error(weights, message));
+    }
+    if let Some((path, _)) = result.missing.first() {
+        return Err(checkpoint_error(
+            weights,
+            format!(
+                "missing key '{}' (and {} more) for the {} model",
+                checkpoint_key(path),
+                result.missing.len() - 1,
+                model.encoder()
+            ),
+        ));
+    }
+    if let Some(path) = result.unused.first() {
+        return Err(checkpoint_error(
+            weights,
+            format!(
+                "unknown key '{}' (and {} more) for the {} model",
+                checkpoint_key(path),
+                result.unused.len() - 1,
+                model.encoder()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The checkpoint's keys with their shapes, sorted by key.
+pub fn checkpoint_keys(weights: &Path) -> Result<Vec<(String, Vec<usize>)>> {
+    let mut store = open_store(weights)?;
+    let tensors = store.get_all_tensors().map_err(|e| checkpoint_error(weights, e.to_string()))?;
+    Ok(tensors.iter().map(|(k, t)| (checkpoint_key(k), t.shape.to_vec())).collect())
+}
+
+/// The encoder size of a checkpoint, from the width of `pretrained.cls_token` and the number of
+/// blocks.
+pub fn detect_encoder(weights: &Path) -> Result<DepthAnythingV2Encoder> {
+    let keys = checkpoint_keys(weights)?;
+    let cls = keys
+        .iter()
+        .find(|(k, _)| k == "pretrained.cls_token")
+        .ok_or_else(|| checkpoint_error(weights, "missing key 'pretrained.cls_token'"))?;
+    let width = *cls.1.last().unwrap_or(&0);
+    let encoder = DepthAnythingV2Encoder::from_embed_dim(width).ok_or_else(|| {
+        checkpoint_error(weights, format!("key 'pretrained.cls_token' has width {width}, not one of vits/vitb/vitl"))
+    })?;
+    let blocks = keys.iter().filter(|(k, _)| k.starts_with("pretrained.blocks.") && k.ends_with(".norm1.weight")).count();
+    if blocks != encoder.vit().depth {
+        return Err(checkpoint_error(
+            weights,
+            format!("{blocks} blocks 'pretrained.blocks.*', the {encoder} encoder has {}", encoder.vit().depth),
+        ));
+    }
+    Ok(encoder)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn key_renames_round_trip() {
+        for key in [
+            "depth_head.resize_layers.3.weight",
+            "depth_head.scratch.refinenet2.resConfUnit1.conv2.bias",
+            "depth_head.scratch.output_conv2.2.weight",
+            "pretrained.blocks.7.ls1.gamma",
+        ] {
+            assert_eq!(checkpoint_key(&module_key(key)), key);
+        }
+        assert_eq!(module_key("depth_head.resize_layers.0.bias"), "depth_head.upsample_4x.bias");
+        assert_eq!(
+            module_key("depth_head.scratch.refinenet4.resConfUnit2.conv1.weight"),
+            "depth_head.scratch.refinenet4.res_conf_unit2.conv1.weight"
+        );
+    }
+}

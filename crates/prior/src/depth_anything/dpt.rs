@@ -1,0 +1,198 @@
+//! The DPT head of Depth Anything V2 (`depth_head.*` in the checkpoints).
+//!
+//! Four token maps from the encoder are reassembled into a 4-level pyramid (1x1 `projects`, then
+//! `resize_layers`: transposed conv 4x, transposed conv 2x, identity, 3x3 conv stride 2), brought
+//! to `features` channels by the bias-free 3x3 `layerN_rn` convs, and fused coarse-to-fine by
+//! four `FeatureFusionBlock`s (residual conv units, bilinear upsampling with
+//! `align_corners=True`, a 1x1 `out_conv`). Two output convs and a final ReLU give one channel of
+//! relative inverse depth at the input resolution.
+//!
+//! Field names follow the checkpoint keys except where PyTorch's are not Rust names; the loader
+//! ([`super::checkpoint`]) maps `resize_layers.{0,1,3}`, `resConfUnit{1,2}` and
+//! `output_conv2.{0,2}` onto them.
+
+use burn::module::Module;
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor};
+use dgstereo_core::resample::resize_bilinear;
+
+use super::dinov2::{IntermediateLayer, PATCH_SIZE};
+
+/// Channels of the hidden layer of `output_conv2` (`head_features_2` upstream).
+const OUTPUT_HIDDEN: usize = 32;
+
+fn conv(cin: usize, cout: usize, kernel: usize, stride: usize, bias: bool, device: &Device) -> Conv2d {
+    let pad = kernel / 2;
+    Conv2dConfig::new([cin, cout], [kernel, kernel])
+        .with_stride([stride, stride])
+        .with_padding(PaddingConfig2d::Explicit(pad, pad, pad, pad))
+        .with_bias(bias)
+        .init(device)
+}
+
+fn conv_transpose(channels: usize, factor: usize, device: &Device) -> ConvTranspose2d {
+    ConvTranspose2dConfig::new([channels, channels], [factor, factor]).with_stride([factor, factor]).init(device)
+}
+
+/// `x + conv2(relu(conv1(relu(x))))` (no batch norm: Depth Anything V2 has `use_bn=False`).
+#[derive(Module, Debug)]
+pub struct ResidualConvUnit {
+    /// First 3x3 conv.
+    pub conv1: Conv2d,
+    /// Second 3x3 conv.
+    pub conv2: Conv2d,
+}
+
+impl ResidualConvUnit {
+    fn new(features: usize, device: &Device) -> Self {
+        Self { conv1: conv(features, features, 3, 1, true, device), conv2: conv(features, features, 3, 1, true, device) }
+    }
+
+    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let y = self.conv2.forward(relu(self.conv1.forward(relu(x.clone()))));
+        y + x
+    }
+}
+
+/// Fuses a coarser path with a skip connection, then upsamples.
+#[derive(Module, Debug)]
+pub struct FeatureFusionBlock {
+    /// 1x1 conv after the upsampling.
+    pub out_conv: Conv2d,
+    /// Unit applied to the skip connection (`resConfUnit1`).
+    pub res_conf_unit1: ResidualConvUnit,
+    /// Unit applied to the sum (`resConfUnit2`).
+    pub res_conf_unit2: ResidualConvUnit,
+}
+
+impl FeatureFusionBlock {
+    fn new(features: usize, device: &Device) -> Self {
+        Self {
+            out_conv: conv(features, features, 1, 1, true, device),
+            res_conf_unit1: ResidualConvUnit::new(features, device),
+            res_conf_unit2: ResidualConvUnit::new(features, device),
+        }
+    }
+
+    /// `out_conv(up(rcu2(path + rcu1(skip))))`, upsampled to `size` or by 2 when `None`.
+    ///
+    /// # Shapes
+    /// - `path`, `skip`: `[B, F, h, w]` -> `[B, F, size]` (or `[B, F, 2h, 2w]`)
+    fn forward(&self, path: Tensor<4>, skip: Option<Tensor<4>>, size: Option<[usize; 2]>) -> Tensor<4> {
+        let mut x = path;
+        if let Some(skip) = skip {
+            x = x + self.res_conf_unit1.forward(skip);
+        }
+        let x = self.res_conf_unit2.forward(x);
+        let [_, _, h, w] = x.dims();
+        let x = resize_bilinear(x, size.unwrap_or([2 * h, 2 * w]), true);
+        self.out_conv.forward(x)
+    }
+}
+
+/// The `scratch` part of the head: channel adapters, fusion blocks and output convs.
+#[derive(Module, Debug)]
+pub struct Scratch {
+    /// 3x3 conv, no bias, level 1 (1/14·4).
+    pub layer1_rn: Conv2d,
+    /// Level 2.
+    pub layer2_rn: Conv2d,
+    /// Level 3.
+    pub layer3_rn: Conv2d,
+    /// Level 4.
+    pub layer4_rn: Conv2d,
+    /// Finest fusion block.
+    pub refinenet1: FeatureFusionBlock,
+    /// Fusion block 2.
+    pub refinenet2: FeatureFusionBlock,
+    /// Fusion block 3.
+    pub refinenet3: FeatureFusionBlock,
+    /// Coarsest fusion block (no skip input).
+    pub refinenet4: FeatureFusionBlock,
+    /// 3x3 conv `F -> F/2`.
+    pub output_conv1: Conv2d,
+    /// 3x3 conv `F/2 -> 32` (`output_conv2.0`), followed by ReLU.
+    pub output_conv2_hidden: Conv2d,
+    /// 1x1 conv `32 -> 1` (`output_conv2.2`), followed by ReLU.
+    pub output_conv2_out: Conv2d,
+}
+
+/// The DPT head.
+#[derive(Module, Debug)]
+pub struct DptHead {
+    /// 1x1 convs from the token width to each level's channels.
+    pub projects: Vec<Conv2d>,
+    /// Level 1 resize (`resize_layers.0`): transposed conv, 4x.
+    pub upsample_4x: ConvTranspose2d,
+    /// Level 2 resize (`resize_layers.1`): transposed conv, 2x.
+    pub upsample_2x: ConvTranspose2d,
+    /// Level 4 resize (`resize_layers.3`): 3x3 conv, stride 2. Level 3 is the identity.
+    pub downsample_2x: Conv2d,
+    /// Fusion and output.
+    pub scratch: Scratch,
+}
+
+impl DptHead {
+    /// A randomly initialised head reading tokens of width `in_channels`.
+    pub fn new(in_channels: usize, features: usize, out_channels: [usize; 4], device: &Device) -> Self {
+        let fusion = || FeatureFusionBlock::new(features, device);
+        Self {
+            projects: out_channels.iter().map(|&c| conv(in_channels, c, 1, 1, true, device)).collect(),
+            upsample_4x: conv_transpose(out_channels[0], 4, device),
+            upsample_2x: conv_transpose(out_channels[1], 2, device),
+            downsample_2x: conv(out_channels[3], out_channels[3], 3, 2, true, device),
+            scratch: Scratch {
+                layer1_rn: conv(out_channels[0], features, 3, 1, false, device),
+                layer2_rn: conv(out_channels[1], features, 3, 1, false, device),
+                layer3_rn: conv(out_channels[2], features, 3, 1, false, device),
+                layer4_rn: conv(out_channels[3], features, 3, 1, false, device),
+                refinenet1: fusion(),
+                refinenet2: fusion(),
+                refinenet3: fusion(),
+                refinenet4: fusion(),
+                output_conv1: conv(features, features / 2, 3, 1, true, device),
+                output_conv2_hidden: conv(features / 2, OUTPUT_HIDDEN, 3, 1, true, device),
+                output_conv2_out: conv(OUTPUT_HIDDEN, 1, 1, 1, true, device),
+            },
+        }
+    }
+
+    /// Depth from four intermediate encoder layers on a `grid = [h, w]` patch grid.
+    ///
+    /// # Shapes
+    /// - `layers[i].tokens`: `[B, h·w, C]`
+    /// - output: `[B, 1, 14h, 14w]`, non-negative
+    pub fn forward(&self, layers: &[IntermediateLayer], grid: [usize; 2]) -> Tensor<4> {
+        assert_eq!(layers.len(), 4, "the DPT head takes four encoder layers");
+        let [h, w] = grid;
+        let maps: Vec<Tensor<4>> = layers
+            .iter()
+            .zip(&self.projects)
+            .map(|(layer, project)| {
+                let [b, n, c] = layer.tokens.dims();
+                assert_eq!(n, h * w, "token count {n} does not match the {h}x{w} patch grid");
+                project.forward(layer.tokens.clone().swap_dims(1, 2).reshape([b, c, h, w]))
+            })
+            .collect();
+        let [l1, l2, l3, l4]: [Tensor<4>; 4] = maps.try_into().expect("four maps");
+        let s = &self.scratch;
+        let l1 = s.layer1_rn.forward(self.upsample_4x.forward(l1));
+        let l2 = s.layer2_rn.forward(self.upsample_2x.forward(l2));
+        let l3 = s.layer3_rn.forward(l3);
+        let l4 = s.layer4_rn.forward(self.downsample_2x.forward(l4));
+        let size = |t: &Tensor<4>| {
+            let [_, _, th, tw] = t.dims();
+            [th, tw]
+        };
+        let path = s.refinenet4.forward(l4, None, Some(size(&l3)));
+        let path = s.refinenet3.forward(path, Some(l3.clone()), Some(size(&l2)));
+        let path = s.refinenet2.forward(path, Some(l2.clone()), Some(size(&l1)));
+        let path = s.refinenet1.forward(path, Some(l1), None);
+        let out = s.output_conv1.forward(path);
+        let out = resize_bilinear(out, [h * PATCH_SIZE, w * PATCH_SIZE], true);
+        let out = relu(s.output_conv2_hidden.forward(out));
+        relu(s.output_conv2_out.forward(out))
+    }
+}

@@ -1,0 +1,198 @@
+//! The `[prior]` TOML forms and the `none`, `file` and `cache` providers.
+
+use std::cell::Cell;
+use std::path::PathBuf;
+use std::rc::Rc;
+
+use burn::tensor::{Distribution, Tensor};
+use dgstereo_core::tensor::{from_vec, to_vec};
+use dgstereo_prior::formats::{DepthMap, write_npy, write_pfm, write_png16};
+use dgstereo_prior::{
+    CachedPrior, DepthAnythingV2Encoder, DepthPrior, PriorConfig, PriorInput, PriorProvider, SimulatedPriorConfig,
+};
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("dgstereo-prior-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn parse(text: &str) -> Result<PriorConfig, toml::de::Error> {
+    toml::from_str(text)
+}
+
+fn pair(n: usize, h: usize, w: usize, seed: u64) -> PriorInput {
+    let device = dgstereo_core::default_device();
+    burn::tensor::Device::seed(&device, seed);
+    PriorInput {
+        left: Tensor::random([n, 3, h, w], Distribution::Uniform(0.0, 255.0), &device),
+        right: Tensor::random([n, 3, h, w], Distribution::Uniform(0.0, 255.0), &device),
+        gt_disparity: Some(Tensor::random([n, 1, h, w], Distribution::Uniform(1.0, 20.0), &device)),
+        names: (0..n).map(|i| format!("pair{i}")).collect(),
+    }
+}
+
+#[test]
+fn toml_forms_parse_with_defaults_and_reject_unknown_keys() {
+    assert_eq!(parse("kind = \"none\"").unwrap(), PriorConfig::None);
+    assert!(!PriorConfig::default().gives_prior());
+
+    let dav2 = parse("kind = \"depth-anything-v2\"\nweights = \"w/depth_anything_v2_vitl.pth\"\nencoder = \"vitl\"").unwrap();
+    assert_eq!(
+        dav2,
+        PriorConfig::DepthAnythingV2 {
+            weights: "w/depth_anything_v2_vitl.pth".into(),
+            encoder: Some(DepthAnythingV2Encoder::Vitl),
+            input_size: 518
+        }
+    );
+    assert!(dav2.gives_prior() && !dav2.uses_ground_truth());
+    let err = parse("kind = \"depth-anything-v2\"\nencoder = \"vits\"").unwrap_err().to_string();
+    assert!(err.contains("weights"), "{err}");
+    let err = parse("kind = \"depth-anything-v2\"\nweights = \"a.pth\"\ninput_sise = 518").unwrap_err().to_string();
+    assert!(err.contains("input_sise"), "{err}");
+
+    let file = parse("kind = \"file\"\ndir = \"priors\"").unwrap();
+    assert_eq!(file, PriorConfig::File { dir: "priors".into(), left: "{name}_left".into(), right: "{name}_right".into() });
+
+    let sim = parse("kind = \"simulated\"\nseed = 7\nnoise_std = 0.0").unwrap();
+    assert_eq!(sim, PriorConfig::Simulated(SimulatedPriorConfig { seed: 7, noise_std: 0.0, ..Default::default() }));
+    assert!(sim.uses_ground_truth());
+    let err = parse("kind = \"simulated\"\nnoise = 0.1").unwrap_err().to_string();
+    assert!(err.contains("noise"), "{err}");
+
+    let cache = parse("kind = \"cache\"\ndir = \"c\"\n[inner]\nkind = \"simulated\"\nseed = 3").unwrap();
+    let PriorConfig::Cache { inner, .. } = &cache else { panic!("{cache:?}") };
+    assert!(matches!(**inner, PriorConfig::Simulated(SimulatedPriorConfig { seed: 3, .. })));
+    assert!(cache.uses_ground_truth());
+    let none_cached = parse("kind = \"cache\"\ndir = \"c\"\n[inner]\nkind = \"none\"").unwrap();
+    assert!(!none_cached.gives_prior());
+
+    // Round trip through TOML.
+    for config in [dav2, file, sim, cache] {
+        assert_eq!(parse(&toml::to_string(&config).unwrap()).unwrap(), config);
+    }
+}
+
+#[test]
+fn none_gives_no_prior() {
+    let prior = PriorConfig::None.init(&dgstereo_core::default_device()).unwrap();
+    assert!(prior.provide(&pair(1, 4, 5, 1)).unwrap().is_none());
+}
+
+#[test]
+fn file_provider_reads_each_format_by_name_and_resizes() {
+    let dir = temp_dir("files");
+    let device = dgstereo_core::default_device();
+    let (h, w) = (6, 8);
+    let map = |offset: f32, height: usize, width: usize| DepthMap {
+        height,
+        width,
+        values: (0..height * width).map(|i| offset + (i % 7) as f32 * 10.0 + (i / width) as f32).collect(),
+    };
+    write_npy(&dir.join("pair0_left.npy"), &map(1.0, h, w)).unwrap();
+    write_pfm(&dir.join("pair0_right.pfm"), &map(2.0, h, w)).unwrap();
+    write_png16(&dir.join("pair1_left.png"), &map(3.0, h, w)).unwrap();
+    // A half-resolution map is resized to the image size.
+    write_npy(&dir.join("pair1_right.npy"), &map(4.0, h / 2, w / 2)).unwrap();
+
+    let config = PriorConfig::File { dir: dir.clone(), left: "{name}_left".into(), right: "{name}_right".into() };
+    let prior = config.init(&device).unwrap();
+    let out = prior.provide(&pair(2, h, w, 2)).unwrap().expect("a prior");
+    assert_eq!(out.left.dims(), [2, 1, h, w]);
+    assert_eq!(out.right.dims(), [2, 1, h, w]);
+    let left = to_vec(out.left);
+    assert_eq!(&left[..h * w], map(1.0, h, w).values.as_slice());
+    assert_eq!(&left[h * w..], map(3.0, h, w).values.as_slice());
+    let right = to_vec(out.right);
+    assert_eq!(&right[..h * w], map(2.0, h, w).values.as_slice());
+    let small = map(4.0, h / 2, w / 2).values;
+    // align_corners=True keeps the corners exactly.
+    assert_eq!(right[h * w], small[0]);
+    assert_eq!(right[2 * h * w - 1], *small.last().unwrap());
+
+    // A pair without files is an error naming the file.
+    let mut input = pair(1, h, w, 3);
+    input.names = vec!["pair7".into()];
+    let err = prior.provide(&input).unwrap_err().to_string();
+    assert!(err.contains("pair7_left"), "{err}");
+    // A missing folder is an error naming the key.
+    let missing = PriorConfig::File { dir: dir.join("nope"), left: "{name}".into(), right: "{name}".into() };
+    assert!(missing.init(&device).unwrap_err().to_string().contains("prior.dir"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A provider that counts its calls and returns a fixed function of the images.
+#[derive(Debug, Clone)]
+struct CountingPrior {
+    calls: Rc<Cell<usize>>,
+    elements: Rc<Cell<usize>>,
+}
+
+impl PriorProvider for CountingPrior {
+    fn provide(&self, input: &PriorInput) -> dgstereo_core::Result<Option<DepthPrior>> {
+        self.calls.set(self.calls.get() + 1);
+        self.elements.set(self.elements.get() + input.left.dims()[0]);
+        let left = input.left.clone().mean_dim(1).sqrt();
+        let right = input.right.clone().mean_dim(1).add_scalar(1.0).log();
+        Ok(Some(DepthPrior { left, right }))
+    }
+}
+
+#[test]
+fn cache_returns_identical_tensors_without_calling_the_wrapped_provider() {
+    let dir = temp_dir("cache");
+    let calls = Rc::new(Cell::new(0));
+    let elements = Rc::new(Cell::new(0));
+    let inner = CountingPrior { calls: calls.clone(), elements: elements.clone() };
+    let cache = CachedPrior::new(inner.clone(), "counting v1", &dir, false).unwrap();
+    let input = pair(2, 5, 7, 4);
+
+    let first = cache.provide(&input).unwrap().unwrap();
+    assert_eq!((calls.get(), elements.get()), (1, 2));
+    let second = cache.provide(&input).unwrap().unwrap();
+    assert_eq!(calls.get(), 1, "the second call must come from the cache");
+    assert_eq!(to_vec(first.left.clone()), to_vec(second.left));
+    assert_eq!(to_vec(first.right.clone()), to_vec(second.right));
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 2, "one file per batch element");
+
+    // Names do not matter, content does: a renamed pair hits, a changed pixel misses.
+    let mut renamed = input.clone();
+    renamed.names = vec!["x".into(), "y".into()];
+    cache.provide(&renamed).unwrap().unwrap();
+    assert_eq!(calls.get(), 1);
+    let device = input.left.device();
+    let mut pixels = to_vec(input.left.clone());
+    pixels[0] += 1.0;
+    let mut changed = input.clone();
+    changed.left = from_vec(pixels, [2, 3, 5, 7], &device);
+    let mixed = cache.provide(&changed).unwrap().unwrap();
+    assert_eq!((calls.get(), elements.get()), (2, 3), "only the changed element is recomputed");
+    assert_eq!(to_vec(mixed.right.narrow(0, 1, 1)), to_vec(first.right.narrow(0, 1, 1)));
+
+    // Another provider configuration misses.
+    let other = CachedPrior::new(inner, "counting v2", &dir, false).unwrap();
+    other.provide(&input).unwrap().unwrap();
+    assert_eq!(calls.get(), 3);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn cache_config_wraps_the_simulated_provider() {
+    let dir = temp_dir("cache-config");
+    let device = dgstereo_core::default_device();
+    let config = PriorConfig::Cache {
+        dir: dir.clone(),
+        inner: Box::new(PriorConfig::Simulated(SimulatedPriorConfig { seed: 5, ..Default::default() })),
+    };
+    let input = pair(1, 6, 9, 5);
+    let a = config.init(&device).unwrap().provide(&input).unwrap().unwrap();
+    let b = config.init(&device).unwrap().provide(&input).unwrap().unwrap();
+    assert_eq!(to_vec(a.left.clone()), to_vec(b.left));
+    let direct = PriorConfig::Simulated(SimulatedPriorConfig { seed: 5, ..Default::default() });
+    let c = direct.init(&device).unwrap().provide(&input).unwrap().unwrap();
+    assert_eq!(to_vec(a.left), to_vec(c.left));
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+    std::fs::remove_dir_all(&dir).ok();
+}

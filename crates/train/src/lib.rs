@@ -1,0 +1,1 @@
+//! Training (schedule, clipping, loop) of dgstereo models.

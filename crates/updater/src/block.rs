@@ -1,0 +1,132 @@
+//! The multi-level update block of RAFT-Stereo.
+
+use burn::module::Module;
+use burn::nn::conv::Conv2d;
+use burn::tensor::module::avg_pool2d;
+use burn::tensor::ops::AvgPoolOptions;
+use burn::tensor::{Device, Tensor, activation::relu};
+use dgstereo_core::layers::{ConvInit, conv2d};
+use dgstereo_core::resample::resize_bilinear;
+
+use crate::gru::{ConvGru, GateContext};
+use crate::motion::MotionEncoder;
+use crate::{UpdateOutput, Updater, UpdaterConfig};
+
+/// Two convolutions predicting the disparity update (`FlowHead`).
+#[derive(Module, Debug)]
+pub struct FlowHead {
+    /// 3x3 to 256 channels.
+    pub conv1: Conv2d,
+    /// 3x3 to 2 channels (x, y; y is discarded).
+    pub conv2: Conv2d,
+}
+
+/// Two convolutions predicting the convex-upsampling weights (`mask` in the reference, whose
+/// `mask.0`/`mask.2` are `conv1`/`conv2` here).
+#[derive(Module, Debug)]
+pub struct MaskHead {
+    /// 3x3 to 256 channels.
+    pub conv1: Conv2d,
+    /// 1x1 to `9·factor²` channels.
+    pub conv2: Conv2d,
+}
+
+/// ConvGRUs at 1/4, 1/8 and 1/16 (always built, as in the reference), the motion encoder and
+/// the two heads.
+///
+/// One call runs, in the reference's order, the 1/16 GRU (fed by the pooled old 1/8 state),
+/// the 1/8 GRU (pooled old 1/4 state and the upsampled new 1/16 state), then the motion encoder
+/// and the 1/4 GRU (with the upsampled new 1/8 state), and the heads on the 1/4 state.
+#[derive(Module, Debug)]
+pub struct MultiLevelUpdateBlock {
+    /// Motion encoder.
+    pub encoder: MotionEncoder,
+    /// GRU at 1/4.
+    pub gru08: ConvGru,
+    /// GRU at 1/8.
+    pub gru16: ConvGru,
+    /// GRU at 1/16.
+    pub gru32: ConvGru,
+    /// Disparity head.
+    pub flow_head: FlowHead,
+    /// Upsampling-weight head.
+    pub mask: MaskHead,
+    /// GRU levels in use (1..=3).
+    pub n_gru_layers: usize,
+}
+
+/// `F.avg_pool2d(x, 3, stride=2, padding=1)` (padding counted in the average).
+fn pool2x(x: Tensor<4>) -> Tensor<4> {
+    avg_pool2d(x, AvgPoolOptions::new([3, 3]).with_stride([2, 2]).with_padding([1, 1]))
+}
+
+/// Bilinear resize (align corners) of `x` to the size of `dest`.
+fn interp(x: Tensor<4>, dest: &Tensor<4>) -> Tensor<4> {
+    let [_, _, h, w] = dest.dims();
+    resize_bilinear(x, [h, w], true)
+}
+
+impl MultiLevelUpdateBlock {
+    /// Builds the block.
+    pub fn new(config: &UpdaterConfig, corr_channels: usize, device: &Device) -> Self {
+        let [d32, d16, d08] = config.hidden_dims;
+        let n = config.n_gru_layers;
+        let factor = 1usize << config.n_downsample;
+        let init = ConvInit::TorchDefault;
+        Self {
+            encoder: MotionEncoder::new(corr_channels, config.guidance.channels(), device),
+            gru08: ConvGru::new(d08, 128 + d16 * (n > 1) as usize, device),
+            gru16: ConvGru::new(d16, d32 * (n == 3) as usize + d08, device),
+            gru32: ConvGru::new(d32, d16, device),
+            flow_head: FlowHead {
+                conv1: conv2d([d08, 256], 3, 1, 1, init, device),
+                conv2: conv2d([256, 2], 3, 1, 1, init, device),
+            },
+            mask: MaskHead {
+                conv1: conv2d([d08, 256], 3, 1, 1, init, device),
+                conv2: conv2d([256, factor * factor * 9], 1, 1, 0, init, device),
+            },
+            n_gru_layers: n,
+        }
+    }
+
+    /// Updates the coarser GRUs only (the slow-fast schedule's extra calls).
+    pub fn update_coarse(&self, hidden: &mut [Tensor<4>], context: &[GateContext], iter32: bool, iter16: bool) {
+        let n = self.n_gru_layers;
+        if iter32 && n == 3 {
+            hidden[2] = self.gru32.forward(hidden[2].clone(), &context[2], vec![pool2x(hidden[1].clone())]);
+        }
+        if iter16 && n >= 2 {
+            let mut inputs = vec![pool2x(hidden[0].clone())];
+            if n > 2 {
+                inputs.push(interp(hidden[2].clone(), &hidden[1]));
+            }
+            hidden[1] = self.gru16.forward(hidden[1].clone(), &context[1], inputs);
+        }
+    }
+}
+
+impl Updater for MultiLevelUpdateBlock {
+    fn step(
+        &self,
+        hidden: &mut [Tensor<4>],
+        context: &[GateContext],
+        corr: Tensor<4>,
+        flow: Tensor<4>,
+        guidance: Option<&Tensor<4>>,
+    ) -> UpdateOutput {
+        let n = self.n_gru_layers;
+        self.update_coarse(hidden, context, n == 3, n >= 2);
+        let motion = self.encoder.forward(flow, corr, guidance);
+        let mut inputs = vec![motion];
+        if n > 1 {
+            inputs.push(interp(hidden[1].clone(), &hidden[0]));
+        }
+        hidden[0] = self.gru08.forward(hidden[0].clone(), &context[0], inputs);
+        let h = hidden[0].clone();
+        let delta = self.flow_head.conv2.forward(relu(self.flow_head.conv1.forward(h.clone())));
+        let up_mask = self.mask.conv2.forward(relu(self.mask.conv1.forward(h))).mul_scalar(0.25);
+        let [b, _, hh, ww] = delta.dims();
+        UpdateOutput { delta_x: delta.slice([0..b, 0..1, 0..hh, 0..ww]), up_mask }
+    }
+}

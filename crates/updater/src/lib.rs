@@ -1,0 +1,96 @@
+//! The iterative update operator of RAFT-Stereo, with the paper's depth guidance.
+//!
+//! The [`Updater`] stage takes the GRU states, the precomputed context terms, the correlation
+//! lookup, the current disparity and (optionally) a guidance feature, and returns the
+//! disparity update and the convex-upsampling weights. [`MultiLevelUpdateBlock`] is RAFT-Stereo's
+//! three-level ConvGRU; its motion encoder gains a guidance branch when [`GuidanceKind`] is not
+//! `none`, so the guidance reaches the GRU input but never the disparity head directly. Bilinear
+//! resizes between levels are matrix products (see `dgstereo_core::resample`), which train on
+//! every backend.
+#![deny(missing_docs)]
+
+pub mod block;
+pub mod gru;
+pub mod guidance;
+pub mod motion;
+pub mod upsample;
+
+use burn::tensor::Tensor;
+use serde::{Deserialize, Serialize};
+
+pub use block::MultiLevelUpdateBlock;
+pub use gru::{ConvGru, GateContext};
+pub use guidance::{GuidanceKind, gradient_feature};
+pub use upsample::convex_upsample;
+
+/// What one update step returns.
+///
+/// # Shapes
+/// - `delta_x`: `[N, 1, H, W]` (x-flow update at the update grid)
+/// - `up_mask`: `[N, 9·f², H, W]` (upsampling logits, already scaled by 0.25)
+#[derive(Debug, Clone)]
+pub struct UpdateOutput {
+    /// Update of the x flow (negative disparity).
+    pub delta_x: Tensor<4>,
+    /// Convex-upsampling weights.
+    pub up_mask: Tensor<4>,
+}
+
+/// The update stage.
+pub trait Updater {
+    /// One iteration: updates `hidden` in place and predicts the flow update.
+    ///
+    /// `hidden` and `context` are ordered finest level first; `flow` is `[N, 2, H, W]` (x, y=0),
+    /// `corr` the correlation lookup, `guidance` the feature of [`GuidanceKind::feature`].
+    fn step(
+        &self,
+        hidden: &mut [Tensor<4>],
+        context: &[GateContext],
+        corr: Tensor<4>,
+        flow: Tensor<4>,
+        guidance: Option<&Tensor<4>>,
+    ) -> UpdateOutput;
+}
+
+/// Configuration of the update stage (RAFT-Stereo's defaults).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UpdaterConfig {
+    /// Hidden widths, coarsest first (`hidden_dims`: 1/16, 1/8, 1/4).
+    #[serde(default = "default_hidden")]
+    pub hidden_dims: [usize; 3],
+    /// GRU levels in use, 1..=3.
+    #[serde(default = "default_layers")]
+    pub n_gru_layers: usize,
+    /// Update grid at `1/2^n_downsample`; the upsampling factor.
+    #[serde(default = "default_downsample")]
+    pub n_downsample: usize,
+    /// Extra coarse-level updates per iteration (`slow_fast_gru`).
+    #[serde(default)]
+    pub slow_fast_gru: bool,
+    /// The guidance branch.
+    #[serde(default)]
+    pub guidance: GuidanceKind,
+}
+
+fn default_hidden() -> [usize; 3] {
+    [128, 128, 128]
+}
+fn default_layers() -> usize {
+    3
+}
+fn default_downsample() -> usize {
+    2
+}
+
+impl Default for UpdaterConfig {
+    fn default() -> Self {
+        Self {
+            hidden_dims: default_hidden(),
+            n_gru_layers: 3,
+            n_downsample: 2,
+            slow_fast_gru: false,
+            guidance: GuidanceKind::None,
+        }
+    }
+}
