@@ -1,2 +1,51 @@
-//! The `dgstereo` command-line tool.
-fn main() {}
+//! The `dgstereo` command-line tool: a thin layer over the library crates.
+//!
+//! Each subcommand lives in `commands/`; errors are reported as one line naming the file and
+//! the problem, with a non-zero exit status, never a panic message.
+
+mod commands;
+mod convert;
+mod models;
+mod visualize;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Deep stereo matching with a monocular depth prior (RAFT-Stereo + DGIA, Gradient-GRU, EALS).
+#[derive(Parser)]
+#[command(name = "dgstereo", version, about, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Disparity of the bundled Cones pair with the default weights: the quickest look.
+    Demo(commands::demo::DemoArgs),
+    /// Disparity (and depth, point clouds) of your stereo pairs.
+    Infer(commands::infer::InferArgs),
+    /// Scores one disparity prediction against ground truth; prints JSON.
+    Metrics(commands::metrics::MetricsArgs),
+    /// Compares a model with activations computed by the official PyTorch code.
+    #[command(subcommand)]
+    Verify(commands::verify::VerifyCommand),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Demo(a) => commands::demo::run(a),
+        Command::Infer(a) => commands::infer::run(a),
+        Command::Metrics(a) => commands::metrics::run(a),
+        Command::Verify(c) => commands::verify::run(c),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -29,6 +29,12 @@
 //! target = "both"            # or "context-only"; default "both"
 //! features = 8               # channels of F_i and F_d; default 8
 //! ```
+//! (serde does not reject unknown keys next to the unit kind `none`; the learned kinds do.)
+//!
+//! # Training
+//! Build on the autodiff device, or build on a plain device and call
+//! `fusion.fork(&autodiff_device).train()`: in burn 0.22 a forked module tracks gradients only
+//! after `train()`.
 #![deny(missing_docs)]
 
 pub mod conv;

@@ -64,7 +64,12 @@ impl<P: PriorProvider> CachedPrior<P> {
     /// Wraps `inner`, whose configuration is summarised by `fingerprint` (any string that changes
     /// whenever its output would), storing files in `dir` (created when missing).
     /// `hash_ground_truth` adds the ground truth to the key, for providers that read it.
-    pub fn new(inner: P, fingerprint: impl Into<String>, dir: impl Into<PathBuf>, hash_ground_truth: bool) -> Result<Self> {
+    pub fn new(
+        inner: P,
+        fingerprint: impl Into<String>,
+        dir: impl Into<PathBuf>,
+        hash_ground_truth: bool,
+    ) -> Result<Self> {
         let dir = dir.into();
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
         Ok(Self { inner, fingerprint: fingerprint.into(), dir, hash_ground_truth })
@@ -93,7 +98,9 @@ impl<P: PriorProvider> CachedPrior<P> {
                     hasher.update(&values.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
                 }
                 if let Some(gt) = &gt {
-                    hasher.update(&gt[i * gt_len..(i + 1) * gt_len].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
+                    hasher.update(
+                        &gt[i * gt_len..(i + 1) * gt_len].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>(),
+                    );
                 }
                 self.dir.join(format!("{}.safetensors", hasher.hex()))
             })
@@ -127,7 +134,10 @@ fn write_entry(path: &Path, left: Tensor<4>, right: Tensor<4>) -> Result<()> {
 
 fn select(t: &Tensor<4>, indices: &[usize]) -> Tensor<4> {
     let device = t.device();
-    let idx = Tensor::<1, Int>::from_data(TensorData::new(indices.iter().map(|&i| i as i64).collect::<Vec<_>>(), [indices.len()]), &device);
+    let idx = Tensor::<1, Int>::from_data(
+        TensorData::new(indices.iter().map(|&i| i as i64).collect::<Vec<_>>(), [indices.len()]),
+        &device,
+    );
     t.clone().select(0, idx)
 }
 

@@ -24,6 +24,19 @@ fn default_right_pattern() -> String {
 }
 
 /// Which prior provider an experiment uses (TOML: a `[prior]` table with `kind = "..."`).
+///
+/// ```toml
+/// [prior]
+/// kind = "depth-anything-v2"          # or "none" (the default), "file", "cache", "simulated"
+/// weights = "weights/depth_anything_v2_vits.pth"
+/// encoder = "vits"                    # optional: read from the checkpoint, checked when given
+/// input_size = 518                    # optional
+///
+/// # [prior] kind = "file", dir = "priors", left = "{name}_left", right = "{name}_right"
+/// # [prior] kind = "simulated", seed = 0, scale = [0.5, 2.0], shift = [0.0, 0.3],
+/// #         gamma = [0.7, 1.4], blur_sigma = 1.5, noise_std = 0.01
+/// # [prior] kind = "cache", dir = "cache/priors"  with the wrapped provider in [prior.inner]
+/// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum PriorConfig {
@@ -70,7 +83,7 @@ pub enum Prior {
     /// No prior.
     None,
     /// Depth Anything V2.
-    DepthAnythingV2(DepthAnythingV2Prior),
+    DepthAnythingV2(Box<DepthAnythingV2Prior>),
     /// Files.
     File(FilePrior),
     /// A cached provider.
@@ -85,9 +98,9 @@ impl PriorConfig {
     pub fn init(&self, device: &Device) -> Result<Prior> {
         match self {
             Self::None => Ok(Prior::None),
-            Self::DepthAnythingV2 { weights, encoder, input_size } => {
-                Ok(Prior::DepthAnythingV2(DepthAnythingV2Prior::load(weights, *encoder, *input_size, device)?))
-            }
+            Self::DepthAnythingV2 { weights, encoder, input_size } => Ok(Prior::DepthAnythingV2(Box::new(
+                DepthAnythingV2Prior::load(weights, *encoder, *input_size, device)?,
+            ))),
             Self::File { dir, left, right } => {
                 if !dir.is_dir() {
                     return Err(Error::Config(format!("prior.dir = '{}': no such folder", dir.display())));

@@ -96,7 +96,7 @@ pub fn read_npy(path: &Path) -> Result<DepthMap> {
         }
         w
     };
-    let convert: Box<dyn Fn(Vec<u8>) -> f32> = match &kind[..] {
+    let convert: Box<dyn Fn(Vec<u8>) -> f32> = match kind {
         "f4" => Box::new(|w| f32::from_le_bytes(w.try_into().unwrap())),
         "f8" => Box::new(|w| f64::from_le_bytes(w.try_into().unwrap()) as f32),
         "u1" => Box::new(|w| w[0] as f32),
@@ -183,7 +183,10 @@ pub fn read_png(path: &Path) -> Result<DepthMap> {
         image::DynamicImage::ImageLuma16(g) => g.into_raw().into_iter().map(f32::from).collect(),
         image::DynamicImage::ImageLuma8(g) => g.into_raw().into_iter().map(f32::from).collect(),
         other => {
-            return Err(Error::format(path, format!("png: a prior must be one grey channel, found {:?}", other.color())));
+            return Err(Error::format(
+                path,
+                format!("png: a prior must be one grey channel, found {:?}", other.color()),
+            ));
         }
     };
     Ok(DepthMap { height, width, values })
@@ -211,11 +214,9 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("dgstereo-prior-formats-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let map = sample();
-        for (ext, write) in [
-            ("npy", write_npy as fn(&Path, &DepthMap) -> Result<()>),
-            ("pfm", write_pfm),
-            ("png", write_png16),
-        ] {
+        for (ext, write) in
+            [("npy", write_npy as fn(&Path, &DepthMap) -> Result<()>), ("pfm", write_pfm), ("png", write_png16)]
+        {
             let path = dir.join(format!("m.{ext}"));
             write(&path, &map).unwrap();
             let back = read_depth_map(&path).unwrap();
@@ -238,7 +239,12 @@ mod tests {
             std::fs::write(&p, out).unwrap();
             p
         };
-        let f8 = write("a.npy", "<f8", "(1, 2, 3)", [1.5f64, 2.0, 3.0, 4.0, 5.0, 6.25].iter().flat_map(|v| v.to_le_bytes()).collect());
+        let f8 = write(
+            "a.npy",
+            "<f8",
+            "(1, 2, 3)",
+            [1.5f64, 2.0, 3.0, 4.0, 5.0, 6.25].iter().flat_map(|v| v.to_le_bytes()).collect(),
+        );
         let m = read_npy(&f8).unwrap();
         assert_eq!((m.height, m.width), (2, 3));
         assert_eq!(m.values, vec![1.5, 2.0, 3.0, 4.0, 5.0, 6.25]);

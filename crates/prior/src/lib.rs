@@ -56,17 +56,7 @@ pub struct PriorInput {
     pub names: Vec<String>,
 }
 
-/// A relative depth map per view.
-///
-/// # Shapes
-/// - `left`, `right`: `[N, 1, H, W]`, relative inverse depth (larger = nearer), any scale
-#[derive(Debug, Clone)]
-pub struct DepthPrior {
-    /// Prior of the left view.
-    pub left: Tensor<4>,
-    /// Prior of the right view.
-    pub right: Tensor<4>,
-}
+pub use dgstereo_core::DepthPrior;
 
 /// The stage trait: a stereo pair in, a relative depth per view (or none) out.
 pub trait PriorProvider {

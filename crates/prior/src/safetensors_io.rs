@@ -25,10 +25,9 @@ pub fn read_float_tensors(path: &Path) -> Result<BTreeMap<String, FloatArray>> {
         let data = view.data();
         let values: Vec<f32> = match view.dtype() {
             Dtype::F32 => data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(),
-            Dtype::F64 => data
-                .chunks_exact(8)
-                .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")) as f32)
-                .collect(),
+            Dtype::F64 => {
+                data.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")) as f32).collect()
+            }
             Dtype::F16 => data.chunks_exact(2).map(|b| f16_to_f32(u16::from_le_bytes([b[0], b[1]]))).collect(),
             other => return Err(Error::format(path, format!("tensor '{name}' has dtype {other:?}, expected a float"))),
         };
@@ -50,7 +49,9 @@ pub fn write_float_tensors(
     let views: Vec<(String, TensorView<'_>)> = bytes
         .iter()
         .map(|(k, b, s)| {
-            TensorView::new(Dtype::F32, s.clone(), b).map(|v| (k.clone(), v)).map_err(|e| Error::format(path, e.to_string()))
+            TensorView::new(Dtype::F32, s.clone(), b)
+                .map(|v| (k.clone(), v))
+                .map_err(|e| Error::format(path, e.to_string()))
         })
         .collect::<Result<_>>()?;
     let serialized = safetensors::serialize(views, &metadata).map_err(|e| Error::format(path, e.to_string()))?;

@@ -36,7 +36,8 @@ fn checkpoint_has_the_official_parameter_count_and_loads_completely() {
     assert_eq!(keys.len(), 239);
     let params: usize = keys.iter().map(|(_, s)| s.iter().product::<usize>()).sum();
     assert_eq!(params, 24_785_089);
-    let model = DepthAnythingV2::load(DepthAnythingV2Encoder::Vits, &weights, &dgstereo_core::default_device()).unwrap();
+    let model =
+        DepthAnythingV2::load(DepthAnythingV2Encoder::Vits, &weights, &dgstereo_core::default_device()).unwrap();
     use burn::module::Module;
     assert_eq!(model.num_params(), params);
 }
@@ -54,8 +55,11 @@ fn a_checkpoint_of_another_size_is_an_error_naming_a_key() {
 #[test]
 fn the_provider_rejects_a_mismatched_encoder_and_a_missing_checkpoint() {
     let device = dgstereo_core::default_device();
-    let missing =
-        PriorConfig::DepthAnythingV2 { weights: Path::new("/nonexistent/dav2.pth").into(), encoder: None, input_size: 518 };
+    let missing = PriorConfig::DepthAnythingV2 {
+        weights: Path::new("/nonexistent/dav2.pth").into(),
+        encoder: None,
+        input_size: 518,
+    };
     let err = missing.init(&device).unwrap_err().to_string();
     assert!(err.contains("prior.weights") && err.contains("/nonexistent/dav2.pth"), "{err}");
 

@@ -38,7 +38,8 @@ fn toml_forms_parse_with_defaults_and_reject_unknown_keys() {
     assert_eq!(parse("kind = \"none\"").unwrap(), PriorConfig::None);
     assert!(!PriorConfig::default().gives_prior());
 
-    let dav2 = parse("kind = \"depth-anything-v2\"\nweights = \"w/depth_anything_v2_vitl.pth\"\nencoder = \"vitl\"").unwrap();
+    let dav2 =
+        parse("kind = \"depth-anything-v2\"\nweights = \"w/depth_anything_v2_vitl.pth\"\nencoder = \"vitl\"").unwrap();
     assert_eq!(
         dav2,
         PriorConfig::DepthAnythingV2 {
@@ -54,7 +55,10 @@ fn toml_forms_parse_with_defaults_and_reject_unknown_keys() {
     assert!(err.contains("input_sise"), "{err}");
 
     let file = parse("kind = \"file\"\ndir = \"priors\"").unwrap();
-    assert_eq!(file, PriorConfig::File { dir: "priors".into(), left: "{name}_left".into(), right: "{name}_right".into() });
+    assert_eq!(
+        file,
+        PriorConfig::File { dir: "priors".into(), left: "{name}_left".into(), right: "{name}_right".into() }
+    );
 
     let sim = parse("kind = \"simulated\"\nseed = 7\nnoise_std = 0.0").unwrap();
     assert_eq!(sim, PriorConfig::Simulated(SimulatedPriorConfig { seed: 7, noise_std: 0.0, ..Default::default() }));

@@ -131,7 +131,8 @@ pub fn detect_encoder(weights: &Path) -> Result<DepthAnythingV2Encoder> {
     let encoder = DepthAnythingV2Encoder::from_embed_dim(width).ok_or_else(|| {
         checkpoint_error(weights, format!("key 'pretrained.cls_token' has width {width}, not one of vits/vitb/vitl"))
     })?;
-    let blocks = keys.iter().filter(|(k, _)| k.starts_with("pretrained.blocks.") && k.ends_with(".norm1.weight")).count();
+    let blocks =
+        keys.iter().filter(|(k, _)| k.starts_with("pretrained.blocks.") && k.ends_with(".norm1.weight")).count();
     if blocks != encoder.vit().depth {
         return Err(checkpoint_error(
             weights,

@@ -96,17 +96,22 @@ mod tests {
     }
 
     #[test]
-    fn reproduces_cubic_polynomials_away_from_the_border() {
-        // Keys' kernel with A = -0.75 is exact for linear functions; check interior samples.
-        let n_in = 20;
-        let n_out = 7;
-        let ratio = n_in as f32 / n_out as f32;
-        let m = cubic_weights(n_in, n_out, ratio);
-        let f: Vec<f32> = (0..n_in).map(|x| 3.0 * x as f32 - 2.0).collect();
-        for i in 1..n_out - 1 {
-            let src = ratio * (i as f32 + 0.5) - 0.5;
-            let y: f32 = (0..n_in).map(|j| m[i * n_in + j] * f[j]).sum();
-            assert!((y - (3.0 * src - 2.0)).abs() < 1e-4, "sample {i}: {y}");
+    fn taps_are_keys_kernel_with_a_minus_075() {
+        // Halfway between samples the kernel with A = -0.75 weighs the taps
+        // [-3/32, 19/32, 19/32, -3/32] (A = -0.5 would give [-1/16, 9/16, 9/16, -1/16]).
+        let c = cubic_coefficients(0.5);
+        for (got, want) in c.iter().zip([-3.0 / 32.0, 19.0 / 32.0, 19.0 / 32.0, -3.0 / 32.0]) {
+            assert!((got - want).abs() < 1e-7, "{c:?}");
         }
+        assert_eq!(cubic_coefficients(0.0), [0.0, 1.0, 0.0, 0.0]);
+        // Upscaling 2x: output 4 reads source 4.5 / 2 - 0.5 = 1.75, taps 0..=3.
+        let m = cubic_weights(8, 16, 0.5);
+        let c = cubic_coefficients(0.75);
+        for k in 0..4 {
+            assert!((m[4 * 8 + k] - c[k]).abs() < 1e-7);
+        }
+        // Output 0 reads -0.25 (not clamped): taps -2..=1, the three below 1 fold onto sample 0.
+        assert!((m[0] - (c[0] + c[1] + c[2])).abs() < 1e-7);
+        assert!((m[1] - c[3]).abs() < 1e-7);
     }
 }

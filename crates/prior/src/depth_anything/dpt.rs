@@ -47,7 +47,10 @@ pub struct ResidualConvUnit {
 
 impl ResidualConvUnit {
     fn new(features: usize, device: &Device) -> Self {
-        Self { conv1: conv(features, features, 3, 1, true, device), conv2: conv(features, features, 3, 1, true, device) }
+        Self {
+            conv1: conv(features, features, 3, 1, true, device),
+            conv2: conv(features, features, 3, 1, true, device),
+        }
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {

@@ -92,7 +92,8 @@ mod tests {
 
     #[test]
     fn sizes_are_multiples_of_14_with_short_side_at_least_input_size() {
-        for (h, w) in [(375, 1242), (480, 640), (1080, 1920), (518, 518), (100, 100), (2000, 300), (70, 98), (333, 334)] {
+        for (h, w) in [(375, 1242), (480, 640), (1080, 1920), (518, 518), (100, 100), (2000, 300), (70, 98), (333, 334)]
+        {
             for input_size in [518, 364, 700] {
                 let [nh, nw] = network_input_size(h, w, input_size);
                 assert_eq!(nh % 14, 0, "{h}x{w}@{input_size} -> {nh}x{nw}");

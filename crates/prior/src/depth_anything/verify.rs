@@ -72,7 +72,11 @@ impl fmt::Display for VerificationReport {
                 if c.passed { "ok" } else { "FAILED" }
             )?;
         }
-        writeln!(f, "tolerance: {RELATIVE_TOLERANCE:e} of each tensor's range; {}", if self.passed { "PASSED" } else { "FAILED" })?;
+        writeln!(
+            f,
+            "tolerance: {RELATIVE_TOLERANCE:e} of each tensor's range; {}",
+            if self.passed { "PASSED" } else { "FAILED" }
+        )?;
         write!(f, "depth max abs error: {:e}", self.depth_max_abs_error)
     }
 }
@@ -89,7 +93,8 @@ fn compare(key: &str, reference: &FloatArray, ours: Vec<f32>, path: &Path) -> Re
         .zip(&reference.values)
         .map(|(a, b)| if a.is_finite() { (a - b).abs() } else { f32::INFINITY })
         .fold(0.0, f32::max);
-    let (lo, hi) = reference.values.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let (lo, hi) =
+        reference.values.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
     let reference_range = (hi - lo).max(0.0);
     Ok(TensorComparison {
         key: key.to_string(),
@@ -109,11 +114,12 @@ fn compare(key: &str, reference: &FloatArray, ours: Vec<f32>, path: &Path) -> Re
 pub fn verify_depth_anything_v2(weights: &Path, reference: &Path, device: &Device) -> Result<VerificationReport> {
     let model = DepthAnythingV2::load_detect_encoder(weights, device)?;
     let tensors = read_float_tensors(reference)?;
-    let input = tensors
-        .get(INPUT_KEY)
-        .ok_or_else(|| Error::format(reference, format!("missing key '{INPUT_KEY}'")))?;
+    let input = tensors.get(INPUT_KEY).ok_or_else(|| Error::format(reference, format!("missing key '{INPUT_KEY}'")))?;
     let &[n, c, h, w] = input.shape.as_slice() else {
-        return Err(Error::format(reference, format!("'{INPUT_KEY}' has shape {:?}, expected [N, 3, H, W]", input.shape)));
+        return Err(Error::format(
+            reference,
+            format!("'{INPUT_KEY}' has shape {:?}, expected [N, 3, H, W]", input.shape),
+        ));
     };
     let x = Tensor::<4>::from_data(TensorData::new(input.values.clone(), [n, c, h, w]), device);
     let output = model.forward_with_layers(x);

@@ -77,7 +77,7 @@ pub fn warp_left_to_right(disparity: &[f32], height: usize, width: usize) -> Vec
                 continue;
             }
             let slot = &mut out[y * width + target as usize];
-            if !(*slot >= d) {
+            if slot.is_nan() || *slot < d {
                 *slot = d;
             }
         }
@@ -155,10 +155,13 @@ mod tests {
         let (h, w) = (6, 9);
         let flat = vec![3.5f32; h * w];
         assert!(gaussian_blur(&flat, h, w, 1.3).iter().all(|v| (v - 3.5).abs() < 1e-5));
+        // Away from the border (radius ceil(3 · 0.8) = 3) the blur conserves mass and spreads.
+        let (h, w) = (12, 12);
         let mut spike = vec![0f32; h * w];
-        spike[3 * w + 4] = 1.0;
+        spike[6 * w + 6] = 1.0;
         let b = gaussian_blur(&spike, h, w, 0.8);
         assert!((b.iter().sum::<f32>() - 1.0).abs() < 1e-4);
-        assert!(b[3 * w + 4] < 1.0 && b[3 * w + 5] > 0.0 && b[2 * w + 4] > 0.0);
+        assert!(b[6 * w + 6] < 1.0 && b[6 * w + 7] > 0.0 && b[5 * w + 6] > 0.0);
+        assert_eq!(b[6 * w + 10], 0.0);
     }
 }
