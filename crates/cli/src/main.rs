@@ -26,6 +26,15 @@ enum Command {
     Demo(commands::demo::DemoArgs),
     /// Disparity (and depth, point clouds) of your stereo pairs.
     Infer(commands::infer::InferArgs),
+    /// Runs a model over a data set and prints (and writes) a table of metrics.
+    Eval(commands::eval::EvalArgs),
+    /// Resolves, validates and smoke-tests experiment files.
+    #[command(subcommand)]
+    Experiment(commands::experiment::ExperimentCommand),
+    /// Trains a model from an experiment file.
+    Train(commands::train::TrainArgs),
+    /// Trains (or reuses) and evaluates every run of experiment files; writes the ablation table.
+    Ablate(commands::ablate::AblateArgs),
     /// Scores one disparity prediction against ground truth; prints JSON.
     Metrics(commands::metrics::MetricsArgs),
     /// Compares a model with activations computed by the official PyTorch code.
@@ -38,6 +47,10 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Demo(a) => commands::demo::run(a),
         Command::Infer(a) => commands::infer::run(a),
+        Command::Eval(a) => commands::eval::run(a),
+        Command::Experiment(c) => commands::experiment::run(c),
+        Command::Train(a) => commands::train::run(a),
+        Command::Ablate(a) => commands::ablate::run(a),
         Command::Metrics(a) => commands::metrics::run(a),
         Command::Verify(c) => commands::verify::run(c),
     };

@@ -9,7 +9,7 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CostVolume};
 use dgstereo_encoder::{ContextEncoder, ContextExtractor, FeatureEncoder, FeatureExtractor, NormKind, SharedFeatureHead};
-use dgstereo_fusion::{Fusion, ImageFusion};
+use dgstereo_fusion::{Fusion, FusionTarget, ImageFusion};
 use dgstereo_core::DepthPrior;
 use dgstereo_updater::{GateContext, GuidanceKind, MultiLevelUpdateBlock, Updater, convex_upsample};
 
@@ -79,7 +79,7 @@ impl RaftStereo {
             update_block: MultiLevelUpdateBlock::new(u, config.correlation.channels(), device),
             correlation: config.correlation.clone(),
             guidance: u.guidance,
-            fuse_features: true,
+            fuse_features: config.fusion.target() == FusionTarget::Both,
             n_gru_layers: u.n_gru_layers,
             n_downsample: u.n_downsample,
             slow_fast_gru: u.slow_fast_gru,

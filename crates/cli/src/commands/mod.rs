@@ -1,6 +1,10 @@
 //! One module per subcommand.
 
+pub mod ablate;
 pub mod demo;
+pub mod eval;
+pub mod experiment;
 pub mod infer;
 pub mod metrics;
+pub mod train;
 pub mod verify;
