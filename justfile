@@ -1,0 +1,34 @@
+# Common tasks. `just --list` shows them.
+
+# The main job: disparity of the bundled Cones pair.
+demo:
+    cargo run --release -p dgstereo -- demo
+
+# The test suite, as CI runs it.
+test:
+    cargo test --workspace
+
+# CI exactly.
+ci:
+    .ci/run
+
+# Criterion benchmarks (history in target/criterion).
+bench:
+    cargo bench -p dgstereo-suite
+
+# Conformance with the official RAFT-Stereo code on the reference activations.
+verify:
+    cargo run --release -p dgstereo -- verify raft-stereo --weights ../shared/golden/raft_stereo_random.pth --reference ../shared/golden/raft_stereo_random.activations.safetensors
+
+# Resolve, validate and smoke-test every experiment file.
+check-experiments:
+    cargo run --release -p dgstereo -- experiment check experiments/*.toml experiments/smoke/*.toml
+
+# Build the GPU (wgpu/Vulkan) binary.
+build-gpu:
+    cargo build --release -p dgstereo --features gpu
+
+# Lints.
+lint:
+    cargo clippy --workspace --all-targets -- -D warnings
+    cargo fmt --all -- --check
