@@ -3,9 +3,14 @@
 //! Each subcommand lives in `commands/`; errors are reported as one line naming the file and
 //! the problem, with a non-zero exit status, never a panic message.
 
+mod calib;
 mod commands;
 mod convert;
+mod engine;
+mod inputs;
 mod models;
+mod outputs;
+mod pointcloud;
 mod visualize;
 
 use std::process::ExitCode;
@@ -35,6 +40,8 @@ enum Command {
     Train(commands::train::TrainArgs),
     /// Trains (or reuses) and evaluates every run of experiment files; writes the ablation table.
     Ablate(commands::ablate::AblateArgs),
+    /// Times whole inference at a given size: median/min seconds, megapixels/s, GFLOP/s, memory.
+    Bench(commands::bench::BenchArgs),
     /// Scores one disparity prediction against ground truth; prints JSON.
     Metrics(commands::metrics::MetricsArgs),
     /// Compares a model with activations computed by the official PyTorch code.
@@ -51,13 +58,14 @@ fn main() -> ExitCode {
         Command::Experiment(c) => commands::experiment::run(c),
         Command::Train(a) => commands::train::run(a),
         Command::Ablate(a) => commands::ablate::run(a),
+        Command::Bench(a) => commands::bench::run(a),
         Command::Metrics(a) => commands::metrics::run(a),
         Command::Verify(c) => commands::verify::run(c),
     };
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", engine::error_line(&e));
             ExitCode::FAILURE
         }
     }

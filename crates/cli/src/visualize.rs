@@ -23,12 +23,17 @@ pub fn display_range(d: &DisparityMap) -> (f32, f32) {
     if hi > lo { (lo, hi) } else { (lo, lo + 1.0) }
 }
 
-/// Colours a disparity map (near = red, far = blue); non-finite pixels are black. A legend bar
-/// with tick marks at the bottom spans `range` from left (low) to right (high).
+/// Colours a disparity map (near = red, far = blue); non-finite pixels are black.
+///
+/// With `legend`, a band below the map shows the colour bar spanning `range` from left (low) to
+/// right (high), with ticks at 0, 25, 50, 75 and 100 % and the low, middle and high values
+/// written under it (in the map's unit, pixels of disparity).
 pub fn colorize(d: &DisparityMap, range: (f32, f32), legend: bool) -> RgbImage {
     let (lo, hi) = range;
     let bar = if legend { (d.height / 16).clamp(6, 24) } else { 0 };
-    let mut img = RgbImage::new(d.width, d.height + bar);
+    let scale = (bar / 6).max(1);
+    let text = if legend { GLYPH_HEIGHT * scale + 2 * scale } else { 0 };
+    let mut img = RgbImage::new(d.width, d.height + bar + text);
     for y in 0..d.height {
         for x in 0..d.width {
             let v = d.data[y * d.width + x];
@@ -36,16 +41,84 @@ pub fn colorize(d: &DisparityMap, range: (f32, f32), legend: bool) -> RgbImage {
             img.set(x, y, rgb);
         }
     }
+    if !legend {
+        return img;
+    }
+    let tick_x = |k: usize| k * (d.width.max(1) - 1) / 4;
     for y in d.height..d.height + bar {
         for x in 0..d.width {
             let t = x as f32 / (d.width.max(2) - 1) as f32;
-            // Ticks at 0, 25, 50, 75, 100 % of the range, in the bottom third of the bar.
-            let tick = (0..=4).any(|k| (x as i64 - (k * (d.width - 1) / 4) as i64).abs() <= 0);
+            let tick = (0..=4).any(|k| x == tick_x(k));
             let rgb = if tick && y >= d.height + 2 * bar / 3 { [255.0; 3] } else { turbo(t) };
             img.set(x, y, rgb);
         }
     }
+    let y0 = d.height + bar + scale;
+    let labels = [(lo, 0usize), ((lo + hi) / 2.0, 1), (hi, 2)];
+    for (value, align) in labels {
+        let label = format_value(value);
+        let w = text_width(&label, scale);
+        let anchor = tick_x(2 * align);
+        let x0 = match align {
+            0 => 0,
+            1 => anchor.saturating_sub(w / 2),
+            _ => d.width.saturating_sub(w),
+        };
+        draw_text(&mut img, &label, x0, y0, scale);
+    }
     img
+}
+
+fn format_value(v: f32) -> String {
+    if v.abs() >= 100.0 { format!("{v:.0}") } else { format!("{v:.1}") }
+}
+
+const GLYPH_HEIGHT: usize = 5;
+
+/// A 3x5 pixel glyph: five rows of three bits (most significant = left).
+fn glyph(c: char) -> [u8; 5] {
+    match c {
+        '0' => [7, 5, 5, 5, 7],
+        '1' => [2, 6, 2, 2, 7],
+        '2' => [7, 1, 7, 4, 7],
+        '3' => [7, 1, 7, 1, 7],
+        '4' => [5, 5, 7, 1, 1],
+        '5' => [7, 4, 7, 1, 7],
+        '6' => [7, 4, 7, 5, 7],
+        '7' => [7, 1, 1, 1, 1],
+        '8' => [7, 5, 7, 5, 7],
+        '9' => [7, 5, 7, 1, 7],
+        '.' => [0, 0, 0, 0, 2],
+        '-' => [0, 0, 7, 0, 0],
+        _ => [0; 5],
+    }
+}
+
+fn text_width(s: &str, scale: usize) -> usize {
+    (s.chars().count() * 4).saturating_sub(1) * scale
+}
+
+/// Draws `s` in white with its top-left corner at `(x0, y0)`, each glyph pixel `scale` wide;
+/// what falls outside the image is clipped.
+fn draw_text(img: &mut RgbImage, s: &str, x0: usize, y0: usize, scale: usize) {
+    for (i, c) in s.chars().enumerate() {
+        let rows = glyph(c);
+        for (gy, row) in rows.iter().enumerate() {
+            for gx in 0..3 {
+                if row & (4 >> gx) == 0 {
+                    continue;
+                }
+                for dy in 0..scale {
+                    for dx in 0..scale {
+                        let (x, y) = (x0 + (i * 4 + gx) * scale + dx, y0 + gy * scale + dy);
+                        if x < img.width && y < img.height {
+                            img.set(x, y, [255.0; 3]);
+                        }
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// Absolute error against ground truth as a picture (0 = black, `max` px or more = white);
@@ -81,4 +154,24 @@ pub fn side_by_side(panels: &[&RgbImage]) -> RgbImage {
         x0 += p.width;
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn legend_adds_a_bar_and_written_values() {
+        let d = DisparityMap { width: 64, height: 48, data: (0..64 * 48).map(|i| (i % 64) as f32).collect() };
+        let plain = colorize(&d, (0.0, 63.0), false);
+        let with = colorize(&d, (0.0, 63.0), true);
+        assert_eq!(plain.height, 48);
+        assert!(with.height > 48 + 6);
+        // The colour of the map's left column equals the bar's left end (same range).
+        assert_eq!(with.get(1, 0), with.get(1, 48));
+        // The text band holds white glyph pixels and black background.
+        let text_rows = 48 + 6..with.height;
+        let white = text_rows.clone().flat_map(|y| (0..64).map(move |x| (x, y))).filter(|&(x, y)| with.get(x, y) == [255.0; 3]).count();
+        assert!(white > 10 && white < 64 * text_rows.len() / 2, "{white}");
+    }
 }

@@ -6,9 +6,13 @@
 //! Two implementations sit behind the [`CostVolume`] trait: [`CorrelationPyramid`] materialises
 //! the `W x W` volume per row once (fast lookups; "reg" in the reference) and
 //! [`OnTheFlyCorrelation`] stores only the pooled features and takes the dot products at the
-//! sampled positions (memory linear in `W`; "alt"). They agree to float rounding.
+//! sampled positions (memory linear in `W`; "alt"). They agree to float rounding. For CPU
+//! inference the pyramid keeps its levels on the host and looks them up with one hand-written
+//! loop ([`host_lookup`], [`LookupKernel::Host`]); the tensor-op lookup stays the reference and
+//! the differentiable path, and both are tested to agree.
 #![deny(missing_docs)]
 
+pub mod host_lookup;
 mod lookup;
 mod on_the_fly;
 mod pyramid;
@@ -17,7 +21,7 @@ use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
 pub use on_the_fly::OnTheFlyCorrelation;
-pub use pyramid::CorrelationPyramid;
+pub use pyramid::{CorrelationPyramid, LookupKernel};
 
 /// The stage trait: correlation features around the current match positions.
 ///

@@ -1,9 +1,32 @@
 //! The materialised all-pairs pyramid ("reg").
 
-use burn::tensor::Tensor;
+use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::CostVolume;
+use crate::host_lookup::{self, HostLevel};
 use crate::lookup::{interpolate_taps, taps};
+
+/// How a pyramid is stored and looked up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LookupKernel {
+    /// burn tensor operations (differentiable, any device): the reference path.
+    Stock,
+    /// The hand-written host loop of [`crate::host_lookup`] (CPU inference; no gradient).
+    Host,
+}
+
+impl LookupKernel {
+    /// The fast kernel where it applies: the CPU backend without autodiff; else the stock one.
+    pub fn for_device(device: &Device) -> Self {
+        if *device == Device::flex() && !device.is_autodiff() { Self::Host } else { Self::Stock }
+    }
+}
+
+#[derive(Debug, Clone)]
+enum Storage {
+    Tensors(Vec<Tensor<2>>),
+    Host { levels: Vec<HostLevel>, device: Device },
+}
 
 /// All-pairs correlation per row and its average-pooled levels.
 ///
@@ -16,30 +39,69 @@ use crate::lookup::{interpolate_taps, taps};
 /// - `levels()[i]`: `[N·H·W1, W2 / 2^i]`
 #[derive(Debug, Clone)]
 pub struct CorrelationPyramid {
-    pyramid: Vec<Tensor<2>>,
+    pyramid: Storage,
     dims: [usize; 3],
     levels: usize,
     radius: usize,
 }
 
 impl CorrelationPyramid {
-    /// Builds the pyramid of `fmap1` (`[N, C, H, W1]`) against `fmap2` (`[N, C, H, W2]`).
+    /// Builds the pyramid of `fmap1` (`[N, C, H, W1]`) against `fmap2` (`[N, C, H, W2]`), with
+    /// the lookup kernel suited to their device ([`LookupKernel::for_device`]).
     pub fn new(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize) -> Self {
-        let [n, c, h, w1] = fmap1.dims();
+        let kernel = LookupKernel::for_device(&fmap1.device());
+        Self::with_kernel(fmap1, fmap2, levels, radius, kernel)
+    }
+
+    /// Builds the pyramid for an explicit lookup kernel.
+    pub fn with_kernel(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize, kernel: LookupKernel) -> Self {
+        let [n, _, h, w1] = fmap1.dims();
         let [_, _, _, w2] = fmap2.dims();
+        let device = fmap1.device();
         let corr = all_pairs(fmap1, fmap2).reshape([n * h * w1, w2]);
-        let mut pyramid = vec![corr];
-        for _ in 0..levels {
-            let last = pyramid.last().expect("level 0").clone();
-            pyramid.push(pool_pairs(last));
-        }
-        let _ = c;
+        let rows = n * h * w1;
+        let pyramid = match kernel {
+            LookupKernel::Stock => {
+                let mut pyramid = vec![corr];
+                for _ in 0..levels {
+                    let last = pyramid.last().expect("level 0").clone();
+                    pyramid.push(pool_pairs(last));
+                }
+                Storage::Tensors(pyramid)
+            }
+            LookupKernel::Host => {
+                let values = corr.into_data().convert::<f32>().try_into_vec::<f32>().expect("float correlation");
+                let mut host = vec![HostLevel { values: values.into(), width: w2 }];
+                for _ in 0..levels {
+                    let next = host_lookup::pool_rows(host.last().expect("level 0"), rows);
+                    host.push(next);
+                }
+                Storage::Host { levels: host, device }
+            }
+        };
         Self { pyramid, dims: [n, h, w1], levels, radius }
     }
 
-    /// The stored levels (`levels + 1` of them).
-    pub fn levels(&self) -> &[Tensor<2>] {
-        &self.pyramid
+    /// The kernel this pyramid looks up with.
+    pub fn kernel(&self) -> LookupKernel {
+        match self.pyramid {
+            Storage::Tensors(_) => LookupKernel::Stock,
+            Storage::Host { .. } => LookupKernel::Host,
+        }
+    }
+
+    /// The stored levels (`levels + 1` of them), `[N·H·W1, W2 / 2^i]` each.
+    pub fn levels(&self) -> Vec<Tensor<2>> {
+        match &self.pyramid {
+            Storage::Tensors(t) => t.clone(),
+            Storage::Host { levels, device } => {
+                let rows = self.dims.iter().product::<usize>();
+                levels
+                    .iter()
+                    .map(|l| Tensor::from_data(TensorData::new(l.values.to_vec(), [rows, l.width]), device))
+                    .collect()
+            }
+        }
     }
 }
 
@@ -64,11 +126,19 @@ fn pool_pairs(x: Tensor<2>) -> Tensor<2> {
 impl CostVolume for CorrelationPyramid {
     fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
         let [n, h, w1] = self.dims;
-        let m = n * h * w1;
         let k = 2 * self.radius + 1;
+        let pyramid = match &self.pyramid {
+            Storage::Tensors(t) => t,
+            Storage::Host { levels, device } => {
+                let coords = coords_x.into_data().convert::<f32>().try_into_vec::<f32>().expect("float coordinates");
+                let out = host_lookup::lookup(&levels[..self.levels], &coords, self.dims, self.radius);
+                return Tensor::from_data(TensorData::new(out, [n, self.levels * k, h, w1]), device);
+            }
+        };
+        let m = n * h * w1;
         let x = coords_x.reshape([m, 1]);
         let mut out = Vec::with_capacity(self.levels);
-        for (i, level) in self.pyramid.iter().take(self.levels).enumerate() {
+        for (i, level) in pyramid.iter().take(self.levels).enumerate() {
             let width = level.dims()[1];
             let xi = x.clone().div_scalar((1u64 << i) as f64);
             let (idx, inside, w) = taps(xi, self.radius, width.max(1));

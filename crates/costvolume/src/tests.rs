@@ -5,7 +5,7 @@ use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, max_abs_diff, to_vec};
 use proptest::prelude::*;
 
-use crate::{CorrelationConfig, CorrelationImplementation, CostVolume};
+use crate::{CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, LookupKernel};
 
 fn features(n: usize, c: usize, h: usize, w: usize, seed: u64) -> Tensor<4> {
     let device = default_device();
@@ -35,6 +35,39 @@ proptest! {
         let diff = max_abs_diff(a, alt.lookup(coords));
         prop_assert!(diff <= 1e-5, "differ by {}", diff);
     }
+
+    /// The host kernel and the stock tensor-op lookup agree to 1e-5, batches and odd widths
+    /// included, and so do the stored levels.
+    #[test]
+    fn host_and_stock_lookups_agree(w in 1usize..40, h in 1usize..4, n in 1usize..3, levels in 1usize..5, radius in 0usize..5, seed in 0u64..1000, shift in -50f32..50.0) {
+        let device = default_device();
+        let c = 16;
+        let (f1, f2) = (features(n, c, h, w, seed), features(n, c, h, w, seed + 1));
+        let stock = CorrelationPyramid::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Stock);
+        let host = CorrelationPyramid::with_kernel(f1, f2, levels, radius, LookupKernel::Host);
+        prop_assert_eq!(host.kernel(), LookupKernel::Host);
+        for (a, b) in stock.levels().into_iter().zip(host.levels()) {
+            prop_assert_eq!(a.dims(), b.dims());
+            if a.dims()[1] > 0 {
+                prop_assert!(max_abs_diff(a, b) <= 1e-6);
+            }
+        }
+        let coords: Vec<f32> = (0..n * h * w).map(|i| (i % w) as f32 + shift * ((i * 7 % 11) as f32 / 11.0)).collect();
+        let coords = from_vec(coords, [n, 1, h, w], &device);
+        let a = stock.lookup(coords.clone());
+        let b = host.lookup(coords);
+        prop_assert_eq!(a.dims(), b.dims());
+        let diff = max_abs_diff(a, b);
+        prop_assert!(diff <= 1e-5, "differ by {}", diff);
+    }
+}
+
+/// Inference on the CPU picks the host kernel; an autodiff device keeps the differentiable one.
+#[test]
+fn kernel_follows_the_device() {
+    let device = default_device();
+    assert_eq!(LookupKernel::for_device(&device), LookupKernel::Host);
+    assert_eq!(LookupKernel::for_device(&device.clone().autodiff()), LookupKernel::Stock);
 }
 
 /// At integer positions, level 0 of the lookup is the plain dot product of the features.

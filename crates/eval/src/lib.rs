@@ -5,14 +5,17 @@
 //! `bad-0.5` … `bad-4`, `d1-all`). [`protocol`] states, per benchmark, which pixels count and how
 //! images are aggregated (pooled or mean of per-image rates), following RAFT-Stereo's evaluation.
 //! [`table`] collects per-image rows into an [`EvalTable`] with aggregate rows, written as CSV,
-//! JSON or text. [`files`] is the file-level entry point behind `dgstereo metrics`.
+//! JSON or text. [`files`] is the file-level entry point behind `dgstereo metrics`, and
+//! [`driver`] scores a predictor over a whole data set (behind `dgstereo eval`).
 #![deny(missing_docs)]
 
+pub mod driver;
 pub mod files;
 pub mod metrics;
 pub mod protocol;
 pub mod table;
 
+pub use driver::{DatasetEvaluation, SampleFailure, evaluate_dataset, score_sample};
 pub use files::{metrics_for_files, metrics_json};
 pub use metrics::{
     BAD_THRESHOLDS, METRIC_NAMES, MetricSums, Metrics, ValidOptions, accumulate, evaluate,

@@ -74,6 +74,8 @@ impl ModelConfig {
         if self.encoder.feature_dim == 0 {
             return err("encoder.feature_dim must be positive".into());
         }
+        // `init` would panic on an invalid fusion (fewer than 3 feature channels).
+        self.fusion.validate()?;
         Ok(())
     }
 

@@ -158,8 +158,7 @@ impl RaftStereo {
         for (i, [h, c]) in context.levels.into_iter().enumerate() {
             let h = tanh(h);
             let zqr = self.context_zqr_convs[i].forward(relu(c));
-            let d = zqr.dims()[1] / 3;
-            let g = GateContext { z: zqr.clone().narrow(1, 0, d), r: zqr.clone().narrow(1, d, d), q: zqr.narrow(1, 2 * d, d) };
+            let g = GateContext::from_zqr(zqr);
             record!(format!("context.hidden.{i}"), &h);
             record!(format!("context.z.{i}"), &g.z);
             record!(format!("context.r.{i}"), &g.r);
@@ -207,10 +206,16 @@ impl RaftStereo {
             for (i, hi) in hidden.iter().enumerate() {
                 record!(format!("iter.{k}.hidden.{i}"), hi);
             }
-            record!(format!("iter.{k}.up_mask"), &out.up_mask);
             record!(format!("iter.{k}.flow_lowres"), &flow_x);
-            if all_iterations || k + 1 == iters {
-                let up = convex_upsample(flow_x.clone(), out.up_mask, factor);
+            // The mask never feeds back into the state: computed only where it is used.
+            let upsampled = all_iterations || k + 1 == iters;
+            if upsampled || trace.is_some() {
+                let up_mask = Updater::upsample_mask(&self.update_block, &hidden);
+                record!(format!("iter.{k}.up_mask"), &up_mask);
+                if !upsampled {
+                    continue;
+                }
+                let up = convex_upsample(flow_x.clone(), up_mask, factor);
                 record!(format!("iter.{k}.flow_up"), &up);
                 flow_up.push(up);
             }

@@ -1,7 +1,7 @@
 //! Depth Anything V2 (ViT-S, random weights) against the official code's activations in
 //! `shared/golden`, and strict checkpoint loading.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use dgstereo_core::shared::shared_dir_for_test;
 use dgstereo_prior::depth_anything::checkpoint::checkpoint_keys;
@@ -53,18 +53,9 @@ fn a_checkpoint_of_another_size_is_an_error_naming_a_key() {
 }
 
 #[test]
-fn the_provider_rejects_a_mismatched_encoder_and_a_missing_checkpoint() {
-    let device = dgstereo_core::default_device();
-    let missing = PriorConfig::DepthAnythingV2 {
-        weights: Path::new("/nonexistent/dav2.pth").into(),
-        encoder: None,
-        input_size: 518,
-    };
-    let err = missing.init(&device).unwrap_err().to_string();
-    assert!(err.contains("prior.weights") && err.contains("/nonexistent/dav2.pth"), "{err}");
-
-    let Some((weights, _)) = golden("the_provider_rejects_a_mismatched_encoder") else { return };
+fn the_provider_rejects_a_checkpoint_of_another_encoder_naming_the_key() {
+    let Some((weights, _)) = golden("the_provider_rejects_a_checkpoint_of_another_encoder") else { return };
     let wrong = PriorConfig::DepthAnythingV2 { weights, encoder: Some(DepthAnythingV2Encoder::Vitl), input_size: 518 };
-    let err = wrong.init(&device).unwrap_err().to_string();
-    assert!(err.contains("prior.encoder"), "{err}");
+    let err = wrong.init(&dgstereo_core::default_device()).unwrap_err().to_string();
+    assert!(err.contains("prior.encoder") && err.contains("vitl") && err.contains("vits"), "{err}");
 }

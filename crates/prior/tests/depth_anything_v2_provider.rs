@@ -1,10 +1,17 @@
-//! The `depth-anything-v2` provider on a randomly initialised ViT-S (the golden checkpoint is
-//! checked in `depth_anything_v2_golden.rs`).
+//! The `depth-anything-v2` provider on a randomly initialised ViT-S, and its errors (the golden
+//! checkpoint is checked in `depth_anything_v2_golden.rs`).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 use burn::tensor::{Distribution, Tensor};
 use dgstereo_core::tensor::{max_abs_diff, to_vec};
 use dgstereo_prior::depth_anything::preprocess::{network_input_size, preprocess};
-use dgstereo_prior::{DepthAnythingV2, DepthAnythingV2Encoder, DepthAnythingV2Prior, PriorInput, PriorProvider};
+use dgstereo_prior::safetensors_io::{FloatArray, write_float_tensors};
+use dgstereo_prior::{
+    DepthAnythingV2, DepthAnythingV2Encoder, DepthAnythingV2Prior, PriorConfig, PriorInput, PriorProvider,
+    verify_depth_anything_v2,
+};
 
 #[test]
 fn both_views_run_in_one_batch_and_come_back_at_image_size() {
@@ -36,4 +43,57 @@ fn both_views_run_in_one_batch_and_come_back_at_image_size() {
     let v = to_vec(x);
     let expected_red = (0.5 - 0.485) / 0.229;
     assert!((v[0] - expected_red).abs() < 1e-5, "{} vs {expected_red}", v[0]);
+}
+
+#[test]
+fn a_missing_checkpoint_is_an_error_naming_the_config_key_and_the_path() {
+    let device = dgstereo_core::default_device();
+    let missing = PriorConfig::DepthAnythingV2 {
+        weights: Path::new("/nonexistent/dav2.pth").into(),
+        encoder: None,
+        input_size: 518,
+    };
+    let err = missing.init(&device).unwrap_err().to_string();
+    assert!(err.contains("prior.weights") && err.contains("/nonexistent/dav2.pth"), "{err}");
+    // Wrapped in a cache it fails the same way instead of falling back.
+    let cached =
+        PriorConfig::Cache { dir: std::env::temp_dir().join("dgstereo-prior-unused"), inner: Box::new(missing) };
+    let err = cached.init(&device).unwrap_err().to_string();
+    assert!(err.contains("/nonexistent/dav2.pth"), "{err}");
+    // An input size below one patch is rejected by key as well.
+    let tiny = PriorConfig::DepthAnythingV2 { weights: "/nonexistent/dav2.pth".into(), encoder: None, input_size: 7 };
+    assert!(tiny.init(&device).unwrap_err().to_string().contains("prior.input_size"));
+}
+
+fn write_reference(path: &Path, input_shape: Vec<usize>) {
+    let array = |shape: Vec<usize>| FloatArray { values: vec![0.5; shape.iter().product()], shape };
+    let tensors = BTreeMap::from([
+        ("input.image".to_string(), array(input_shape)),
+        ("output.depth".to_string(), array(vec![1, 28, 28])),
+    ]);
+    write_float_tensors(path, &tensors, None).unwrap();
+}
+
+#[test]
+fn a_malformed_reference_is_an_error_naming_the_file_and_the_key() {
+    let dir = std::env::temp_dir().join(format!("dgstereo-prior-reference-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let device = dgstereo_core::default_device();
+    let weights = PathBuf::from("/nonexistent/dav2.pth");
+    // Sides that are not multiples of 14 would make the patch embedding drop pixels.
+    let reference = dir.join("bad_size.safetensors");
+    write_reference(&reference, vec![1, 3, 20, 28]);
+    let err = verify_depth_anything_v2(&weights, &reference, &device).unwrap_err().to_string();
+    assert!(err.contains("bad_size.safetensors") && err.contains("input.image"), "{err}");
+    // A file that is not safetensors at all.
+    let garbage = dir.join("garbage.safetensors");
+    std::fs::write(&garbage, b"not a tensor file").unwrap();
+    let err = verify_depth_anything_v2(&weights, &garbage, &device).unwrap_err().to_string();
+    assert!(err.contains("garbage.safetensors"), "{err}");
+    // A good reference with a missing checkpoint names the checkpoint.
+    let good = dir.join("good.safetensors");
+    write_reference(&good, vec![1, 3, 28, 28]);
+    let err = verify_depth_anything_v2(&weights, &good, &device).unwrap_err().to_string();
+    assert!(err.contains("/nonexistent/dav2.pth"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -200,3 +200,89 @@ fn cache_config_wraps_the_simulated_provider() {
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn file_provider_errors_name_the_file() {
+    let dir = temp_dir("file-errors");
+    let device = dgstereo_core::default_device();
+    let config = PriorConfig::File { dir: dir.clone(), left: "{name}_left".into(), right: "{name}_right".into() };
+    let prior = config.init(&device).unwrap();
+    let (h, w) = (4, 5);
+    let good = DepthMap { height: h, width: w, values: vec![1.0; h * w] };
+
+    // The left file exists, the right one does not: the message names the missing file's path.
+    write_npy(&dir.join("pair0_left.npy"), &good).unwrap();
+    let err = prior.provide(&pair(1, h, w, 6)).unwrap_err().to_string();
+    assert!(err.contains(&dir.join("pair0_right").display().to_string()), "{err}");
+
+    // A corrupt file and a file with a NaN are errors naming the file.
+    std::fs::write(dir.join("pair0_right.pfm"), b"P5\n1 1\n255\n").unwrap();
+    let err = prior.provide(&pair(1, h, w, 6)).unwrap_err().to_string();
+    assert!(err.contains("pair0_right.pfm"), "{err}");
+    std::fs::remove_file(dir.join("pair0_right.pfm")).unwrap();
+    let mut nan = good.clone();
+    nan.values[3] = f32::NAN;
+    write_npy(&dir.join("pair0_right.npy"), &nan).unwrap();
+    let err = prior.provide(&pair(1, h, w, 6)).unwrap_err().to_string();
+    assert!(err.contains("pair0_right.npy") && err.contains("non-finite"), "{err}");
+
+    // A batch without names cannot be matched to files.
+    let mut unnamed = pair(1, h, w, 6);
+    unnamed.names.clear();
+    assert!(prior.provide(&unnamed).unwrap_err().to_string().contains("names"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+fn simulated(seed: u64, noise_std: f32) -> PriorConfig {
+    PriorConfig::Simulated(SimulatedPriorConfig { seed, noise_std, ..Default::default() })
+}
+
+fn cache_files(dir: &std::path::Path) -> usize {
+    std::fs::read_dir(dir).unwrap().count()
+}
+
+#[test]
+fn cache_key_changes_with_the_provider_config() {
+    let dir = temp_dir("cache-key");
+    let device = dgstereo_core::default_device();
+    let input = pair(1, 6, 9, 7);
+    let cached = |inner: PriorConfig| PriorConfig::Cache { dir: dir.clone(), inner: Box::new(inner) };
+    let run = |config: &PriorConfig| to_vec(config.init(&device).unwrap().provide(&input).unwrap().unwrap().left);
+
+    let seed1 = run(&cached(simulated(1, 0.01)));
+    assert_eq!(cache_files(&dir), 1);
+    // The same configuration hits; another seed or another noise level misses and differs.
+    assert_eq!(run(&cached(simulated(1, 0.01))), seed1);
+    assert_eq!(cache_files(&dir), 1);
+    let seed2 = run(&cached(simulated(2, 0.01)));
+    assert_eq!(cache_files(&dir), 2);
+    assert_ne!(seed2, seed1);
+    assert_eq!(seed2, run(&simulated(2, 0.01)), "a miss returns the wrapped provider's output");
+    run(&cached(simulated(1, 0.02)));
+    assert_eq!(cache_files(&dir), 3);
+
+    // The Depth Anything fingerprint follows the input size and the checkpoint file itself.
+    let weights = dir.join("fake.pth");
+    std::fs::write(&weights, [0u8; 10]).unwrap();
+    let dav2 = |input_size| PriorConfig::DepthAnythingV2 { weights: weights.clone(), encoder: None, input_size };
+    let before = dav2(518).fingerprint().unwrap();
+    assert_ne!(before, dav2(364).fingerprint().unwrap());
+    std::fs::write(&weights, [0u8; 20]).unwrap();
+    assert_ne!(before, dav2(518).fingerprint().unwrap());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_corrupt_cache_entry_is_an_error_naming_it() {
+    let dir = temp_dir("cache-corrupt");
+    let calls = Rc::new(Cell::new(0));
+    let inner = CountingPrior { calls: calls.clone(), elements: Rc::new(Cell::new(0)) };
+    let cache = CachedPrior::new(inner, "counting v1", &dir, false).unwrap();
+    let input = pair(1, 3, 4, 8);
+    let [entry] = cache.entry_paths(&input).try_into().unwrap();
+    std::fs::write(&entry, b"truncated").unwrap();
+    let err = cache.provide(&input).unwrap_err().to_string();
+    assert!(err.contains(&entry.file_name().unwrap().to_string_lossy().to_string()), "{err}");
+    assert_eq!(calls.get(), 0);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -168,3 +168,53 @@ fn shifts_below_zero_are_clamped_and_missing_ground_truth_is_an_error() {
     let bad = SimulatedPriorConfig { gamma: [0.0, 1.0], ..Default::default() };
     assert!(SimulatedPrior::new(bad).unwrap_err().to_string().contains("prior.gamma"));
 }
+
+/// Spearman's rank correlation (ties broken by index; the scenes have few ties).
+fn rank_correlation(x: &[f32], y: &[f32]) -> f64 {
+    let ranks = |v: &[f32]| {
+        let mut order: Vec<usize> = (0..v.len()).collect();
+        order.sort_by(|&i, &j| v[i].total_cmp(&v[j]));
+        let mut rank = vec![0f64; v.len()];
+        for (r, &i) in order.iter().enumerate() {
+            rank[i] = r as f64;
+        }
+        rank
+    };
+    let (rx, ry) = (ranks(x), ranks(y));
+    let n = x.len() as f64;
+    let d2: f64 = rx.iter().zip(&ry).map(|(a, b)| (a - b).powi(2)).sum();
+    1.0 - 6.0 * d2 / (n * (n * n - 1.0))
+}
+
+#[test]
+fn with_default_errors_the_prior_still_orders_depths_like_the_ground_truth() {
+    let gt = slanted_scene();
+    for seed in 0..4 {
+        let (left, right) = run(SimulatedPriorConfig { seed, ..Default::default() }, &gt);
+        assert!(left.iter().chain(&right).all(|v| v.is_finite() && *v >= 0.0), "seed {seed}");
+        let rho = rank_correlation(&gt, &left);
+        assert!(rho > 0.95, "seed {seed}: rank correlation {rho}");
+        // ...but it is not the ground truth up to one fixed affine map: the errors are real.
+        let (_, _, rms) = affine_fit(&gt, &left);
+        assert!(rms > 1e-3, "seed {seed}: no error left, rms {rms}");
+    }
+}
+
+#[test]
+fn batching_does_not_change_an_elements_prior() {
+    let (square, slanted) = (square_scene(), slanted_scene());
+    let device = dgstereo_core::default_device();
+    let both: Vec<f32> = square.iter().chain(&slanted).copied().collect();
+    let batch = PriorInput {
+        left: Tensor::zeros([2, 3, H, W], &device),
+        right: Tensor::zeros([2, 3, H, W], &device),
+        gt_disparity: Some(from_vec(both, [2, 1, H, W], &device)),
+        names: vec!["a".into(), "b".into()],
+    };
+    let config = SimulatedPriorConfig { seed: 11, ..Default::default() };
+    let prior = SimulatedPrior::new(config.clone()).unwrap().provide(&batch).unwrap().unwrap();
+    let (left, right) = (to_vec(prior.left), to_vec(prior.right));
+    let (alone_left, alone_right) = run(config, &slanted);
+    assert_eq!(&left[H * W..], alone_left.as_slice());
+    assert_eq!(&right[H * W..], alone_right.as_slice());
+}

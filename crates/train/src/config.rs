@@ -1,5 +1,11 @@
 //! [`TrainingConfig`] (the `[train]` table) and [`TrainingDataConfig`] (the `[data]` table).
+//!
+//! Every key has a default (RAFT-Stereo's recipe as used by the paper), so an empty table is the
+//! reference run; unknown keys are errors naming the key.
 
+use std::path::PathBuf;
+
+use dgstereo_core::{Error, Result};
 use serde::{Deserialize, Serialize};
 
 /// The recipe of RAFT-Stereo and the paper; every value a key of the `[train]` table.
@@ -12,18 +18,32 @@ pub struct TrainingConfig {
     pub batch_size: usize,
     /// Crop `[height, width]`.
     pub crop: [usize; 2],
-    /// Update iterations during training.
+    /// Update iterations during training (all of them are supervised).
     pub iters: usize,
     /// Peak learning rate of the one-cycle schedule.
     pub lr: f64,
-    /// AdamW weight decay.
+    /// AdamW weight decay (decoupled).
     pub weight_decay: f64,
     /// AdamW epsilon.
     pub eps: f64,
-    /// Global gradient-norm clip.
+    /// AdamW `[beta1, beta2]` (PyTorch's defaults).
+    pub betas: [f64; 2],
+    /// Global gradient-norm clip (`clip_grad_norm_`); 0 disables clipping.
     pub clip: f64,
-    /// Seed of every random choice of the run.
+    /// Fraction of the schedule spent warming up (`pct_start`).
+    pub warmup_fraction: f64,
+    /// Schedule length beyond `steps` (`total_steps = steps + schedule_extra_steps`).
+    pub schedule_extra_steps: usize,
+    /// Seed of every random choice of the run (weights, data, augmentation).
     pub seed: u64,
+    /// Steps between two log lines (JSONL and progress bar).
+    pub log_every: usize,
+    /// Steps between two checkpoints (a checkpoint is also written at the end); 0: end only.
+    pub checkpoint_every: usize,
+    /// Checkpoints kept on disk (the newest ones); at least 1.
+    pub keep_checkpoints: usize,
+    /// Steps between two validations (also run at the end); 0: never.
+    pub validate_every: usize,
 }
 
 impl Default for TrainingConfig {
@@ -36,13 +56,269 @@ impl Default for TrainingConfig {
             lr: 2e-4,
             weight_decay: 1e-5,
             eps: 1e-8,
+            betas: [0.9, 0.999],
             clip: 1.0,
+            warmup_fraction: 0.01,
+            schedule_extra_steps: 100,
             seed: 1234,
+            log_every: 10,
+            checkpoint_every: 5000,
+            keep_checkpoints: 3,
+            validate_every: 5000,
         }
     }
 }
 
+impl TrainingConfig {
+    /// Checks the values; the message names the key.
+    pub fn validate(&self) -> Result<()> {
+        let err = |m: String| Err(Error::Config(m));
+        if self.steps == 0 {
+            return err("train.steps must be at least 1".into());
+        }
+        if self.batch_size == 0 {
+            return err("train.batch_size must be at least 1".into());
+        }
+        if self.crop.contains(&0) {
+            return err(format!("train.crop = {:?}: both sides must be positive", self.crop));
+        }
+        if self.iters == 0 {
+            return err("train.iters must be at least 1".into());
+        }
+        for (key, v) in [("lr", self.lr), ("eps", self.eps)] {
+            if !(v.is_finite() && v > 0.0) {
+                return err(format!("train.{key} = {v}: must be a finite value > 0"));
+            }
+        }
+        for (key, v) in [("weight_decay", self.weight_decay), ("clip", self.clip)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return err(format!("train.{key} = {v}: must be a finite value >= 0"));
+            }
+        }
+        if !self.betas.iter().all(|b| (0.0..1.0).contains(b)) {
+            return err(format!("train.betas = {:?}: each must lie in [0, 1)", self.betas));
+        }
+        if !(self.warmup_fraction > 0.0 && self.warmup_fraction < 1.0) {
+            return err(format!("train.warmup_fraction = {}: must lie in (0, 1)", self.warmup_fraction));
+        }
+        if self.log_every == 0 {
+            return err("train.log_every must be at least 1".into());
+        }
+        if self.keep_checkpoints == 0 {
+            return err("train.keep_checkpoints must be at least 1".into());
+        }
+        Ok(())
+    }
+
+    /// The schedule's `total_steps`.
+    pub fn schedule_total_steps(&self) -> usize {
+        self.steps + self.schedule_extra_steps
+    }
+}
+
 /// Where training pairs come from (the `[data]` table).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+///
+/// ```toml
+/// [data]
+/// augment = true
+/// [[data.sources]]
+/// kind = "synthetic"     # or "sceneflow", "middlebury", "eth3d", "kitti", "folder"
+/// weight = 1.0           # share of the batch elements drawn from this source
+/// width = 640
+/// height = 384
+/// [data.validation]
+/// count = 8              # held-out synthetic pairs (seeds disjoint from training's)
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct TrainingDataConfig {}
+pub struct TrainingDataConfig {
+    /// The training sources, mixed by their weights.
+    pub sources: Vec<DataSource>,
+    /// RAFT-Stereo's augmentation (colour, eraser, scale, crop); off: a random crop only.
+    pub augment: bool,
+    /// `log2` range of the augmentation's scale (`spatial_scale`).
+    pub spatial_scale: [f64; 2],
+    /// Saturation range of the colour jitter (`saturation_range`).
+    pub saturation_range: [f32; 2],
+    /// The validation set.
+    pub validation: ValidationConfig,
+}
+
+impl Default for TrainingDataConfig {
+    fn default() -> Self {
+        Self {
+            sources: vec![DataSource::default()],
+            augment: true,
+            spatial_scale: [-0.2, 0.4],
+            saturation_range: [0.0, 1.4],
+            validation: ValidationConfig::default(),
+        }
+    }
+}
+
+impl TrainingDataConfig {
+    /// Checks the values; the message names the key.
+    pub fn validate(&self) -> Result<()> {
+        if self.sources.is_empty() {
+            return Err(Error::Config("data.sources is empty: give at least one training source".into()));
+        }
+        for (i, s) in self.sources.iter().enumerate() {
+            let w = s.weight();
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(Error::Config(format!("data.sources[{i}].weight = {w}: must be finite and >= 0")));
+            }
+            if let DataSource::Synthetic { width, height, count, .. } = s {
+                if *width < 16 || *height < 16 {
+                    return Err(Error::Config(format!(
+                        "data.sources[{i}]: synthetic images of {width}x{height} are too small (at least 16x16)"
+                    )));
+                }
+                if *count == Some(0) {
+                    return Err(Error::Config(format!("data.sources[{i}].count must be at least 1")));
+                }
+            }
+        }
+        if self.sources.iter().map(DataSource::weight).sum::<f64>() <= 0.0 {
+            return Err(Error::Config("data.sources: the weights sum to 0".into()));
+        }
+        if self.spatial_scale[0] > self.spatial_scale[1] {
+            return Err(Error::Config(format!("data.spatial_scale = {:?}: expected [min, max]", self.spatial_scale)));
+        }
+        Ok(())
+    }
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn default_width() -> usize {
+    640
+}
+fn default_height() -> usize {
+    384
+}
+
+/// One source of training pairs (an entry of `[[data.sources]]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum DataSource {
+    /// The procedural generator of the data crate (exact ground truth, unlimited pairs).
+    Synthetic {
+        /// Share of the batch elements drawn from this source.
+        #[serde(default = "one")]
+        weight: f64,
+        /// Image width.
+        #[serde(default = "default_width")]
+        width: usize,
+        /// Image height.
+        #[serde(default = "default_height")]
+        height: usize,
+        /// Largest disparity; default `0.15 · width`.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        max_disparity: Option<f64>,
+        /// A fixed set of this many scenes; unlimited (a new scene per draw) when absent.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        count: Option<usize>,
+    },
+    /// SceneFlow (`root` holds `frames_*pass` and `disparity`).
+    Sceneflow {
+        /// Share of the batch elements drawn from this source.
+        #[serde(default = "one")]
+        weight: f64,
+        /// The dataset folder.
+        root: PathBuf,
+        /// `flyingthings` (TRAIN), `driving` or `monkaa`.
+        #[serde(default = "default_subset")]
+        subset: String,
+        /// `clean` or `final`.
+        #[serde(default = "default_pass")]
+        pass: String,
+    },
+    /// Middlebury 2014 (`root` holds the scene folders).
+    Middlebury {
+        /// Share of the batch elements drawn from this source.
+        #[serde(default = "one")]
+        weight: f64,
+        /// The dataset folder.
+        root: PathBuf,
+    },
+    /// ETH3D two-view training set.
+    Eth3d {
+        /// Share of the batch elements drawn from this source.
+        #[serde(default = "one")]
+        weight: f64,
+        /// The dataset folder.
+        root: PathBuf,
+    },
+    /// KITTI 2012 or 2015 (`root` is the `training` folder).
+    Kitti {
+        /// Share of the batch elements drawn from this source.
+        #[serde(default = "one")]
+        weight: f64,
+        /// The dataset folder.
+        root: PathBuf,
+        /// 2012 or 2015.
+        #[serde(default = "default_kitti")]
+        version: u32,
+    },
+    /// A folder of pairs with ground truth beside them (see the data crate's `folder_pairs`).
+    Folder {
+        /// Share of the batch elements drawn from this source.
+        #[serde(default = "one")]
+        weight: f64,
+        /// The folder.
+        root: PathBuf,
+    },
+}
+
+fn default_subset() -> String {
+    "flyingthings".into()
+}
+fn default_pass() -> String {
+    "clean".into()
+}
+fn default_kitti() -> u32 {
+    2015
+}
+
+impl Default for DataSource {
+    fn default() -> Self {
+        Self::Synthetic { weight: 1.0, width: default_width(), height: default_height(), max_disparity: None, count: None }
+    }
+}
+
+impl DataSource {
+    /// The source's share of the batch.
+    pub fn weight(&self) -> f64 {
+        match self {
+            Self::Synthetic { weight, .. }
+            | Self::Sceneflow { weight, .. }
+            | Self::Middlebury { weight, .. }
+            | Self::Eth3d { weight, .. }
+            | Self::Kitti { weight, .. }
+            | Self::Folder { weight, .. } => *weight,
+        }
+    }
+}
+
+/// The validation set (`[data.validation]`): held-out synthetic pairs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ValidationConfig {
+    /// Number of pairs (0: no validation).
+    pub count: usize,
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+    /// Seed of the first pair; pair `i` is the scene of `seed + i`.
+    pub seed: u64,
+    /// Update iterations at validation (`valid_iters`).
+    pub iters: usize,
+}
+
+impl Default for ValidationConfig {
+    fn default() -> Self {
+        Self { count: 8, width: 640, height: 384, seed: 1 << 40, iters: 32 }
+    }
+}

@@ -1,6 +1,32 @@
-//! Training (optimiser, schedule, clipping, checkpoints, loop) of dgstereo models.
+//! Training of dgstereo models: RAFT-Stereo's recipe, reproducible, resumable and observable.
+//!
+//! The pieces burn lacks are here: PyTorch's one-cycle schedule ([`schedule`]) and global-norm
+//! gradient clipping ([`clip`]); AdamW is burn-optim's. [`Trainer::step`] takes one step: a batch
+//! that is a pure function of `(seed, step)` ([`batch`]), the configured prior, the network over
+//! all training iterations on the autodiff device, the configured loss, backward, clipping,
+//! AdamW at the schedule's rate. BatchNorm is frozen by construction (the encoder's
+//! `FrozenBatchNorm` always normalises with running statistics that have no gradient).
+//!
+//! Design decision: resumability comes from determinism, not from saving random generators.
+//! Since the data of step `k` depends only on the seed and `k`, and the schedule only on `k`, a
+//! checkpoint ([`checkpoint`]) holding the weights, the optimiser state, the parameter identities
+//! and the step reproduces an uninterrupted run exactly. [`run::train`] is the loop: logging
+//! (JSONL, progress bar), validation, plots and atomic checkpoints that keep the last N.
 #![deny(missing_docs)]
 
+pub mod ablation;
+pub mod batch;
+pub mod checkpoint;
+pub mod clip;
 mod config;
+pub mod params;
+pub mod plot;
+pub mod run;
+pub mod schedule;
+pub mod trainer;
+pub mod validate;
 
-pub use config::{TrainingConfig, TrainingDataConfig};
+pub use config::{DataSource, TrainingConfig, TrainingDataConfig, ValidationConfig};
+pub use schedule::OneCycleLr;
+pub use run::{RunOptions, RunSummary, train};
+pub use trainer::{StepReport, TrainParts, Trainer};

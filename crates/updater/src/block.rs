@@ -55,13 +55,15 @@ pub struct MultiLevelUpdateBlock {
     pub n_gru_layers: usize,
 }
 
-/// `F.avg_pool2d(x, 3, stride=2, padding=1)` (padding counted in the average).
-fn pool2x(x: Tensor<4>) -> Tensor<4> {
+/// `F.avg_pool2d(x, 3, stride=2, padding=1)` (padding counted in the average): a finer
+/// state handed to the next coarser GRU.
+pub fn pool2x(x: Tensor<4>) -> Tensor<4> {
     avg_pool2d(x, AvgPoolOptions::new([3, 3]).with_stride([2, 2]).with_padding([1, 1]))
 }
 
-/// Bilinear resize (align corners) of `x` to the size of `dest`.
-fn interp(x: Tensor<4>, dest: &Tensor<4>) -> Tensor<4> {
+/// Bilinear resize (align corners) of `x` to the size of `dest`: a coarser state handed to
+/// the next finer GRU.
+pub fn interp(x: Tensor<4>, dest: &Tensor<4>) -> Tensor<4> {
     let [_, _, h, w] = dest.dims();
     resize_bilinear(x, [h, w], true)
 }
@@ -88,6 +90,23 @@ impl MultiLevelUpdateBlock {
             },
             n_gru_layers: n,
         }
+    }
+
+    /// The disparity update of the finest state (the flow head's x channel).
+    ///
+    /// # Shapes
+    /// - `hidden_fine`: `[N, hidden, H, W]`; output `[N, 1, H, W]`
+    pub fn delta_x(&self, hidden_fine: Tensor<4>) -> Tensor<4> {
+        let delta = self.flow_head.conv2.forward(relu(self.flow_head.conv1.forward(hidden_fine)));
+        delta.narrow(1, 0, 1)
+    }
+
+    /// The convex-upsampling logits of the finest state, scaled by 0.25 as in the reference.
+    ///
+    /// # Shapes
+    /// - `hidden_fine`: `[N, hidden, H, W]`; output `[N, 9·f², H, W]`
+    pub fn upsample_mask(&self, hidden_fine: Tensor<4>) -> Tensor<4> {
+        self.mask.conv2.forward(relu(self.mask.conv1.forward(hidden_fine))).mul_scalar(0.25)
     }
 
     /// Updates the coarser GRUs only (the slow-fast schedule's extra calls).
@@ -123,10 +142,10 @@ impl Updater for MultiLevelUpdateBlock {
             inputs.push(interp(hidden[1].clone(), &hidden[0]));
         }
         hidden[0] = self.gru08.forward(hidden[0].clone(), &context[0], inputs);
-        let h = hidden[0].clone();
-        let delta = self.flow_head.conv2.forward(relu(self.flow_head.conv1.forward(h.clone())));
-        let up_mask = self.mask.conv2.forward(relu(self.mask.conv1.forward(h))).mul_scalar(0.25);
-        let [b, _, hh, ww] = delta.dims();
-        UpdateOutput { delta_x: delta.slice([0..b, 0..1, 0..hh, 0..ww]), up_mask }
+        UpdateOutput { delta_x: self.delta_x(hidden[0].clone()) }
+    }
+
+    fn upsample_mask(&self, hidden: &[Tensor<4>]) -> Tensor<4> {
+        MultiLevelUpdateBlock::upsample_mask(self, hidden[0].clone())
     }
 }

@@ -1,7 +1,15 @@
 //! The convolutional GRU cell.
+//!
+//! The update and reset gates read the same input `[h, x]`, so one step runs them as a single
+//! convolution with `2·hidden` output channels: the weights of `convz` and `convr` are
+//! concatenated at each call (a few MB, next to a multi-GMAC convolution), which halves the
+//! im2col work and gives the matrix product a wider output. The modules stay separate so the
+//! official checkpoint keys `convz`, `convr`, `convq` keep loading and training updates each.
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
+use burn::tensor::module::conv2d as conv2d_op;
+use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor, activation::{sigmoid, tanh}};
 use dgstereo_core::layers::{ConvInit, conv2d};
 
@@ -31,6 +39,22 @@ pub struct GateContext {
     pub r: Tensor<4>,
     /// Added to the candidate.
     pub q: Tensor<4>,
+    /// `z` and `r` stacked along channels (`[N, 2·hidden, H, W]`), added to the fused gates.
+    pub zr: Tensor<4>,
+}
+
+impl GateContext {
+    /// Splits the output of a level's context convolution, `[N, 3·hidden, H, W]` ordered
+    /// `z, r, q` along channels (the reference's `context_zqr_convs`).
+    pub fn from_zqr(zqr: Tensor<4>) -> Self {
+        let d = zqr.dims()[1] / 3;
+        Self {
+            z: zqr.clone().narrow(1, 0, d),
+            r: zqr.clone().narrow(1, d, d),
+            zr: zqr.clone().narrow(1, 0, 2 * d),
+            q: zqr.narrow(1, 2 * d, d),
+        }
+    }
 }
 
 impl ConvGru {
@@ -42,11 +66,56 @@ impl ConvGru {
 
     /// One step.
     pub fn forward(&self, h: Tensor<4>, ctx: &GateContext, inputs: Vec<Tensor<4>>) -> Tensor<4> {
+        let hidden = h.dims()[1];
         let x = Tensor::cat(inputs, 1);
         let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
-        let z = sigmoid(self.convz.forward(hx.clone()) + ctx.z.clone());
-        let r = sigmoid(self.convr.forward(hx) + ctx.r.clone());
+        let zr = sigmoid(self.gates(hx) + ctx.zr.clone());
+        let z = zr.clone().narrow(1, 0, hidden);
+        let r = zr.narrow(1, hidden, hidden);
         let q = tanh(self.convq.forward(Tensor::cat(vec![r * h.clone(), x], 1)) + ctx.q.clone());
         (z.clone().neg().add_scalar(1.0)) * h + z * q
+    }
+
+    /// `[convz(hx), convr(hx)]` as one convolution of the concatenated weights.
+    ///
+    /// # Shapes
+    /// - `hx`: `[N, hidden + input_dim, H, W]`; output `[N, 2·hidden, H, W]`
+    pub fn gates(&self, hx: Tensor<4>) -> Tensor<4> {
+        let weight = Tensor::cat(vec![self.convz.weight.val(), self.convr.weight.val()], 0);
+        let bias = match (&self.convz.bias, &self.convr.bias) {
+            (Some(bz), Some(br)) => Some(Tensor::cat(vec![bz.val(), br.val()], 0)),
+            _ => None,
+        };
+        let [_, _, kh, kw] = weight.dims();
+        let options = ConvOptions::new(self.convz.stride, [kh / 2, kw / 2], self.convz.dilation, self.convz.groups);
+        conv2d_op(hx, weight, bias, options)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Distribution;
+    use dgstereo_core::default_device;
+    use dgstereo_core::tensor::max_abs_diff;
+
+    /// The fused gate convolution equals the two separate ones, and the step equals the
+    /// reference formula written with them.
+    #[test]
+    fn fused_gates_equal_separate_convolutions() {
+        let device = default_device();
+        let gru = ConvGru::new(8, 6, &device);
+        let rand = |c: usize| Tensor::<4>::random([2, c, 5, 7], Distribution::Normal(0.0, 1.0), &device);
+        let (h, x) = (rand(8), rand(6));
+        let ctx = GateContext::from_zqr(rand(24));
+        let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
+        let fused = gru.gates(hx.clone());
+        let separate = Tensor::cat(vec![gru.convz.forward(hx.clone()), gru.convr.forward(hx.clone())], 1);
+        assert!(max_abs_diff(fused, separate) < 1e-5);
+        let z = sigmoid(gru.convz.forward(hx.clone()) + ctx.z.clone());
+        let r = sigmoid(gru.convr.forward(hx) + ctx.r.clone());
+        let q = tanh(gru.convq.forward(Tensor::cat(vec![r * h.clone(), x.clone()], 1)) + ctx.q.clone());
+        let expected = (z.clone().neg().add_scalar(1.0)) * h.clone() + z * q;
+        assert!(max_abs_diff(gru.forward(h, &ctx, vec![x]), expected) < 1e-5);
     }
 }

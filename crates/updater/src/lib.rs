@@ -27,13 +27,10 @@ pub use upsample::convex_upsample;
 ///
 /// # Shapes
 /// - `delta_x`: `[N, 1, H, W]` (x-flow update at the update grid)
-/// - `up_mask`: `[N, 9·f², H, W]` (upsampling logits, already scaled by 0.25)
 #[derive(Debug, Clone)]
 pub struct UpdateOutput {
     /// Update of the x flow (negative disparity).
     pub delta_x: Tensor<4>,
-    /// Convex-upsampling weights.
-    pub up_mask: Tensor<4>,
 }
 
 /// The update stage.
@@ -50,6 +47,14 @@ pub trait Updater {
         flow: Tensor<4>,
         guidance: Option<&Tensor<4>>,
     ) -> UpdateOutput;
+
+    /// The convex-upsampling weights of the current state, `[N, 9·f², H, W]` (logits already
+    /// scaled by 0.25).
+    ///
+    /// Separate from [`Updater::step`] because the mask never feeds back into the state: a
+    /// caller computes it only for the iterations whose full-resolution flow it needs (the last
+    /// one in inference), which saves a sixth of every other iteration's work.
+    fn upsample_mask(&self, hidden: &[Tensor<4>]) -> Tensor<4>;
 }
 
 /// Configuration of the update stage (RAFT-Stereo's defaults).

@@ -1,13 +1,69 @@
-//! `dgstereo ablate`.
+//! `dgstereo ablate`: trains (or reuses) every run of the given experiment files, evaluates each
+//! final model and writes the ablation table (Markdown, CSV, JSON) into `--out`.
+//!
+//! Each run trains into `--out/<run name>`. A run folder holding a finished run (`summary.json`
+//! and `model.safetensors`) is reused as is; one holding checkpoints only is resumed. The
+//! benchmark is each run's held-out synthetic validation set (`[data.validation]`).
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Args;
+use dgstereo_core::DeviceChoice;
+use dgstereo_train::ablation::{AblationTable, TABLE_METRICS, evaluate_finished_run};
+use dgstereo_train::run::{checkpoint_dir, is_finished};
+
+use super::train::{folder_name, parts_of, train_one};
 
 /// Options of `dgstereo ablate`.
 #[derive(Args)]
-pub struct AblateArgs {}
+pub struct AblateArgs {
+    /// Experiment files; every run of each is a row, in order.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// Output folder: one sub-folder per run, and the tables.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Train this many steps instead of each file's `train.steps`.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps: Option<u64>,
+    /// `cpu` or `gpu`.
+    #[arg(long, default_value = "cpu")]
+    pub device: DeviceChoice,
+    /// No progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+}
 
-pub fn run(_a: AblateArgs) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("dgstereo ablate is not implemented yet")
+pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
+    let runs = dgstereo_experiment::load_all(&a.files)?;
+    let device = a.device.device()?;
+    std::fs::create_dir_all(&a.out).map_err(|e| dgstereo_core::Error::io(&a.out, e))?;
+    let bench = "synthetic".to_string();
+    let mut table = AblationTable::new(TABLE_METRICS.iter().map(|m| (bench.clone(), m.to_string())).collect());
+    for run in runs {
+        let name = run.name.clone();
+        let out = a.out.join(folder_name(&name));
+        let parts = parts_of(run.config, a.steps);
+        if is_finished(&out) {
+            let stored = std::fs::read_to_string(out.join("config.toml")).unwrap_or_default();
+            if stored != parts.resolved_toml {
+                anyhow::bail!(
+                    "{}: holds a finished run of another configuration than '{name}' resolves to now; remove the folder or choose another --out",
+                    out.display()
+                );
+            }
+            println!("{name}: finished run found in {}, reusing it", out.display());
+        } else {
+            let resume = checkpoint_dir(&out).is_dir() && !dgstereo_train::checkpoint::list_checkpoints(&checkpoint_dir(&out))?.is_empty();
+            train_one(parts.clone(), &out, resume, !a.quiet, &device)?;
+        }
+        let metrics = evaluate_finished_run(&parts, &out, &device)?;
+        println!("{name}: {bench} EPE {:.3} px, bad-1 {:.2} %, bad-3 {:.2} %", metrics.epe, metrics.bad_1, metrics.bad_3);
+        table.push(&name, &[(bench.clone(), metrics)]);
+        table.write(&a.out)?;
+    }
+    println!("\n{}", table.to_markdown());
+    println!("tables written to {}/ablation.{{md,csv,json}}", a.out.display());
+    Ok(ExitCode::SUCCESS)
 }

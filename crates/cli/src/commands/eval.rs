@@ -1,13 +1,164 @@
-//! `dgstereo eval`.
+//! `dgstereo eval`: runs a model over a data set and scores it under the benchmark's protocol.
+//!
+//! The data set's layout is read by the data crate, the model runs through the same [`Engine`] as
+//! `infer`, and the eval crate's driver scores each sample (all valid pixels, and non-occluded
+//! ones where a mask exists) into a table printed as text and written as `eval.csv` and
+//! `eval.json` in `--out`. The protocol follows the data set (KITTI: bad-3 pooled; Middlebury:
+//! bad-2 per image; ETH3D: bad-1 per image; SceneFlow: FlyingThings3D finalpass TEST, bad-1
+//! pooled; DrivingStereo: EPE and bad-3 per weather; folder: generic). `--max-size` makes the numbers differ from the benchmark's (it is for quick looks
+//! and tests) and is reported in the output.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Instant;
 
-use clap::Args;
+use anyhow::bail;
+use clap::{Args, ValueEnum};
+use dgstereo_data::datasets::{
+    KittiVersion, SceneFlowPass, SceneFlowSubset, drivingstereo, eth3d, folder_pairs, kitti, middlebury2014, sceneflow,
+};
+use dgstereo_data::{Dataset, FileDataset};
+use dgstereo_eval::{Protocol, evaluate_dataset};
+
+use crate::engine::{Engine, ModelArgs, error_line};
+
+/// A data set layout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum DatasetKind {
+    /// Middlebury 2014 / MiddEval3: scene folders with im0.png, im1.png, disp0GT.pfm.
+    Middlebury,
+    /// ETH3D two-view (two_view_training + two_view_training_gt).
+    Eth3d,
+    /// KITTI 2012 training folder (colored_0, colored_1, disp_occ).
+    Kitti2012,
+    /// KITTI 2015 training folder (image_2, image_3, disp_occ_0).
+    Kitti2015,
+    /// SceneFlow FlyingThings3D finalpass TEST.
+    Sceneflow,
+    /// DrivingStereo weather subsets (sunny, cloudy, foggy, rainy).
+    Drivingstereo,
+    /// A folder of pairs (`*left*`/`*right*` or im0/im1) with `*disp*` or disp0GT ground truth,
+    /// e.g. the bundled Cones pair in assets/cones.
+    Folder,
+}
+
+impl DatasetKind {
+    fn load(self, root: &std::path::Path) -> dgstereo_core::Result<FileDataset> {
+        match self {
+            Self::Middlebury => middlebury2014(root),
+            Self::Eth3d => eth3d(root),
+            Self::Kitti2012 => kitti(root, KittiVersion::K2012),
+            Self::Kitti2015 => kitti(root, KittiVersion::K2015),
+            Self::Sceneflow => sceneflow(root, SceneFlowSubset::FlyingThingsTest, SceneFlowPass::Final),
+            Self::Drivingstereo => drivingstereo(root, &[]),
+            Self::Folder => folder_pairs(root),
+        }
+    }
+
+    fn protocol(self) -> Protocol {
+        match self {
+            Self::Middlebury => Protocol::Middlebury,
+            Self::Eth3d => Protocol::Eth3d,
+            Self::Kitti2012 | Self::Kitti2015 => Protocol::Kitti,
+            Self::Sceneflow => Protocol::FlyingThings,
+            Self::Drivingstereo => Protocol::DrivingStereo,
+            Self::Folder => Protocol::Generic,
+        }
+    }
+}
 
 /// Options of `dgstereo eval`.
 #[derive(Args)]
-pub struct EvalArgs {}
+pub struct EvalArgs {
+    /// Data set layout.
+    #[arg(long, value_enum)]
+    dataset: DatasetKind,
+    /// Root folder of the data set.
+    #[arg(long)]
+    root: PathBuf,
+    /// Output folder for eval.csv and eval.json.
+    #[arg(long, default_value = "out/eval")]
+    out: PathBuf,
+    /// Evaluate only the first N samples.
+    #[arg(long)]
+    limit: Option<usize>,
+    #[command(flatten)]
+    model: ModelArgs,
+}
 
-pub fn run(_a: EvalArgs) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("dgstereo eval is not implemented yet")
+pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
+    eval(a).map_err(|e| anyhow::anyhow!(error_line(&e)))
+}
+
+fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
+    let start = Instant::now();
+    if !a.root.is_dir() {
+        bail!("{}: --root must be the data set's folder", a.root.display());
+    }
+    let dataset = a.dataset.load(&a.root)?;
+    if dataset.files.is_empty() {
+        bail!("{}: no {:?} samples found in this folder", a.root.display(), a.dataset);
+    }
+    let without_gt: Vec<&str> =
+        dataset.files.iter().filter(|f| f.disparity.is_none()).map(|f| f.name.as_str()).collect();
+    if without_gt.len() == dataset.files.len() {
+        bail!("{}: no sample has ground truth disparity (is this a test split?)", a.root.display());
+    }
+    let n = a.limit.unwrap_or(usize::MAX).min(dataset.len());
+    let protocol = a.dataset.protocol();
+    let engine = Engine::new(&a.model)?;
+    std::fs::create_dir_all(&a.out)
+        .map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", a.out.display()))?;
+    eprintln!(
+        "{:?}: {n} of {} sample(s), protocol {}, weights {}, {} iterations{}",
+        a.dataset,
+        dataset.len(),
+        protocol.name(),
+        engine.weights.display(),
+        a.model.iters,
+        a.model.max_size.map(|m| format!(", downscaled to at most {m} px (not the benchmark's protocol)")).unwrap_or_default()
+    );
+    let mut k = 0;
+    let result = evaluate_dataset(
+        Arc::new(dataset) as Arc<dyn Dataset>,
+        (0..n).collect(),
+        protocol,
+        |sample| {
+            engine
+                .disparity(&sample.left, &sample.right, &sample.name)
+                .map(|(d, _)| d)
+                .map_err(|e| dgstereo_core::Error::Other(error_line(&e)))
+        },
+        |outcome| {
+            k += 1;
+            match outcome {
+                Ok(row) => {
+                    let m = row.all.metrics();
+                    eprintln!("[{k}/{n}] {}: epe {:.3}, bad-2 {:.2} %", row.name, m.epe, m.bad_2);
+                }
+                Err(f) => eprintln!("[{k}/{n}] error: {}: {}", f.name, f.message.replace('\n', " ")),
+            }
+        },
+    );
+    println!("{}", result.table);
+    let (csv, json) = (a.out.join("eval.csv"), a.out.join("eval.json"));
+    result.table.write_csv(&csv)?;
+    result.table.write_json(&json)?;
+    println!(
+        "summary: {} of {n} sample(s) scored, {} failed, {:.1} s; wrote {} and {}",
+        result.table.rows.len(),
+        result.failures.len(),
+        start.elapsed().as_secs_f64(),
+        csv.display(),
+        json.display()
+    );
+    if result.failures.is_empty() {
+        return Ok(ExitCode::SUCCESS);
+    }
+    eprintln!("failed:");
+    for f in &result.failures {
+        eprintln!("  {}: {}", f.name, f.message.replace('\n', " "));
+    }
+    Ok(ExitCode::FAILURE)
 }

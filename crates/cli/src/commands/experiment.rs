@@ -1,4 +1,9 @@
-//! `dgstereo experiment`.
+//! `dgstereo experiment`: tools for experiment files.
+//!
+//! `check` resolves and validates each file (bases, sweeps, defaults), then builds every run's
+//! model, counts its trainable parameters and runs one forward pass on a small synthetic pair.
+//! It prints one line per run and exits with status 1 when any file or run fails; a failing file
+//! does not stop the others from being checked.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -11,10 +16,90 @@ pub enum ExperimentCommand {
     /// Resolves and validates files, builds each model and runs one small forward pass.
     Check {
         /// Experiment files.
+        #[arg(required = true)]
         files: Vec<PathBuf>,
+        /// Size `HEIGHTxWIDTH` of the synthetic pair.
+        #[arg(long, default_value = "64x96", value_parser = parse_size)]
+        size: [usize; 2],
+        /// Update iterations of the forward pass.
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..))]
+        iters: u16,
+        /// Print each run's resolved configuration (TOML) after its line.
+        #[arg(long)]
+        show: bool,
     },
 }
 
-pub fn run(_c: ExperimentCommand) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("dgstereo experiment is not implemented yet")
+fn parse_size(text: &str) -> Result<[usize; 2], String> {
+    let (h, w) = text.split_once(['x', 'X']).ok_or_else(|| format!("'{text}': expected HEIGHTxWIDTH, e.g. 64x96"))?;
+    let parse = |s: &str| s.trim().parse::<usize>().ok().filter(|v| *v >= 8);
+    match (parse(h), parse(w)) {
+        (Some(h), Some(w)) => Ok([h, w]),
+        _ => Err(format!("'{text}': both sides must be whole numbers of at least 8")),
+    }
+}
+
+pub fn run(command: ExperimentCommand) -> anyhow::Result<ExitCode> {
+    match command {
+        ExperimentCommand::Check { files, size, iters, show } => check(&files, size, iters as usize, show),
+    }
+}
+
+fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool) -> anyhow::Result<ExitCode> {
+    let device = dgstereo_core::default_device();
+    let mut failures = 0usize;
+    for file in files {
+        let runs = match dgstereo_experiment::load(file) {
+            Ok(runs) => runs,
+            Err(e) => {
+                failures += 1;
+                println!("{:<44} {:>22}  error: {e}", file.display(), "-");
+                continue;
+            }
+        };
+        for run in runs {
+            match dgstereo_experiment::smoke_test(&run.config, size, iters, &device) {
+                Ok(report) => println!("{:<44} {:>22}  OK", run.name, parameters(report.parameters)),
+                Err(e) => {
+                    failures += 1;
+                    println!("{:<44} {:>22}  error: {}: {e}", run.name, "-", run.source.display());
+                }
+            }
+            if show {
+                println!("{}", run.config.to_toml());
+            }
+        }
+    }
+    if failures > 0 {
+        eprintln!("{failures} failed");
+        return Ok(ExitCode::FAILURE);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `11116176` → `11,116,176 (11.12 M)`.
+fn parameters(count: usize) -> String {
+    let digits = count.to_string();
+    let mut grouped = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i) % 3 == 0 {
+            grouped.push(',');
+        }
+        grouped.push(c);
+    }
+    format!("{grouped} ({:.2} M)", count as f64 / 1e6)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_and_counts_format() {
+        assert_eq!(parse_size("64x96"), Ok([64, 96]));
+        assert!(parse_size("64").is_err());
+        assert!(parse_size("4x96").is_err());
+        assert_eq!(parameters(11_116_176), "11,116,176 (11.12 M)");
+        assert_eq!(parameters(999), "999 (0.00 M)");
+    }
 }

@@ -1,24 +1,241 @@
-//! `dgstereo infer`: disparity of the user's stereo pairs.
+//! `dgstereo infer`: disparity (and depth, point clouds) of the user's stereo pairs.
+//!
+//! Whole-run problems (no pairs, weights that do not load or fit the experiment, a calibration
+//! that does not parse) stop the command before any pair runs. Per-pair problems (a missing right
+//! image, an unreadable or truncated file, views of different sizes) are reported as one line
+//! naming the file, the other pairs still run, the failures are listed at the end and the exit
+//! status is non-zero. A panic inside the model is caught and reported the same way, as an
+//! internal error of that pair.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::time::Instant;
 
+use anyhow::{Context, bail};
 use clap::Args;
+use dgstereo_data::load_rgb;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::calib::Calibration;
+use crate::engine::{Engine, ModelArgs, error_line};
+use crate::inputs::{PairList, PairPaths, from_folder, from_left_right, from_list};
+use crate::outputs::{OutputOptions, SaveKind, calibration_beside, write_outputs};
+use crate::pointcloud::PlyEncoding;
 
 /// Options of inference.
 #[derive(Args)]
 pub struct InferArgs {
-    /// Left image(s): files or glob patterns.
-    #[arg(short, long)]
+    /// Left image(s): files or glob patterns (sorted, then zipped with --right).
+    #[arg(short, long, num_args = 1..)]
     left: Vec<String>,
     /// Right image(s): files or glob patterns.
-    #[arg(short, long)]
+    #[arg(short, long, num_args = 1..)]
     right: Vec<String>,
+    /// A folder of pairs: `*left*`/`*right*` or `im0`/`im1` image names (searched recursively).
+    #[arg(long, conflicts_with_all = ["left", "right", "list"])]
+    pairs: Option<PathBuf>,
+    /// A text file with one `LEFT RIGHT` pair per line (paths relative to the file).
+    #[arg(long, conflicts_with_all = ["left", "right"])]
+    list: Option<PathBuf>,
     /// Output folder.
     #[arg(long, default_value = "out/infer")]
     out: PathBuf,
+    /// Outputs, comma-separated: pfm, npy, png16, color, depth, ply.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "pfm,color")]
+    save: Vec<SaveKind>,
+    /// Calibration for depth and ply: Middlebury calib.txt, JSON (fx, fy, cx, cy, baseline) or
+    /// K.txt (default: a calib.txt or K.txt beside each left image).
+    #[arg(long)]
+    calib: Option<PathBuf>,
+    /// Farthest point kept in point clouds, metres (default: the calibration's depth range, else
+    /// the depth of a 1-pixel disparity).
+    #[arg(long)]
+    max_depth: Option<f64>,
+    /// PLY encoding.
+    #[arg(long, value_enum, default_value_t = PlyEncoding::Binary)]
+    ply_encoding: PlyEncoding,
+    #[command(flatten)]
+    model: ModelArgs,
 }
 
-pub fn run(_a: InferArgs) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("dgstereo infer is not implemented yet")
+fn find_pairs(a: &InferArgs) -> anyhow::Result<PairList> {
+    match (&a.pairs, &a.list) {
+        (Some(dir), _) => from_folder(dir),
+        (None, Some(list)) => from_list(list),
+        (None, None) => from_left_right(&a.left, &a.right),
+    }
+}
+
+/// A failed pair: the file at fault (or the pair) and the problem, on one line.
+struct Failure {
+    what: PathBuf,
+    message: String,
+}
+
+impl Failure {
+    /// `FILE: problem`, without naming the file twice when the message already does.
+    fn line(&self) -> String {
+        if self.message.contains(&*self.what.to_string_lossy()) {
+            self.message.clone()
+        } else {
+            format!("{}: {}", self.what.display(), self.message)
+        }
+    }
+}
+
+pub fn run(a: InferArgs) -> anyhow::Result<ExitCode> {
+    infer(a).map_err(|e| anyhow::anyhow!(error_line(&e)))
+}
+
+fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
+    let start = Instant::now();
+    let list = find_pairs(&a)?;
+    let global_calib = a.calib.as_deref().map(Calibration::load).transpose()?;
+    if let Some(m) = a.max_depth
+        && !(m.is_finite() && m > 0.0)
+    {
+        bail!("--max-depth must be a positive number of metres");
+    }
+    let engine = Engine::new(&a.model)?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the output folder", a.out.display()))?;
+    let opts = OutputOptions { dir: a.out.clone(), kinds: dedup(&a.save), max_depth: a.max_depth, ply: a.ply_encoding };
+
+    let mut failures: Vec<Failure> =
+        list.problems.iter().map(|p| Failure { what: p.path.clone(), message: p.message.clone() }).collect();
+    for f in &failures {
+        eprintln!("error: {}", f.line());
+    }
+    let total = list.pairs.len();
+    eprintln!(
+        "{total} pair(s), weights {}, {} iterations, output {}",
+        engine.weights.display(),
+        a.model.iters,
+        a.out.display()
+    );
+    let bar = ProgressBar::new(total as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} pairs  {per_sec}  eta {eta}  {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let previous_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let mut done = 0usize;
+    for pair in &list.pairs {
+        bar.set_message(pair.name.clone());
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            process_pair(&engine, pair, &opts, global_calib.as_ref())
+        }));
+        match outcome {
+            Ok(Ok(line)) => {
+                done += 1;
+                bar.suspend(|| println!("{line}"));
+            }
+            Ok(Err(e)) => {
+                let f = Failure { what: pair.left.clone(), message: error_line(&e) };
+                bar.suspend(|| eprintln!("error: {}", f.line()));
+                failures.push(f);
+            }
+            Err(panic) => {
+                let msg = panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_else(|| "unknown panic".into());
+                let f = Failure {
+                    what: pair.left.clone(),
+                    message: format!("{}: internal error: {}", pair.left.display(), msg.replace(['\n', '\r'], " ")),
+                };
+                bar.suspend(|| eprintln!("error: {}", f.line()));
+                failures.push(f);
+            }
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    std::panic::set_hook(previous_hook);
+
+    let seconds = start.elapsed().as_secs_f64();
+    let attempted = total + list.problems.len();
+    println!(
+        "summary: {done} of {attempted} pair(s) done, {} failed, {seconds:.1} s ({:.2} pairs/s)",
+        failures.len(),
+        done as f64 / seconds.max(1e-9)
+    );
+    if failures.is_empty() {
+        return Ok(ExitCode::SUCCESS);
+    }
+    eprintln!("failed:");
+    for f in &failures {
+        eprintln!("  {}", f.line());
+    }
+    Ok(ExitCode::FAILURE)
+}
+
+fn dedup(kinds: &[SaveKind]) -> Vec<SaveKind> {
+    let mut out = Vec::new();
+    for k in kinds {
+        if !out.contains(k) {
+            out.push(*k);
+        }
+    }
+    out
+}
+
+/// Reads, predicts and writes one pair; returns the line reporting it.
+fn process_pair(
+    engine: &Engine,
+    pair: &PairPaths,
+    opts: &OutputOptions,
+    global_calib: Option<&Calibration>,
+) -> anyhow::Result<String> {
+    let t0 = Instant::now();
+    let left = load_rgb(&pair.left)?;
+    let right = load_rgb(&pair.right)?;
+    if (left.width, left.height) != (right.width, right.height) {
+        bail!(
+            "{} is {}x{} but {} is {}x{}: the views of a rectified pair have one size",
+            pair.left.display(),
+            left.width,
+            left.height,
+            pair.right.display(),
+            right.width,
+            right.height
+        );
+    }
+    let calib = if opts.kinds.iter().any(|k| k.needs_calibration()) {
+        Some(calibration_for(&pair.left, global_calib)?.for_size(left.width, left.height))
+    } else {
+        None
+    };
+    let (disp, info) = engine
+        .disparity(&left, &right, &pair.name)
+        .with_context(|| format!("{} + {}", pair.left.display(), pair.right.display()))?;
+    let written = write_outputs(opts, &pair.name, &left, &disp, calib.as_ref())?;
+    let files: Vec<String> =
+        written.iter().map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()).collect();
+    Ok(format!(
+        "{}: {}x{} (network {}x{}, {:?} volume) {:.2} s -> {}",
+        pair.name,
+        left.width,
+        left.height,
+        info.network_size.0,
+        info.network_size.1,
+        info.corr,
+        t0.elapsed().as_secs_f64(),
+        files.join(", ")
+    ))
+}
+
+fn calibration_for(left: &Path, global: Option<&Calibration>) -> anyhow::Result<Calibration> {
+    if let Some(c) = global {
+        return Ok(c.clone());
+    }
+    match calibration_beside(left) {
+        Some(p) => Calibration::load(&p),
+        None => bail!(
+            "{}: depth and ply outputs need a calibration: pass --calib FILE (or put calib.txt beside the image)",
+            left.display()
+        ),
+    }
 }

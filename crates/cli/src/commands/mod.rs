@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod ablate;
+pub mod bench;
 pub mod demo;
 pub mod eval;
 pub mod experiment;

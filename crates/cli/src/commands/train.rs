@@ -1,13 +1,86 @@
-//! `dgstereo train`.
+//! `dgstereo train`: trains the run(s) of an experiment file.
+//!
+//! One run trains into `--out`; a file with a sweep trains each combination into
+//! `--out/<run name>` (characters other than letters, digits, `-`, `_`, `.`, `=`, `,` and `+`
+//! become `_`). `--steps N` replaces `train.steps` (and so the schedule's length) before the
+//! configuration is resolved and stored; `--resume` continues from the newest checkpoint.
 
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use anyhow::Context;
 use clap::Args;
+use dgstereo_core::DeviceChoice;
+use dgstereo_train::{RunOptions, TrainParts};
 
 /// Options of `dgstereo train`.
 #[derive(Args)]
-pub struct TrainArgs {}
+pub struct TrainArgs {
+    /// The experiment file.
+    pub experiment: PathBuf,
+    /// Output folder (log, plot, checkpoints, final model).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Train this many steps instead of the file's `train.steps`.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps: Option<u64>,
+    /// Continue from the newest checkpoint in the output folder.
+    #[arg(long)]
+    pub resume: bool,
+    /// `cpu` or `gpu`.
+    #[arg(long, default_value = "cpu")]
+    pub device: DeviceChoice,
+    /// No progress bar (log lines still go to log.jsonl).
+    #[arg(long)]
+    pub quiet: bool,
+}
 
-pub fn run(_a: TrainArgs) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("dgstereo train is not implemented yet")
+/// A run name as a folder name.
+pub fn folder_name(name: &str) -> String {
+    name.chars()
+        .map(|c| if c.is_ascii_alphanumeric() || "-_.=,+".contains(c) { c } else { '_' })
+        .collect()
+}
+
+/// The trainer's parts of a resolved experiment, with `steps` overriding `train.steps`.
+pub fn parts_of(mut config: dgstereo_experiment::ExperimentConfig, steps: Option<u64>) -> TrainParts {
+    if let Some(s) = steps {
+        config.train.steps = s as usize;
+    }
+    let resolved_toml = config.to_toml();
+    TrainParts {
+        name: config.name,
+        model: config.model,
+        prior: config.prior,
+        loss: config.loss,
+        train: config.train,
+        data: config.data,
+        resolved_toml,
+    }
+}
+
+/// Trains one run into `out`.
+pub fn train_one(parts: TrainParts, out: &Path, resume: bool, progress: bool, device: &burn::tensor::Device) -> anyhow::Result<dgstereo_train::RunSummary> {
+    let name = parts.name.clone();
+    let options = RunOptions { out: out.to_path_buf(), resume, stop_after: None, progress };
+    let summary = dgstereo_train::train(parts, device, &options).with_context(|| format!("run '{name}'"))?;
+    if let Some(r) = summary.last {
+        println!("{name}: {} steps, loss {:.4}, train EPE {:.3} px, bad-3 {:.2} %", summary.steps, r.loss, r.epe, r.bad3);
+    }
+    if let Some(m) = summary.validation {
+        println!("{name}: validation EPE {:.3} px, bad-3 {:.2} %", m.epe, m.bad_3);
+    }
+    println!("{name}: outputs in {}", out.display());
+    Ok(summary)
+}
+
+pub fn run(a: TrainArgs) -> anyhow::Result<ExitCode> {
+    let runs = dgstereo_experiment::load(&a.experiment)?;
+    let device = a.device.device()?;
+    let several = runs.len() > 1;
+    for run in runs {
+        let out = if several { a.out.join(folder_name(&run.name)) } else { a.out.clone() };
+        train_one(parts_of(run.config, a.steps), &out, a.resume, !a.quiet, &device)?;
+    }
+    Ok(ExitCode::SUCCESS)
 }

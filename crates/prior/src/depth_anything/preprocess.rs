@@ -115,6 +115,10 @@ mod tests {
         assert_eq!(network_input_size(480, 640, 518), [518, 686]); // 690.67 -> 49.33 -> 49 · 14
         assert_eq!(network_input_size(375, 1242, 518), [518, 1722]); // 1715.6 / 14 = 122.54 -> 123
         assert_eq!(network_input_size(518, 518, 518), [518, 518]);
+        // Downscaling (SceneFlow 540x960): 960 · 518/540 = 920.9 -> 65.78 patches -> 66 · 14.
+        assert_eq!(network_input_size(540, 960, 518), [518, 924]);
+        // Portrait: the width is the shorter side. 450 · 518/375 = 621.6 -> 44.4 -> 44 · 14.
+        assert_eq!(network_input_size(450, 375, 518), [616, 518]);
         // Upscaling a tiny image: the short side to 518.
         assert_eq!(network_input_size(100, 50, 518), [1036, 518]);
         // Rounding down would go below the minimum, so the side rounds up: 520 / 14 = 37.14 -> 38.

@@ -1,4 +1,12 @@
 //! The `depth-anything-v2` prior provider.
+//!
+//! The official network on both views: the left and right images of a batch of `N` pairs are
+//! stacked into one batch of `2N` and go through [`DepthAnythingV2::infer`] (the official
+//! `infer_image`: resize so the shorter side is at least `input_size` with both sides multiples
+//! of 14, ImageNet normalisation, network, bilinear resize back). Grey images are repeated to
+//! three channels. The weights come from `prior.weights` (or `--prior-weights`); a missing
+//! checkpoint is an error naming that key, never a fallback to another provider. The output is
+//! detached: the prior is an input of the stereo model, not something it trains.
 
 use std::path::Path;
 
@@ -75,6 +83,9 @@ impl PriorProvider for DepthAnythingV2Prior {
                 input.left.dims(),
                 input.right.dims()
             )));
+        }
+        if h == 0 || w == 0 || n == 0 {
+            return Err(Error::Shape(format!("depth-anything-v2 prior: empty images {:?}", input.left.dims())));
         }
         let both = Tensor::cat(vec![as_rgb(input.left.clone())?, as_rgb(input.right.clone())?], 0).detach();
         let depth = self.model.infer(both, self.input_size).detach();

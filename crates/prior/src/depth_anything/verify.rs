@@ -15,6 +15,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use dgstereo_core::tensor::to_vec;
 use dgstereo_core::{Error, Result};
 
+use super::dinov2::PATCH_SIZE;
 use super::{DepthAnythingV2, DepthAnythingV2Encoder};
 use crate::safetensors_io::{FloatArray, read_float_tensors};
 
@@ -81,13 +82,20 @@ impl fmt::Display for VerificationReport {
     }
 }
 
-fn compare(key: &str, reference: &FloatArray, ours: Vec<f32>, path: &Path) -> Result<TensorComparison> {
-    if ours.len() != reference.values.len() {
+/// A shape without its axes of length 1 (the reference and the model differ only in those).
+fn squeezed(shape: &[usize]) -> Vec<usize> {
+    shape.iter().copied().filter(|&d| d != 1).collect()
+}
+
+fn compare(key: &str, reference: &FloatArray, ours: Tensor<4>, path: &Path) -> Result<TensorComparison> {
+    let our_shape = ours.dims();
+    if squeezed(&our_shape) != squeezed(&reference.shape) {
         return Err(Error::format(
             path,
-            format!("'{key}' has shape {:?} but the model gives {} values", reference.shape, ours.len()),
+            format!("'{key}' has shape {:?} but the model gives {our_shape:?}", reference.shape),
         ));
     }
+    let ours = to_vec(ours);
     let max_abs_error = ours
         .iter()
         .zip(&reference.values)
@@ -112,8 +120,11 @@ fn compare(key: &str, reference: &FloatArray, ours: Vec<f32>, path: &Path) -> Re
 /// When a file cannot be read, the checkpoint does not fit (the key is named), or the reference
 /// holds a key the model does not produce or of another size.
 pub fn verify_depth_anything_v2(weights: &Path, reference: &Path, device: &Device) -> Result<VerificationReport> {
-    let model = DepthAnythingV2::load_detect_encoder(weights, device)?;
+    // The reference is checked first: it is cheap to read, the checkpoint is not.
     let tensors = read_float_tensors(reference)?;
+    if !tensors.contains_key(DEPTH_KEY) {
+        return Err(Error::format(reference, format!("missing key '{DEPTH_KEY}'")));
+    }
     let input = tensors.get(INPUT_KEY).ok_or_else(|| Error::format(reference, format!("missing key '{INPUT_KEY}'")))?;
     let &[n, c, h, w] = input.shape.as_slice() else {
         return Err(Error::format(
@@ -121,6 +132,16 @@ pub fn verify_depth_anything_v2(weights: &Path, reference: &Path, device: &Devic
             format!("'{INPUT_KEY}' has shape {:?}, expected [N, 3, H, W]", input.shape),
         ));
     };
+    if c != 3 || h % PATCH_SIZE != 0 || w % PATCH_SIZE != 0 || h == 0 || w == 0 {
+        return Err(Error::format(
+            reference,
+            format!(
+                "'{INPUT_KEY}' has shape {:?}, expected [N, 3, H, W] with H, W multiples of {PATCH_SIZE}",
+                input.shape
+            ),
+        ));
+    }
+    let model = DepthAnythingV2::load_detect_encoder(weights, device)?;
     let x = Tensor::<4>::from_data(TensorData::new(input.values.clone(), [n, c, h, w]), device);
     let output = model.forward_with_layers(x);
 
@@ -131,15 +152,12 @@ pub fn verify_depth_anything_v2(weights: &Path, reference: &Path, device: &Devic
     }
     ours.insert(DEPTH_KEY.to_string(), output.depth);
 
-    if !tensors.contains_key(DEPTH_KEY) {
-        return Err(Error::format(reference, format!("missing key '{DEPTH_KEY}'")));
-    }
     let mut comparisons = Vec::new();
     for (key, reference_tensor) in tensors.iter().filter(|(k, _)| k.as_str() != INPUT_KEY) {
         let mine = ours
             .remove(key)
             .ok_or_else(|| Error::format(reference, format!("key '{key}' is not an output of the model")))?;
-        comparisons.push(compare(key, reference_tensor, to_vec(mine), reference)?);
+        comparisons.push(compare(key, reference_tensor, mine, reference)?);
     }
     let depth_max_abs_error =
         comparisons.iter().find(|c| c.key == DEPTH_KEY).map(|c| c.max_abs_error).unwrap_or(f32::INFINITY);

@@ -1,0 +1,222 @@
+//! `dgstereo bench`: timing of whole inference, and optionally of each stage.
+//!
+//! Design decision: the whole-inference figure goes through [`StereoModel::predict`], the same
+//! call `infer` makes (padding, network, cropping), on synthetic images of the requested size,
+//! so it measures what a user waits for; the weights are freshly initialised because the cost
+//! of the network does not depend on their values. The achieved GFLOP/s divides the operation
+//! count of the model ([`dgstereo_model::flops::StageMacs`], convolutions and matrix products)
+//! by the median time, and `--stages` adds a per-stage table
+//! ([`dgstereo_model::profile::profile_forward`]) with each stage's share of the machine's peak.
+
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use burn::tensor::{Distribution, Tensor};
+use clap::Args;
+use dgstereo_core::{DepthPrior, DeviceChoice, InputPadder};
+use dgstereo_costvolume::CorrelationImplementation;
+use dgstereo_model::flops::StageMacs;
+use dgstereo_model::profile::profile_forward;
+use dgstereo_model::{ModelConfig, StereoModel};
+
+/// Options of `dgstereo bench`.
+#[derive(Args)]
+pub struct BenchArgs {
+    /// Image size `HxW` (padded to a multiple of 32 inside, as `infer` does).
+    #[arg(long, default_value = "384x448")]
+    pub size: String,
+    /// Update iterations.
+    #[arg(long, default_value_t = 32)]
+    pub iters: usize,
+    /// Device: `cpu` or `gpu`.
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+    /// Timed runs after the warm-up.
+    #[arg(long, default_value_t = 3)]
+    pub runs: usize,
+    /// Untimed warm-up runs.
+    #[arg(long, default_value_t = 1)]
+    pub warmup: usize,
+    /// Cost volume: `reg` (materialised) or `alt` (on the fly).
+    #[arg(long, default_value = "reg")]
+    pub corr: String,
+    /// Model configuration (a TOML file of `ModelConfig`; default RAFT-Stereo's).
+    #[arg(long)]
+    pub config: Option<std::path::PathBuf>,
+    /// Also time each stage of one forward pass.
+    #[arg(long)]
+    pub stages: bool,
+    /// The machine's peak GFLOP/s, for the share-of-peak column (2 cores here: ~200).
+    #[arg(long, default_value_t = 200.0)]
+    pub peak_gflops: f64,
+}
+
+/// Parses `HxW`.
+pub fn parse_size(s: &str) -> anyhow::Result<[usize; 2]> {
+    let (h, w) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("--size '{s}': expected HxW, e.g. 375x1242"))?;
+    let parse = |v: &str, what: &str| {
+        v.trim().parse::<usize>().ok().filter(|&n| n >= 1).with_context(|| format!("--size '{s}': {what} '{v}' is not a positive integer"))
+    };
+    Ok([parse(h, "height")?, parse(w, "width")?])
+}
+
+/// Peak resident memory of this process in bytes (`VmHWM`), when the OS reports it.
+pub fn peak_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// CPU seconds (user + system, all threads) this process has used, from `/proc/self/stat`
+/// (clock ticks of 1/100 s, Linux's `USER_HZ`). On a loaded machine this moves far less than the
+/// wall clock, so it is what to compare between two builds when other jobs share the cores.
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 { v[m] } else { 0.5 * (v[m - 1] + v[m]) }
+}
+
+pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
+    let [h, w] = parse_size(&a.size)?;
+    if a.iters == 0 {
+        bail!("--iters must be at least 1");
+    }
+    if a.runs == 0 {
+        bail!("--runs must be at least 1");
+    }
+    let implementation = match a.corr.as_str() {
+        "reg" => CorrelationImplementation::Reg,
+        "alt" => CorrelationImplementation::Alt,
+        other => bail!("--corr '{other}': expected reg or alt"),
+    };
+    let device = a.device.parse::<DeviceChoice>()?.device()?;
+    let config = match &a.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+            toml::from_str::<ModelConfig>(&text).with_context(|| format!("{}: not a model configuration", p.display()))?
+        }
+        None => ModelConfig::default(),
+    };
+    let network = config.init(&device)?;
+    let model = StereoModel::new(network, config.clone(), device.clone());
+    let image = || Tensor::<4>::random([1, 3, h, w], Distribution::Uniform(0.0, 255.0), &device);
+    let (left, right) = (image(), image());
+    let prior = config.needs_prior().then(|| DepthPrior {
+        left: Tensor::random([1, 1, h, w], Distribution::Uniform(0.1, 1.0), &device),
+        right: Tensor::random([1, 1, h, w], Distribution::Uniform(0.1, 1.0), &device),
+    });
+    let padder = InputPadder::new(h, w, 32usize.max(1 << (config.updater.n_downsample + 3)));
+    let padded = padder.padded();
+    let macs = StageMacs::new(&config, padded).forward(a.iters, 1);
+
+    let predict = || -> anyhow::Result<(f64, f64)> {
+        let cpu = process_cpu_seconds();
+        let start = Instant::now();
+        let out = model.predict(left.clone(), right.clone(), prior.as_ref(), a.iters, false, Some(implementation))?;
+        let _ = out.last().into_data(); // waits for asynchronous backends
+        let wall = start.elapsed().as_secs_f64();
+        Ok((wall, process_cpu_seconds().zip(cpu).map_or(f64::NAN, |(b, a)| b - a)))
+    };
+    for _ in 0..a.warmup {
+        predict()?;
+    }
+    let runs = (0..a.runs).map(|_| predict()).collect::<anyhow::Result<Vec<(f64, f64)>>>()?;
+    let mut times: Vec<f64> = runs.iter().map(|r| r.0).collect();
+    let mut cpu: Vec<f64> = runs.iter().map(|r| r.1).collect();
+    let min = times.iter().copied().fold(f64::INFINITY, f64::min);
+    let med = median(&mut times);
+    let gflops = 2.0 * macs as f64 / med / 1e9;
+    println!(
+        "size {h}x{w} (padded {}x{}), {} iterations, {} cost volume, device {}, {} threads",
+        padded[0],
+        padded[1],
+        a.iters,
+        a.corr,
+        a.device,
+        std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+    );
+    println!("runs {} after {} warm-up: median {med:.3} s, min {min:.3} s", a.runs, a.warmup);
+    println!("CPU time per run (all threads): median {:.2} s", median(&mut cpu));
+    println!("throughput {:.3} megapixels/s", (h * w) as f64 / 1e6 / med);
+    println!(
+        "work {:.1} GFLOP: {gflops:.1} GFLOP/s achieved ({:.0} % of a {:.0} GFLOP/s peak)",
+        2.0 * macs as f64 / 1e9,
+        100.0 * gflops / a.peak_gflops,
+        a.peak_gflops
+    );
+
+    if a.stages {
+        let (pl, pr) = (padder.pad(left.clone()), padder.pad(right.clone()));
+        let pp = prior.as_ref().map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
+        let mut net_config = config.clone();
+        net_config.correlation.implementation = implementation;
+        let mut network = model.network.clone();
+        network.correlation.implementation = implementation;
+        let profile = profile_forward(&network, &net_config, pl, pr, pp.as_ref(), a.iters)?;
+        let total = profile.total_seconds();
+        println!();
+        println!("| stage | calls | time (s) | share of time | GFLOP/s | share of peak |");
+        println!("|---|---:|---:|---:|---:|---:|");
+        for s in &profile.stages {
+            let (gf, peak) = match s.gflops() {
+                Some(g) => (format!("{g:.1}"), format!("{:.0} %", 100.0 * g / a.peak_gflops)),
+                None => ("-".into(), "-".into()),
+            };
+            println!("| {} | {} | {:.3} | {:.1} % | {gf} | {peak} |", s.name, s.calls, s.seconds, 100.0 * s.seconds / total);
+        }
+        println!("| total | | {total:.3} | 100 % | | |");
+    }
+    match peak_memory_bytes() {
+        Some(b) => println!("peak memory (VmHWM, whole process) {:.0} MiB", b as f64 / (1024.0 * 1024.0)),
+        None => println!("peak memory: not reported by this OS"),
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_parse_and_bad_ones_are_named() {
+        assert_eq!(parse_size("375x1242").unwrap(), [375, 1242]);
+        assert_eq!(parse_size("32X64").unwrap(), [32, 64]);
+        for bad in ["375", "0x10", "ax10", "10x"] {
+            let e = parse_size(bad).unwrap_err().to_string();
+            assert!(e.contains(bad), "{e}");
+        }
+    }
+
+    #[test]
+    fn median_of_even_and_odd_counts() {
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), 2.5);
+    }
+
+    #[test]
+    fn peak_memory_and_cpu_time_are_read_on_linux() {
+        if cfg!(target_os = "linux") {
+            assert!(peak_memory_bytes().unwrap() > 0);
+            let before = process_cpu_seconds().unwrap();
+            let mut x = 0u64;
+            for i in 0..50_000_000u64 {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(i);
+            }
+            std::hint::black_box(x);
+            assert!(process_cpu_seconds().unwrap() >= before);
+        }
+    }
+}

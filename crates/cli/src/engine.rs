@@ -1,0 +1,328 @@
+//! Running a model on one stereo pair as a user asks: the options shared by `infer` and `eval`
+//! ([`ModelArgs`]) and the [`Engine`] they build.
+//!
+//! The engine owns the network, the prior provider and the per-pair policy:
+//! - `--max-size N` downscales both views so the longer side is at most `N` pixels, and the
+//!   disparity is resized back to the input size and multiplied by the inverse scale;
+//! - the cost volume is the materialised pyramid ("reg", fast) unless its estimated size
+//!   ([`CorrelationConfig::pyramid_bytes`] at the padded feature resolution) exceeds
+//!   `--memory-budget`, then the on-the-fly volume ("alt", memory linear in the width) is used;
+//!   `--corr reg|alt` forces one.
+//!
+//! Design decision: every whole-run problem (weights that do not load or do not match the
+//! experiment, a prior that cannot be built, a device that does not exist) is found here, once,
+//! before any pair is read, so `infer` can fail fast on those and keep going on per-pair ones.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use burn::tensor::Device;
+use clap::{Args, ValueEnum};
+use dgstereo_core::DeviceChoice;
+use dgstereo_costvolume::CorrelationImplementation;
+use dgstereo_data::resize::{resize_plane_linear, resize_rgb};
+use dgstereo_data::{DisparityMap, RgbImage};
+use dgstereo_model::{ModelConfig, StereoModel};
+use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
+
+use crate::convert::{disparity_map, image_tensor};
+use crate::models::{default_weights, load_model};
+
+/// Which cost volume to build.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum CorrChoice {
+    /// "reg" unless it would exceed `--memory-budget`, then "alt".
+    Auto,
+    /// Always the materialised pyramid.
+    Reg,
+    /// Always on-the-fly correlation.
+    Alt,
+}
+
+/// Model options shared by `infer` and `eval`.
+#[derive(Args, Clone, Debug)]
+pub struct ModelArgs {
+    /// Weights: a dgstereo `.safetensors` or an official RAFT-Stereo `.pth` (default: the
+    /// project's default model).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Experiment file whose model (and prior) configuration the weights were trained with.
+    #[arg(long)]
+    pub experiment: Option<PathBuf>,
+    /// The run of a sweep experiment to use (its name as `dgstereo experiment` lists it).
+    #[arg(long, requires = "experiment")]
+    pub run: Option<String>,
+    /// Update iterations.
+    #[arg(long, default_value_t = 32)]
+    pub iters: usize,
+    /// Depth prior: `none`, `file:DIR` (precomputed `{name}_left`/`{name}_right` maps) or
+    /// `depth-anything-v2:WEIGHTS` (default: the experiment's `[prior]`, else none).
+    #[arg(long)]
+    pub prior: Option<String>,
+    /// Device: `cpu` or `gpu` (the GPU needs a build with `--features gpu`).
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+    /// Downscale pairs whose longer side exceeds this many pixels (disparity is rescaled back).
+    #[arg(long)]
+    pub max_size: Option<usize>,
+    /// Memory allowed for the materialised cost volume, e.g. `4GiB`, `512MiB` (`--corr auto`).
+    #[arg(long, default_value = "4GiB")]
+    pub memory_budget: String,
+    /// Cost volume implementation.
+    #[arg(long, value_enum, default_value_t = CorrChoice::Auto)]
+    pub corr: CorrChoice,
+}
+
+/// An error and its causes on one line, without repeating a cause its parent already quotes
+/// (the library errors embed their I/O cause in their own message).
+pub fn error_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line.replace(['\n', '\r'], " ")
+}
+
+/// Parses a byte size: a number with an optional `B`, `KB`/`KiB`, `MB`/`MiB`, `GB`/`GiB`, `TB`/`TiB`.
+pub fn parse_bytes(s: &str) -> anyhow::Result<u64> {
+    let t = s.trim();
+    let split = t.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let value: f64 = num.parse().with_context(|| format!("--memory-budget '{s}': not a size like 4GiB"))?;
+    let mult: f64 = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1.0,
+        "k" | "kb" => 1e3,
+        "kib" => 1024.0,
+        "m" | "mb" => 1e6,
+        "mib" => 1024f64.powi(2),
+        "g" | "gb" => 1e9,
+        "gib" => 1024f64.powi(3),
+        "t" | "tb" => 1e12,
+        "tib" => 1024f64.powi(4),
+        other => bail!("--memory-budget '{s}': unknown unit '{other}' (use B, MiB, GiB, ...)"),
+    };
+    Ok((value * mult) as u64)
+}
+
+/// Parses `--prior`: `none`, `file:DIR`, `depth-anything-v2:WEIGHTS` (also `dav2:WEIGHTS`).
+pub fn parse_prior(spec: &str) -> anyhow::Result<PriorConfig> {
+    let (kind, arg) = spec.split_once(':').unwrap_or((spec, ""));
+    Ok(match (kind.to_ascii_lowercase().as_str(), arg) {
+        ("none", _) => PriorConfig::None,
+        ("file", dir) if !dir.is_empty() => PriorConfig::File {
+            dir: dir.into(),
+            left: dgstereo_prior::file::DEFAULT_LEFT_PATTERN.into(),
+            right: dgstereo_prior::file::DEFAULT_RIGHT_PATTERN.into(),
+        },
+        ("depth-anything-v2" | "dav2", w) if !w.is_empty() => {
+            PriorConfig::DepthAnythingV2 { weights: w.into(), encoder: None, input_size: 518 }
+        }
+        _ => bail!("--prior '{spec}': expected none, file:DIR or depth-anything-v2:WEIGHTS"),
+    })
+}
+
+/// The model and prior configurations of an experiment file's run: the only run, or the one
+/// named `run` when the file resolves to several (a sweep).
+fn experiment_configs(path: &Path, run: Option<&str>) -> anyhow::Result<(ModelConfig, PriorConfig)> {
+    let runs = dgstereo_experiment::load(path)?;
+    let names = || runs.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ");
+    let chosen = match (run, runs.len()) {
+        (Some(name), _) => runs
+            .iter()
+            .find(|r| r.name == name)
+            .with_context(|| format!("{}: no run named '{name}' (runs: {})", path.display(), names()))?,
+        (None, 1) => &runs[0],
+        (None, 0) => bail!("{}: the experiment defines no run", path.display()),
+        (None, _) => bail!("{}: the experiment has {} runs; pick one with --run NAME ({})", path.display(), runs.len(), names()),
+    };
+    Ok((chosen.config.model.clone(), chosen.config.prior.clone()))
+}
+
+/// The cost volume `choice` gives for a `width x height` input of a model of `config`: with
+/// [`CorrChoice::Auto`], "alt" when the materialised pyramid of the padded input's features
+/// would take more than `budget` bytes.
+pub fn corr_for(config: &ModelConfig, choice: CorrChoice, budget: u64, width: usize, height: usize) -> CorrelationImplementation {
+    match choice {
+        CorrChoice::Reg => CorrelationImplementation::Reg,
+        CorrChoice::Alt => CorrelationImplementation::Alt,
+        CorrChoice::Auto => {
+            let pad = |v: usize| v.div_ceil(32) * 32;
+            let f = config.factor();
+            let bytes = config.correlation.pyramid_bytes(1, pad(height) / f, pad(width) / f);
+            if bytes as u64 > budget { CorrelationImplementation::Alt } else { CorrelationImplementation::Reg }
+        }
+    }
+}
+
+/// What happened on one pair.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunInfo {
+    /// Size the network saw (after `--max-size`).
+    pub network_size: (usize, usize),
+    /// Cost volume used.
+    pub corr: CorrelationImplementation,
+}
+
+/// A loaded model with its prior and per-pair policy.
+pub struct Engine {
+    model: StereoModel,
+    prior: Option<Prior>,
+    iters: usize,
+    max_size: Option<usize>,
+    budget: u64,
+    corr: CorrChoice,
+    /// The weights file.
+    pub weights: PathBuf,
+    /// The device.
+    pub device: Device,
+}
+
+impl Engine {
+    /// Loads the weights (into the experiment's model when given) and builds the prior.
+    pub fn new(a: &ModelArgs) -> anyhow::Result<Self> {
+        if a.iters == 0 {
+            bail!("--iters must be at least 1");
+        }
+        if a.max_size == Some(0) || a.max_size.is_some_and(|m| m < 32) {
+            bail!("--max-size must be at least 32 pixels");
+        }
+        let budget = parse_bytes(&a.memory_budget)?;
+        let choice: DeviceChoice = a.device.parse()?;
+        let device = choice.device()?;
+        let (config, experiment_prior) = match &a.experiment {
+            Some(p) => {
+                let (m, pr) = experiment_configs(p, a.run.as_deref())?;
+                (Some(m), pr)
+            }
+            None => (None, PriorConfig::None),
+        };
+        let prior_config = match &a.prior {
+            Some(spec) => parse_prior(spec)?,
+            None => experiment_prior,
+        };
+        let weights = match &a.weights {
+            Some(w) => w.clone(),
+            None => default_weights()?,
+        };
+        let model = load_model(&weights, config, &device).with_context(|| match &a.experiment {
+            Some(e) => format!("weights {} do not fit the model of {}", weights.display(), e.display()),
+            None => format!("cannot load weights {}", weights.display()),
+        })?;
+        let prior = if prior_config.gives_prior() {
+            if prior_config.uses_ground_truth() {
+                bail!("--prior: a simulated prior needs ground truth and cannot be used for inference");
+            }
+            if !model.config.needs_prior() {
+                eprintln!("note: this model uses no depth prior; --prior is ignored");
+                None
+            } else {
+                Some(prior_config.init(&device).context("--prior")?)
+            }
+        } else {
+            None
+        };
+        if model.config.needs_prior() && prior.is_none() {
+            bail!("this model uses a depth prior (fusion or guidance): pass --prior (e.g. depth-anything-v2:WEIGHTS or file:DIR)");
+        }
+        Ok(Self { model, prior, iters: a.iters, max_size: a.max_size, budget, corr: a.corr, weights, device })
+    }
+
+    /// The cost volume for a network input of `width x height` (before padding).
+    pub fn choose_corr(&self, width: usize, height: usize) -> CorrelationImplementation {
+        corr_for(&self.model.config, self.corr, self.budget, width, height)
+    }
+
+    /// The disparity of a rectified pair at the left image's size.
+    pub fn disparity(&self, left: &RgbImage, right: &RgbImage, name: &str) -> anyhow::Result<(DisparityMap, RunInfo)> {
+        if (left.width, left.height) != (right.width, right.height) {
+            bail!(
+                "left image is {}x{} but right image is {}x{}: a rectified pair has one size",
+                left.width,
+                left.height,
+                right.width,
+                right.height
+            );
+        }
+        let (w, h) = (left.width, left.height);
+        let scale = match self.max_size {
+            Some(m) if w.max(h) > m => m as f64 / w.max(h) as f64,
+            _ => 1.0,
+        };
+        let (l, r) = if scale < 1.0 {
+            (resize_rgb(left, scale, scale), resize_rgb(right, scale, scale))
+        } else {
+            (left.clone(), right.clone())
+        };
+        let corr = self.choose_corr(l.width, l.height);
+        let (lt, rt) = (image_tensor(&l, &self.device), image_tensor(&r, &self.device));
+        let prior = match &self.prior {
+            Some(p) => p.provide(&PriorInput {
+                left: lt.clone(),
+                right: rt.clone(),
+                gt_disparity: None,
+                names: vec![name.to_string()],
+            })?,
+            None => None,
+        };
+        let pred = self.model.predict(lt, rt, prior.as_ref(), self.iters, false, Some(corr))?;
+        let small = disparity_map(pred.last());
+        let info = RunInfo { network_size: (l.width, l.height), corr };
+        if scale >= 1.0 {
+            return Ok((small, info));
+        }
+        let (fx, fy) = (w as f64 / small.width as f64, h as f64 / small.height as f64);
+        let (data, ow, oh) = resize_plane_linear(&small.data, small.width, small.height, fx, fy);
+        if (ow, oh) != (w, h) {
+            bail!("internal: disparity resized to {ow}x{oh} instead of {w}x{h}");
+        }
+        let sx = fx as f32;
+        Ok((DisparityMap { width: w, height: h, data: data.into_iter().map(|d| d * sx).collect() }, info))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn byte_sizes_parse_with_units() {
+        assert_eq!(parse_bytes("4GiB").unwrap(), 4 << 30);
+        assert_eq!(parse_bytes("512 MiB").unwrap(), 512 << 20);
+        assert_eq!(parse_bytes("1.5kb").unwrap(), 1500);
+        assert!(parse_bytes("lots").is_err() && parse_bytes("3 parsecs").is_err());
+    }
+
+    #[test]
+    fn error_lines_do_not_repeat_causes() {
+        let io = std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "unexpected end of file");
+        let e = anyhow::Error::from(dgstereo_core::Error::io("a.png", io)).context("pair a");
+        assert_eq!(error_line(&e), "pair a: a.png: unexpected end of file");
+    }
+
+    #[test]
+    fn large_inputs_switch_to_the_on_the_fly_volume() {
+        let config = ModelConfig::default();
+        // 1024 x 768 at 1/4: 256 x 192 features; rows of 256 + 128 + 64 + 32 + 16 floats each.
+        let bytes = 4 * 192 * 256 * (256 + 128 + 64 + 32 + 16);
+        assert_eq!(config.correlation.pyramid_bytes(1, 192, 256), bytes);
+        let pick = |budget| corr_for(&config, CorrChoice::Auto, budget, 1000, 750);
+        assert_eq!(pick(bytes as u64), CorrelationImplementation::Reg);
+        assert_eq!(pick(bytes as u64 - 1), CorrelationImplementation::Alt);
+        assert_eq!(corr_for(&config, CorrChoice::Reg, 0, 1000, 750), CorrelationImplementation::Reg);
+    }
+
+    #[test]
+    fn prior_specs_parse() {
+        assert_eq!(parse_prior("none").unwrap(), PriorConfig::None);
+        assert!(matches!(parse_prior("file:/tmp/p").unwrap(), PriorConfig::File { .. }));
+        assert!(matches!(parse_prior("dav2:w.pth").unwrap(), PriorConfig::DepthAnythingV2 { .. }));
+        assert!(parse_prior("file:").is_err() && parse_prior("magic").is_err());
+    }
+}

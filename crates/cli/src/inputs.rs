@@ -1,0 +1,335 @@
+//! Finding the stereo pairs of `dgstereo infer` and naming their outputs.
+//!
+//! Pairs come from `-l/-r` files or glob patterns (each side sorted, then zipped, as the
+//! reference demo does), from a folder (`--pairs DIR`: `*left*`/`*right*` or `im0`/`im1` names,
+//! searched recursively) or from a list file (`--list FILE`: one `LEFT RIGHT` pair per line).
+//! Problems that concern one pair (a left image without its right image) become a
+//! [`PairProblem`] so the other pairs still run; problems that concern the whole request (a
+//! pattern matching nothing, an unreadable list) are errors.
+//!
+//! Design decision: an output name is the *unique part* of the left image's path. Paths are taken
+//! relative to the deepest folder common to all left images, the extension and the words that only
+//! say "left" (`left`, `im0`) are dropped, and what remains must differ between pairs; colliding
+//! names get a `-2`, `-3`, ... suffix, so two pairs never write the same file.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+
+/// One stereo pair to process.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PairPaths {
+    /// Left image.
+    pub left: PathBuf,
+    /// Right image.
+    pub right: PathBuf,
+    /// Output name (unique among the pairs of one run).
+    pub name: String,
+}
+
+/// A pair that cannot be formed (reported and counted as a failure).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PairProblem {
+    /// The file concerned.
+    pub path: PathBuf,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// The pairs found, and the ones that could not be formed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PairList {
+    /// Complete pairs, named.
+    pub pairs: Vec<PairPaths>,
+    /// Incomplete pairs.
+    pub problems: Vec<PairProblem>,
+}
+
+const IMAGE_EXTENSIONS: [&str; 8] = ["png", "jpg", "jpeg", "bmp", "tif", "tiff", "ppm", "pgm"];
+
+fn is_image(p: &Path) -> bool {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+}
+
+fn has_glob_chars(s: &str) -> bool {
+    s.contains(['*', '?', '['])
+}
+
+/// Expands files and glob patterns, each pattern's matches sorted. A plain path is kept as given
+/// (a missing file is then reported when it is read, naming it).
+pub fn expand_patterns(patterns: &[String]) -> anyhow::Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for pattern in patterns {
+        if !has_glob_chars(pattern) {
+            out.push(PathBuf::from(pattern));
+            continue;
+        }
+        let paths = glob::glob(pattern).with_context(|| format!("'{pattern}' is not a valid glob pattern"))?;
+        let mut matched: Vec<PathBuf> = paths.filter_map(Result::ok).filter(|p| p.is_file()).collect();
+        if matched.is_empty() {
+            bail!("'{pattern}' matches no file");
+        }
+        matched.sort();
+        out.extend(matched);
+    }
+    Ok(out)
+}
+
+/// A key telling which side a path belongs to: the path with the side's words neutralised.
+fn side_key(p: &Path, words: &[&str]) -> String {
+    let stem = p.file_stem().map(|s| s.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let parent = p.parent().map(|d| d.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let mut key = format!("{parent}/{stem}");
+    for w in words {
+        key = key.replace(w, "#");
+    }
+    key
+}
+
+/// Pairs `-l` with `-r` inputs: zipped in order when both sides have as many files, otherwise
+/// matched by name (`left`↔`right`, `im0`↔`im1`, `image_2`↔`image_3`), unmatched files being
+/// problems.
+pub fn from_left_right(left: &[String], right: &[String]) -> anyhow::Result<PairList> {
+    if left.is_empty() || right.is_empty() {
+        bail!("give both -l/--left and -r/--right images (files or glob patterns), or --pairs DIR, or --list FILE");
+    }
+    let lefts = expand_patterns(left)?;
+    let rights = expand_patterns(right)?;
+    if lefts.len() == rights.len() {
+        return Ok(named(lefts.into_iter().zip(rights).collect(), Vec::new()));
+    }
+    let left_words = ["left", "im0", "image_2", "colored_0"];
+    let right_words = ["right", "im1", "image_3", "colored_1"];
+    let mut by_key: HashMap<String, PathBuf> = rights.iter().map(|r| (side_key(r, &right_words), r.clone())).collect();
+    let mut pairs = Vec::new();
+    let mut problems = Vec::new();
+    for l in lefts {
+        match by_key.remove(&side_key(&l, &left_words)) {
+            Some(r) => pairs.push((l, r)),
+            None => problems.push(PairProblem { path: l, message: "missing right image: no -r file matches it".into() }),
+        }
+    }
+    let mut unmatched: Vec<PathBuf> = by_key.into_values().collect();
+    unmatched.sort();
+    problems.extend(
+        unmatched.into_iter().map(|r| PairProblem { path: r, message: "missing left image: no -l file matches it".into() }),
+    );
+    Ok(named(pairs, problems))
+}
+
+fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
+    let entries = std::fs::read_dir(dir).with_context(|| format!("{}: cannot list the folder", dir.display()))?;
+    let mut paths: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
+    paths.sort();
+    for p in paths {
+        if p.is_dir() {
+            walk(&p, out)?;
+        } else {
+            out.push(p);
+        }
+    }
+    Ok(())
+}
+
+/// The right image's stem for a left image's stem, if the stem names a left image.
+fn right_stem(stem: &str) -> Option<String> {
+    let lower = stem.to_ascii_lowercase();
+    if lower == "im0" {
+        return Some(stem[..stem.len() - 1].to_string() + "1");
+    }
+    let at = lower.find("left")?;
+    let right = if stem[at..].starts_with("Left") {
+        "Right"
+    } else if stem[at..].starts_with("LEFT") {
+        "RIGHT"
+    } else {
+        "right"
+    };
+    Some(format!("{}{right}{}", &stem[..at], &stem[at + 4..]))
+}
+
+/// The pairs of a folder (recursive): `<x>left<y>.<ext>` with `<x>right<y>.<ext>` (any image
+/// extension) and `im0.<ext>` with `im1.<ext>`. Names holding `disp`, `occ`, `mask`, `depth` are
+/// not images of pairs. A left image without its right image is a problem.
+pub fn from_folder(dir: &Path) -> anyhow::Result<PairList> {
+    if !dir.is_dir() {
+        bail!("{}: --pairs needs a folder", dir.display());
+    }
+    let mut files = Vec::new();
+    walk(dir, &mut files)?;
+    let images: Vec<&PathBuf> = files.iter().filter(|p| is_image(p)).collect();
+    let mut pairs = Vec::new();
+    let mut problems = Vec::new();
+    for left in &images {
+        let stem = left.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let lower = stem.to_ascii_lowercase();
+        if ["disp", "occ", "mask", "depth"].iter().any(|w| lower.contains(w)) {
+            continue;
+        }
+        let Some(want) = right_stem(&stem) else { continue };
+        let right = images.iter().find(|q| {
+            q.parent() == left.parent() && q.file_stem().is_some_and(|s| s.to_string_lossy() == want.as_str())
+        });
+        match right {
+            Some(r) => pairs.push(((*left).clone(), (*r).clone())),
+            None => problems.push(PairProblem {
+                path: (*left).clone(),
+                message: format!("missing right image (expected {want}.* beside it)"),
+            }),
+        }
+    }
+    if pairs.is_empty() && problems.is_empty() {
+        bail!("{}: no stereo pairs found (expected *left*/*right* or im0/im1 image names)", dir.display());
+    }
+    Ok(named(pairs, problems))
+}
+
+/// The pairs of a list file: one `LEFT RIGHT` pair per line (whitespace or a comma between),
+/// paths relative to the list's folder, `#` starting a comment. A line with one path is a problem.
+pub fn from_list(list: &Path) -> anyhow::Result<PairList> {
+    let text = std::fs::read_to_string(list).with_context(|| format!("{}: cannot read the pair list", list.display()))?;
+    let base = list.parent().unwrap_or(Path::new(""));
+    let mut pairs = Vec::new();
+    let mut problems = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = line.split([',', ' ', '\t']).filter(|f| !f.is_empty()).collect();
+        match fields.as_slice() {
+            [l, r] => pairs.push((base.join(l), base.join(r))),
+            [l] => problems.push(PairProblem {
+                path: base.join(l),
+                message: format!("missing right image ({} line {})", list.display(), i + 1),
+            }),
+            _ => bail!("{} line {}: expected 'LEFT RIGHT', found {} fields", list.display(), i + 1, fields.len()),
+        }
+    }
+    if pairs.is_empty() && problems.is_empty() {
+        bail!("{}: the pair list is empty", list.display());
+    }
+    Ok(named(pairs, problems))
+}
+
+fn named(pairs: Vec<(PathBuf, PathBuf)>, problems: Vec<PairProblem>) -> PairList {
+    let lefts: Vec<&Path> = pairs.iter().map(|(l, _)| l.as_path()).collect();
+    let names = unique_names(&lefts);
+    let pairs = pairs.into_iter().zip(names).map(|((left, right), name)| PairPaths { left, right, name }).collect();
+    PairList { pairs, problems }
+}
+
+/// The deepest folder containing every path.
+fn common_folder(paths: &[&Path]) -> PathBuf {
+    let mut common: Option<Vec<std::path::Component>> = None;
+    for p in paths {
+        let parent: Vec<_> = p.parent().map(|d| d.components().collect()).unwrap_or_default();
+        common = Some(match common {
+            None => parent,
+            Some(c) => c.into_iter().zip(parent).take_while(|(a, b)| a == b).map(|(a, _)| a).collect(),
+        });
+    }
+    common.unwrap_or_default().into_iter().collect()
+}
+
+/// Drops the words that only say "left" from a name; separators left dangling are removed.
+fn without_side_words(name: &str) -> String {
+    let seps = ['_', '-', '.', ' '];
+    let mut parts: Vec<String> = Vec::new();
+    for component in name.split('/') {
+        let tokens: Vec<&str> = component
+            .split(seps)
+            .filter(|t| !t.is_empty() && !["left", "im0", "l"].contains(&t.to_ascii_lowercase().as_str()))
+            .collect();
+        let joined = tokens.join("_");
+        if !joined.is_empty() {
+            parts.push(joined);
+        }
+    }
+    parts.join("_")
+}
+
+/// Output names of left images: their unique part (see the module doc), sanitised to
+/// `[A-Za-z0-9_.-]`, never empty, never two alike (case-insensitively).
+pub fn unique_names(lefts: &[&Path]) -> Vec<String> {
+    let root = common_folder(lefts);
+    let mut used: HashMap<String, usize> = HashMap::new();
+    lefts
+        .iter()
+        .map(|p| {
+            let rel = p.strip_prefix(&root).unwrap_or(p).with_extension("");
+            let rel = rel.to_string_lossy().replace('\\', "/");
+            let mut name = without_side_words(&rel);
+            if name.is_empty() {
+                // `im0.png` alone: the folder names the scene, as in the reference demo.
+                name = p
+                    .parent()
+                    .and_then(|d| d.file_name())
+                    .map(|d| without_side_words(&d.to_string_lossy()))
+                    .filter(|n| !n.is_empty())
+                    .unwrap_or_else(|| "pair".into());
+            }
+            let name: String =
+                name.chars().map(|c| if c.is_ascii_alphanumeric() || "_.-".contains(c) { c } else { '_' }).collect();
+            let count = used.entry(name.to_ascii_lowercase()).or_insert(0);
+            *count += 1;
+            if *count == 1 { name } else { format!("{name}-{count}") }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(paths: &[&str]) -> Vec<String> {
+        let p: Vec<&Path> = paths.iter().map(Path::new).collect();
+        unique_names(&p)
+    }
+
+    #[test]
+    fn names_are_the_unique_part_of_the_path() {
+        assert_eq!(names(&["d/desk_left.png", "d/stairs_left.png"]), ["desk", "stairs"]);
+        assert_eq!(names(&["m/Art/im0.png", "m/Bowling/im0.png"]), ["Art", "Bowling"]);
+        assert_eq!(names(&["a/cones/left_rgb.png"]), ["rgb"]);
+        assert_eq!(names(&["scene/im0.png"]), ["scene"]);
+        assert_eq!(names(&["x/a/left.png", "x/b/left.png"]), ["a", "b"]);
+    }
+
+    #[test]
+    fn colliding_names_get_a_suffix() {
+        let n = names(&["d/a_left.png", "d/a_left.jpg", "d/A-left.png"]);
+        assert_eq!(n.len(), 3);
+        let mut lower: Vec<String> = n.iter().map(|s| s.to_ascii_lowercase()).collect();
+        lower.sort();
+        lower.dedup();
+        assert_eq!(lower.len(), 3, "{n:?}");
+    }
+
+    #[test]
+    fn right_stems_follow_left_stems() {
+        assert_eq!(right_stem("desk_left").as_deref(), Some("desk_right"));
+        assert_eq!(right_stem("Left_0001").as_deref(), Some("Right_0001"));
+        assert_eq!(right_stem("im0").as_deref(), Some("im1"));
+        assert_eq!(right_stem("image"), None);
+    }
+
+    #[test]
+    fn unequal_sides_are_matched_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        for f in ["a_left.png", "a_right.png", "b_left.png"] {
+            std::fs::write(dir.path().join(f), b"").unwrap();
+        }
+        let d = dir.path().display();
+        let list = from_left_right(&[format!("{d}/*_left.png")], &[format!("{d}/*_right.png")]).unwrap();
+        assert_eq!(list.pairs.len(), 1);
+        assert_eq!(list.pairs[0].name, "a");
+        assert_eq!(list.problems.len(), 1);
+        assert!(list.problems[0].path.ends_with("b_left.png"));
+        let folder = from_folder(dir.path()).unwrap();
+        assert_eq!((folder.pairs.len(), folder.problems.len()), (1, 1));
+    }
+}

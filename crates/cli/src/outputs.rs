@@ -1,0 +1,120 @@
+//! The files `dgstereo infer --save KINDS` writes for one pair named `NAME` in the output folder.
+//!
+//! | kind | file | content |
+//! |---|---|---|
+//! | `pfm` | `NAME_disparity.pfm` | float32 disparity (px) of the left view |
+//! | `npy` | `NAME_disparity.npy` | the same as a `(H, W)` float32 NumPy array |
+//! | `png16` | `NAME_disparity_png16.png` | KITTI-style 16-bit PNG, disparity × 256, 0 = invalid |
+//! | `color` | `NAME_disparity_color.png` | turbo colour map with a legend of its range (px) |
+//! | `depth` | `NAME_depth.pfm` | float32 depth in metres, `inf` where unknown (needs calibration) |
+//! | `ply` | `NAME_points.ply` | coloured point cloud, see [`crate::pointcloud`] (needs calibration) |
+//!
+//! Design decision: the kind decides the suffix, the pair decides `NAME` (see [`crate::inputs`]),
+//! so two kinds or two pairs never write the same file.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::ValueEnum;
+use dgstereo_data::{DisparityMap, RgbImage, save_rgb, write_disparity};
+
+use crate::calib::Calibration;
+use crate::pointcloud::{PlyEncoding, depth_map, point_cloud, write_ply};
+use crate::visualize::{colorize, display_range};
+
+/// One kind of output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SaveKind {
+    /// Float disparity as PFM.
+    Pfm,
+    /// Float disparity as `.npy`.
+    Npy,
+    /// KITTI 16-bit PNG disparity (× 256).
+    Png16,
+    /// Turbo colour picture with a legend.
+    Color,
+    /// Depth in metres as PFM (needs calibration).
+    Depth,
+    /// Coloured point cloud as PLY (needs calibration).
+    Ply,
+}
+
+impl SaveKind {
+    /// Whether the kind needs a calibration.
+    pub fn needs_calibration(self) -> bool {
+        matches!(self, SaveKind::Depth | SaveKind::Ply)
+    }
+
+    /// The file this kind writes for the pair `name`.
+    pub fn file_name(self, name: &str) -> String {
+        match self {
+            SaveKind::Pfm => format!("{name}_disparity.pfm"),
+            SaveKind::Npy => format!("{name}_disparity.npy"),
+            SaveKind::Png16 => format!("{name}_disparity_png16.png"),
+            SaveKind::Color => format!("{name}_disparity_color.png"),
+            SaveKind::Depth => format!("{name}_depth.pfm"),
+            SaveKind::Ply => format!("{name}_points.ply"),
+        }
+    }
+}
+
+/// How outputs are written.
+#[derive(Clone, Debug)]
+pub struct OutputOptions {
+    /// Output folder.
+    pub dir: PathBuf,
+    /// Kinds to write.
+    pub kinds: Vec<SaveKind>,
+    /// Farthest point kept in point clouds (metres); `None`: the calibration's depth range, else
+    /// the depth of a one-pixel disparity.
+    pub max_depth: Option<f64>,
+    /// PLY encoding.
+    pub ply: PlyEncoding,
+}
+
+impl OutputOptions {
+    /// The farthest depth kept for `calib` (see [`OutputOptions::max_depth`]).
+    pub fn max_depth_for(&self, calib: &Calibration) -> f64 {
+        self.max_depth
+            .or(calib.depth_range.map(|(_, far)| far))
+            .unwrap_or_else(|| calib.depth(1.0) as f64)
+    }
+}
+
+/// Writes the requested outputs of one pair; returns the files written. `calib` must be given
+/// (already sized to the image, see [`Calibration::for_size`]) when a kind needs it.
+pub fn write_outputs(
+    opts: &OutputOptions,
+    name: &str,
+    left: &RgbImage,
+    disp: &DisparityMap,
+    calib: Option<&Calibration>,
+) -> anyhow::Result<Vec<PathBuf>> {
+    let mut written = Vec::new();
+    let mut depth: Option<DisparityMap> = None;
+    for &kind in &opts.kinds {
+        let path = opts.dir.join(kind.file_name(name));
+        match kind {
+            SaveKind::Pfm | SaveKind::Npy | SaveKind::Png16 => write_disparity(&path, disp)?,
+            SaveKind::Color => save_rgb(&path, &colorize(disp, display_range(disp), true))?,
+            SaveKind::Depth | SaveKind::Ply => {
+                let calib = calib.context("depth and point clouds need a calibration: pass --calib FILE")?;
+                let depth = depth.get_or_insert_with(|| depth_map(disp, calib));
+                if kind == SaveKind::Depth {
+                    write_disparity(&path, depth)?;
+                } else {
+                    let cloud = point_cloud(depth, left, calib, opts.max_depth_for(calib))?;
+                    write_ply(&path, &cloud, opts.ply)?;
+                }
+            }
+        }
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// A calibration beside an image (`calib.txt`, as Middlebury scenes have, or `K.txt`), if any.
+pub fn calibration_beside(image: &Path) -> Option<PathBuf> {
+    let dir = image.parent()?;
+    ["calib.txt", "K.txt"].iter().map(|n| dir.join(n)).find(|p| p.is_file())
+}

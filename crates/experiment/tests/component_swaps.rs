@@ -1,0 +1,183 @@
+//! Any valid combination of the swappable stages builds, runs and trains.
+//!
+//! For random combinations of fusion (none / conv / deformable into both encoders or the context
+//! encoder only), guidance (none / gradient / depth), GRU levels, correlation implementation,
+//! shared backbone, slow-fast GRU and loss, at small random sizes: the configuration validates,
+//! the model builds, every iteration's disparity is finite and of the input's size, and one
+//! training step under autodiff gives a finite gradient to every parameter that takes part.
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::tensor::{Device, Gradients, Tensor};
+use dgstereo_core::tensor::to_vec;
+use dgstereo_core::{DepthPrior, default_device};
+use dgstereo_costvolume::CorrelationImplementation;
+use dgstereo_experiment::smoke::synthetic_pair;
+use dgstereo_experiment::{ExperimentConfig, smoke_test};
+use dgstereo_fusion::{FusionConfig, FusionTarget};
+use dgstereo_loss::{DisparityLoss, LossConfig, LossTarget};
+use dgstereo_model::{ModelConfig, StereoModel};
+use dgstereo_prior::{PriorConfig, SimulatedPriorConfig};
+use dgstereo_updater::GuidanceKind;
+use proptest::prelude::*;
+
+#[derive(Debug, Clone)]
+struct Combination {
+    fusion: FusionConfig,
+    guidance: GuidanceKind,
+    n_gru_layers: usize,
+    implementation: CorrelationImplementation,
+    shared_backbone: bool,
+    slow_fast_gru: bool,
+    loss: LossConfig,
+    hidden: usize,
+    feature_dim: usize,
+    size: [usize; 2],
+}
+
+fn combination() -> impl Strategy<Value = Combination> {
+    let target = prop_oneof![Just(FusionTarget::Both), Just(FusionTarget::ContextOnly)];
+    let fusion = (0usize..3, target, 3usize..9).prop_map(|(kind, target, features)| match kind {
+        0 => FusionConfig::None,
+        1 => FusionConfig::Conv { target, features },
+        _ => FusionConfig::Deformable { target, features },
+    });
+    let guidance = prop_oneof![Just(GuidanceKind::None), Just(GuidanceKind::Gradient), Just(GuidanceKind::Depth)];
+    let implementation = prop_oneof![Just(CorrelationImplementation::Reg), Just(CorrelationImplementation::Alt)];
+    let loss = prop_oneof![
+        (0.8f64..0.95).prop_map(|gamma| LossConfig::SequenceL1 { gamma, max_disparity: 700.0 }),
+        (0.1f64..3.0).prop_map(|tau| LossConfig::EdgeAware { tau, gamma: 0.9, max_disparity: 700.0 }),
+    ];
+    let model = (fusion, guidance, 1usize..=3, implementation, any::<bool>(), any::<bool>());
+    let sizes = (loss, prop_oneof![Just(8usize), Just(16)], prop_oneof![Just(16usize), Just(32)], 20usize..=32, 36usize..=64);
+    (model, sizes).prop_map(
+        |((fusion, guidance, n_gru_layers, implementation, shared_backbone, slow_fast_gru), (loss, hidden, feature_dim, h, w))| {
+            Combination {
+                fusion,
+                guidance,
+                n_gru_layers,
+                implementation,
+                shared_backbone,
+                slow_fast_gru,
+                loss,
+                hidden,
+                feature_dim,
+                size: [h, w],
+            }
+        },
+    )
+}
+
+fn experiment(c: &Combination) -> ExperimentConfig {
+    let mut model = ModelConfig { fusion: c.fusion.clone(), ..Default::default() };
+    model.updater.guidance = c.guidance;
+    model.updater.n_gru_layers = c.n_gru_layers;
+    model.updater.hidden_dims = [c.hidden; 3];
+    model.updater.slow_fast_gru = c.slow_fast_gru;
+    model.correlation.implementation = c.implementation;
+    model.encoder.shared_backbone = c.shared_backbone;
+    model.encoder.feature_dim = c.feature_dim;
+    let prior = if model.needs_prior() { PriorConfig::Simulated(SimulatedPriorConfig::default()) } else { PriorConfig::None };
+    ExperimentConfig {
+        name: "swap".into(),
+        description: None,
+        model,
+        prior,
+        loss: c.loss.clone(),
+        train: Default::default(),
+        data: Default::default(),
+    }
+}
+
+/// Module paths that do not take part in a forward pass with `n_gru_layers` levels: the coarser
+/// GRUs and context heads are built (checkpoints hold them) but unused, and frozen BatchNorm
+/// statistics never get gradients.
+fn takes_part(path: &[String], n_gru_layers: usize) -> bool {
+    let has = |name: &str| path.iter().any(|p| p == name);
+    let unused_levels: &[&str] = match n_gru_layers {
+        1 => &["gru16", "gru32", "layer4", "layer5", "outputs16", "outputs32"],
+        2 => &["gru32", "layer5", "outputs32"],
+        _ => &[],
+    };
+    !(has("running_mean") || has("running_var") || unused_levels.iter().any(|name| has(name)))
+}
+
+/// Checks every float parameter's gradient; returns how many took part.
+struct GradientCheck<'a> {
+    grads: &'a Gradients,
+    n_gru_layers: usize,
+    path: Vec<String>,
+    checked: usize,
+    problems: Vec<String>,
+}
+
+impl ModuleVisitor for GradientCheck<'_> {
+    fn enter_module(&mut self, name: &str, _container_type: &str) {
+        self.path.push(name.to_string());
+    }
+    fn exit_module(&mut self, _name: &str, _container_type: &str) {
+        self.path.pop();
+    }
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let name = self.path.join(".");
+        let grad = param.val().grad(self.grads);
+        match grad {
+            Some(grad) => {
+                if to_vec(grad).iter().any(|g| !g.is_finite()) {
+                    self.problems.push(format!("{name}: non-finite gradient"));
+                }
+                self.checked += 1;
+            }
+            None if takes_part(&self.path, self.n_gru_layers) => self.problems.push(format!("{name}: no gradient")),
+            None => {}
+        }
+    }
+}
+
+/// A ground truth of constant disparity with a step, the nearest-resized copy differing at the
+/// step (as after a resize), every pixel valid.
+fn target(size: [usize; 2], device: &Device) -> LossTarget {
+    let [h, w] = size;
+    let bilinear: Vec<f32> = (0..h * w).map(|i| if i % w < w / 2 { 2.0 } else { 3.5 }).collect();
+    let nearest: Vec<f32> = (0..h * w).map(|i| if i % w < w / 2 + 1 { 2.0 } else { 3.5 }).collect();
+    LossTarget {
+        disparity_bilinear: dgstereo_core::tensor::from_vec(bilinear, [1, 1, h, w], device),
+        disparity_nearest: dgstereo_core::tensor::from_vec(nearest, [1, 1, h, w], device),
+        valid: Tensor::ones([1, 1, h, w], device),
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(6))]
+
+    #[test]
+    fn any_valid_combination_builds_runs_and_trains(c in combination()) {
+        let config = experiment(&c);
+        prop_assert!(config.validate().is_ok(), "{:?}", config.validate());
+
+        // Forward: every iteration's disparity is finite and of the input's size.
+        let device = default_device();
+        let report = smoke_test(&config, c.size, 2, &device);
+        prop_assert!(report.is_ok(), "{:?}: {:?}", c, report);
+        prop_assert_eq!(report.unwrap().iterations, 2);
+
+        // One training step under autodiff.
+        let ad = device.clone().autodiff();
+        let network = config.model.init(&device).unwrap().fork(&ad).train();
+        let model = StereoModel::new(network, config.model.clone(), ad.clone());
+        let (left, right, prior) = synthetic_pair(c.size, 3, &ad);
+        let prior: Option<DepthPrior> = config.model.needs_prior().then_some(prior);
+        let prediction = model.predict(left, right, prior.as_ref(), 2, true, None).unwrap();
+        prop_assert_eq!(prediction.disparities.len(), 2);
+        for disparity in &prediction.disparities {
+            prop_assert_eq!(disparity.dims(), [1, 1, c.size[0], c.size[1]]);
+        }
+        let loss = config.loss.loss(&prediction.disparities, &target(c.size, &ad));
+        let value = to_vec(loss.clone())[0];
+        prop_assert!(value.is_finite() && value > 0.0, "loss {}", value);
+        let grads = loss.backward();
+        let mut check = GradientCheck { grads: &grads, n_gru_layers: c.n_gru_layers, path: Vec::new(), checked: 0, problems: Vec::new() };
+        model.network.visit(&mut check);
+        prop_assert!(check.problems.is_empty(), "{:?}: {:?}", c, check.problems);
+        prop_assert!(check.checked > 20, "only {} parameters took part", check.checked);
+    }
+}

@@ -1,0 +1,217 @@
+//! The training loop: steps, log, progress bar, validation, plot, checkpoints.
+//!
+//! Output folder layout:
+//! - `config.toml`: the resolved experiment;
+//! - `log.jsonl`: one JSON object per logged step (`kind = "train"`: step, loss, epe, bad3, lr,
+//!   steps_per_s, grad_norm) and per validation (`kind = "validation"`: step and the eval
+//!   crate's metrics), `step` counting completed steps;
+//! - `curves.png`: training and validation curves, rewritten at every validation;
+//! - `checkpoints/step-NNNNNNNN.safetensors`: the newest `keep_checkpoints` training checkpoints;
+//! - `model.safetensors` and `summary.json`: the final weights (loadable by `dgstereo infer`) and
+//!   the final metrics, written when the run completes; their presence marks a finished run.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::tensor::Device;
+use dgstereo_core::{Error, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+
+use crate::checkpoint::{list_checkpoints, load_checkpoint, save_checkpoint};
+use crate::plot::{Curves, write_plot};
+use crate::trainer::{StepReport, TrainParts, Trainer};
+use crate::validate::ValidationSet;
+
+/// How to run.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// The output folder.
+    pub out: PathBuf,
+    /// Continue from the newest checkpoint in `out` (error when there is none).
+    pub resume: bool,
+    /// Stop (with a checkpoint) after this many completed steps, without changing the schedule.
+    pub stop_after: Option<usize>,
+    /// Show a progress bar on the terminal.
+    pub progress: bool,
+}
+
+/// What a run returns.
+#[derive(Debug, Clone)]
+pub struct RunSummary {
+    /// Completed steps.
+    pub steps: usize,
+    /// The last logged training step.
+    pub last: Option<StepReport>,
+    /// The last validation's metrics.
+    pub validation: Option<dgstereo_eval::Metrics>,
+    /// The newest checkpoint.
+    pub checkpoint: Option<PathBuf>,
+    /// Whether all configured steps are done.
+    pub finished: bool,
+}
+
+/// The checkpoint folder of a run folder.
+pub fn checkpoint_dir(out: &Path) -> PathBuf {
+    out.join("checkpoints")
+}
+
+/// Whether `out` holds a finished run (`summary.json` and `model.safetensors`).
+pub fn is_finished(out: &Path) -> bool {
+    out.join("summary.json").is_file() && out.join("model.safetensors").is_file()
+}
+
+fn append_line(path: &Path, value: &serde_json::Value) -> Result<()> {
+    let mut f = std::fs::OpenOptions::new().create(true).append(true).open(path).map_err(|e| Error::io(path, e))?;
+    writeln!(f, "{value}").map_err(|e| Error::io(path, e))
+}
+
+/// Keeps the log lines of completed steps `<= step` (a resumed run redoes the later ones) and
+/// returns the curves they hold.
+fn truncate_log(path: &Path, step: usize) -> Result<Curves> {
+    let mut curves = Curves::default();
+    if !path.is_file() {
+        return Ok(curves);
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let mut kept = String::new();
+    for line in text.lines() {
+        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else { continue };
+        let s = v["step"].as_u64().unwrap_or(u64::MAX) as usize;
+        if s > step {
+            continue;
+        }
+        kept.push_str(line);
+        kept.push('\n');
+        let f = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+        match v["kind"].as_str() {
+            Some("train") => {
+                curves.train_loss.push((s as f64, f("loss")));
+                curves.train_epe.push((s as f64, f("epe")));
+            }
+            Some("validation") => curves.valid_epe.push((s as f64, f("epe"))),
+            _ => {}
+        }
+    }
+    crate::checkpoint::write_atomic(path, kept.as_bytes())?;
+    Ok(curves)
+}
+
+fn metrics_json(m: &dgstereo_eval::Metrics) -> serde_json::Value {
+    m.to_json()
+}
+
+/// Trains `parts` on `device` into `options.out`.
+///
+/// A fresh run refuses a folder that already holds checkpoints (use `resume`). NaN or inf in
+/// the loss or gradients stops the run with an error; the checkpoints already written stay.
+pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result<RunSummary> {
+    let out = &options.out;
+    let ckpt_dir = checkpoint_dir(out);
+    std::fs::create_dir_all(&ckpt_dir).map_err(|e| Error::io(&ckpt_dir, e))?;
+    let existing = list_checkpoints(&ckpt_dir)?;
+    let mut trainer = if options.resume {
+        let (_, path) = existing.last().ok_or_else(|| {
+            Error::Config(format!("--resume: {} holds no checkpoint to resume from", ckpt_dir.display()))
+        })?;
+        let stored = crate::checkpoint::read_metadata(path)?.remove("config").unwrap_or_default();
+        if stored != parts.resolved_toml {
+            eprintln!("warning: {} was saved with another resolved config; resuming with the current one", path.display());
+        }
+        load_checkpoint(parts, path, device)?
+    } else {
+        if let Some((_, p)) = existing.last() {
+            return Err(Error::Config(format!(
+                "{} already holds checkpoints ({}): pass --resume to continue, or choose another --out",
+                ckpt_dir.display(),
+                p.display()
+            )));
+        }
+        Trainer::new(parts, device)?
+    };
+    let config_path = out.join("config.toml");
+    crate::checkpoint::write_atomic(&config_path, trainer.parts.resolved_toml.as_bytes())?;
+    let log_path = out.join("log.jsonl");
+    let plot_path = out.join("curves.png");
+    let mut curves = truncate_log(&log_path, trainer.step)?;
+    let validation = ValidationSet::new(&trainer.parts.data.validation);
+
+    let t = trainer.parts.train.clone();
+    let end = options.stop_after.map_or(t.steps, |s| s.min(t.steps));
+    let bar = if options.progress { ProgressBar::new(t.steps as u64) } else { ProgressBar::hidden() };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {pos}/{len} [{elapsed_precise} < {eta_precise}] {wide_bar} {msg}")
+            .expect("valid template"),
+    );
+    bar.set_position(trainer.step as u64);
+    bar.reset_eta();
+
+    let mut summary = RunSummary { steps: trainer.step, last: None, validation: None, checkpoint: existing.last().map(|e| e.1.clone()), finished: false };
+    let mut interval_start = Instant::now();
+    let mut interval_steps = 0usize;
+    while trainer.step < end {
+        let report = match trainer.step() {
+            Ok(r) => r,
+            Err(e) => {
+                bar.abandon();
+                let _ = append_line(&log_path, &json!({"kind": "error", "step": trainer.step, "message": e.to_string()}));
+                let kept = summary.checkpoint.as_ref().map_or("none yet".to_string(), |p| p.display().to_string());
+                return Err(Error::Other(format!("training stopped: {e}. Last good checkpoint: {kept}")));
+            }
+        };
+        interval_steps += 1;
+        let done = trainer.step;
+        bar.set_position(done as u64);
+        if done % t.log_every == 0 || done == end {
+            let rate = interval_steps as f64 / interval_start.elapsed().as_secs_f64().max(1e-9);
+            append_line(
+                &log_path,
+                &json!({"kind": "train", "step": done, "loss": report.loss, "epe": report.epe, "bad3": report.bad3,
+                        "lr": report.lr, "steps_per_s": rate, "grad_norm": report.grad_norm}),
+            )?;
+            bar.set_message(format!(
+                "loss {:.3} epe {:.3} bad3 {:.1}% lr {:.2e} {:.2} steps/s",
+                report.loss, report.epe, report.bad3, report.lr, rate
+            ));
+            curves.train_loss.push((done as f64, report.loss));
+            curves.train_epe.push((done as f64, report.epe));
+            summary.last = Some(report);
+            interval_start = Instant::now();
+            interval_steps = 0;
+        }
+        let validate_now = !validation.is_empty() && ((t.validate_every > 0 && done % t.validate_every == 0) || done == t.steps);
+        if validate_now {
+            let m = validation.evaluate(&trainer.inference_model(), &trainer.parts.model, trainer.prior(), &trainer.device)?;
+            append_line(&log_path, &json!({"kind": "validation", "step": done, "epe": m.epe, "bad3": m.bad_3, "metrics": metrics_json(&m)}))?;
+            bar.println(format!("validation at step {done}: EPE {:.3} px, bad-3 {:.2} %", m.epe, m.bad_3));
+            curves.valid_epe.push((done as f64, m.epe));
+            write_plot(&curves, &plot_path)?;
+            summary.validation = Some(m);
+        }
+        if (t.checkpoint_every > 0 && done % t.checkpoint_every == 0) || done == end {
+            summary.checkpoint = Some(save_checkpoint(&trainer, &ckpt_dir, t.keep_checkpoints)?);
+        }
+    }
+    bar.finish();
+    summary.steps = trainer.step;
+    summary.finished = trainer.step >= t.steps;
+    if summary.finished {
+        if validation.is_empty() {
+            write_plot(&curves, &plot_path)?;
+        }
+        let model_config = serde_json::to_string(&trainer.parts.model).map_err(|e| Error::Other(e.to_string()))?;
+        dgstereo_model::checkpoint::save_safetensors(
+            &trainer.inference_model(),
+            &out.join("model.safetensors"),
+            &[("model_config", &model_config), ("config", &trainer.parts.resolved_toml)],
+        )?;
+        let last = summary.last.map(|r| json!({"loss": r.loss, "epe": r.epe, "bad3": r.bad3}));
+        let summary_json = json!({
+            "name": trainer.parts.name, "steps": trainer.step, "last_train": last,
+            "validation": summary.validation.as_ref().map(metrics_json),
+        });
+        crate::checkpoint::write_atomic(&out.join("summary.json"), format!("{summary_json:#}\n").as_bytes())?;
+    }
+    Ok(summary)
+}

@@ -1,0 +1,224 @@
+//! One training step: batch, prior, forward over all iterations, loss, backward, clip, AdamW.
+
+use burn::module::Module;
+use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
+use burn::tensor::{Device, Tensor};
+use dgstereo_core::{DepthPrior, Error, InputPadder, Result};
+use dgstereo_data::DisparityMap;
+use dgstereo_eval::{MetricSums, ValidOptions, accumulate};
+use dgstereo_loss::{DisparityLoss, LossConfig};
+use dgstereo_model::{ModelConfig, RaftStereo};
+use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
+
+use crate::batch::{TensorBatch, TrainingData, to_tensors};
+use crate::clip::clip_global_norm;
+use crate::config::{TrainingConfig, TrainingDataConfig};
+use crate::schedule::OneCycleLr;
+
+/// Everything a run is made of: the experiment's parts and its resolved text.
+///
+/// The experiment crate resolves files into these; the trainer does not depend on it.
+#[derive(Debug, Clone)]
+pub struct TrainParts {
+    /// Name of the run.
+    pub name: String,
+    /// The network.
+    pub model: ModelConfig,
+    /// The prior provider.
+    pub prior: PriorConfig,
+    /// The loss.
+    pub loss: LossConfig,
+    /// The recipe.
+    pub train: TrainingConfig,
+    /// The training and validation data.
+    pub data: TrainingDataConfig,
+    /// The resolved experiment as TOML, stored in every checkpoint.
+    pub resolved_toml: String,
+}
+
+impl TrainParts {
+    /// Checks every part; the message names the key.
+    pub fn validate(&self) -> Result<()> {
+        self.model.validate()?;
+        self.train.validate()?;
+        self.data.validate()?;
+        if self.model.needs_prior() && !self.prior.gives_prior() {
+            return Err(Error::Config(
+                "the model uses a depth prior (fusion or guidance) but [prior] gives none: set prior.kind".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What one step measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepReport {
+    /// The index (0-based) of the step just taken; `step + 1` steps are complete.
+    pub step: usize,
+    /// The loss.
+    pub loss: f64,
+    /// End-point error of the last iteration on the batch's valid pixels.
+    pub epe: f64,
+    /// Percentage of valid pixels with error > 3 px.
+    pub bad3: f64,
+    /// The learning rate used.
+    pub lr: f64,
+    /// The global gradient norm before clipping.
+    pub grad_norm: f64,
+}
+
+/// A run in progress: the network on the autodiff device, the optimiser and the step counter.
+pub struct Trainer {
+    /// The run's parts.
+    pub parts: TrainParts,
+    /// The network (autodiff device, training mode).
+    pub model: RaftStereo,
+    /// AdamW and its per-parameter state.
+    pub optimizer: ModuleOptimizer,
+    /// The learning-rate schedule.
+    pub schedule: OneCycleLr,
+    /// Steps taken so far (the index of the next step).
+    pub step: usize,
+    /// The plain device (validation, data).
+    pub device: Device,
+    /// The autodiff device.
+    pub autodiff: Device,
+    data: TrainingData,
+    prior: Prior,
+}
+
+/// The AdamW of a recipe (decoupled weight decay, PyTorch's update).
+pub fn adamw(train: &TrainingConfig) -> ModuleOptimizer {
+    AdamWConfig::new()
+        .with_beta_1(train.betas[0] as f32)
+        .with_beta_2(train.betas[1] as f32)
+        .with_epsilon(train.eps as f32)
+        .with_weight_decay(train.weight_decay as f32)
+        .init()
+}
+
+/// The prior of a batch, or `None` when the model does not use one.
+pub fn batch_prior(prior: &Prior, needs: bool, batch: &TensorBatch) -> Result<Option<DepthPrior>> {
+    if !needs {
+        return Ok(None);
+    }
+    let input = PriorInput {
+        left: batch.left.clone(),
+        right: batch.right.clone(),
+        gt_disparity: Some(batch.target.disparity_bilinear.clone()),
+        names: batch.names.clone(),
+    };
+    prior.provide(&input)?.map(Some).ok_or_else(|| Error::Config("the prior provider gave no prior".into()))
+}
+
+/// Runs `model` on padded inputs and returns positive disparity after every iteration kept.
+///
+/// # Shapes
+/// - `left`, `right`: `[N, 3, H, W]`; prior maps `[N, 1, H, W]`
+/// - each output: `[N, 1, H, W]`
+pub fn forward_disparities(
+    model: &RaftStereo,
+    config: &ModelConfig,
+    left: Tensor<4>,
+    right: Tensor<4>,
+    prior: Option<&DepthPrior>,
+    iters: usize,
+    all_iterations: bool,
+) -> Vec<Tensor<4>> {
+    let [_, _, h, w] = left.dims();
+    let divisor = 32usize.max(1 << (config.updater.n_downsample + 3));
+    let padder = InputPadder::new(h, w, divisor);
+    let prior = prior.map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
+    let out = model.forward_flow(padder.pad(left), padder.pad(right), prior.as_ref(), iters, None, None, all_iterations, None);
+    out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect()
+}
+
+/// Metric sums of a `[N, 1, H, W]` prediction against ground truth and a 0/1 validity map.
+pub fn batch_metrics(prediction: Tensor<4>, gt: Tensor<4>, valid: Tensor<4>) -> Result<MetricSums> {
+    let [n, _, h, w] = prediction.dims();
+    let p = dgstereo_core::tensor::to_vec(prediction);
+    let g = dgstereo_core::tensor::to_vec(gt);
+    let v = dgstereo_core::tensor::to_vec(valid);
+    let mut sums = MetricSums::default();
+    for i in 0..n {
+        let r = i * h * w..(i + 1) * h * w;
+        let gt: Vec<f32> = g[r.clone()].iter().zip(&v[r.clone()]).map(|(&d, &m)| if m >= 0.5 { d } else { f32::NAN }).collect();
+        let s = accumulate(
+            &DisparityMap::from_vec(w, h, p[r].to_vec())?,
+            &DisparityMap::from_vec(w, h, gt)?,
+            None,
+            ValidOptions::default(),
+        )?;
+        sums.merge(&s);
+    }
+    Ok(sums)
+}
+
+impl Trainer {
+    /// A fresh run: weights initialised from `train.seed` on `device`.
+    pub fn new(parts: TrainParts, device: &Device) -> Result<Self> {
+        parts.validate()?;
+        device.seed(parts.train.seed);
+        let model = parts.model.init(device)?;
+        let optimizer = adamw(&parts.train);
+        Self::with_model(parts, model, device, optimizer, 0)
+    }
+
+    /// A run from given weights (plain device), optimiser and step counter.
+    pub fn with_model(parts: TrainParts, model: RaftStereo, device: &Device, optimizer: ModuleOptimizer, step: usize) -> Result<Self> {
+        parts.validate()?;
+        let autodiff = device.clone().autodiff();
+        let model = model.fork(&autodiff).train();
+        let schedule = OneCycleLr::new(parts.train.lr, parts.train.schedule_total_steps(), parts.train.warmup_fraction)?;
+        let data = TrainingData::new(&parts.data, &parts.train)?;
+        let prior = parts.prior.init(device)?;
+        Ok(Self { parts, model, optimizer, schedule, step, device: device.clone(), autodiff, data, prior })
+    }
+
+    /// Takes one step. On NaN or inf in the loss or the gradients, fails naming the step and
+    /// what was not finite, and leaves the weights and optimiser state untouched.
+    pub fn step(&mut self) -> Result<StepReport> {
+        let step = self.step;
+        let t = &self.parts.train;
+        let pairs = self.data.batch(step, t.batch_size)?;
+        let batch = to_tensors(&pairs, &self.autodiff)?;
+        let prior = batch_prior(&self.prior, self.parts.model.needs_prior(), &batch)?;
+        let predictions =
+            forward_disparities(&self.model, &self.parts.model, batch.left.clone(), batch.right.clone(), prior.as_ref(), t.iters, true);
+        let loss = self.parts.loss.loss(&predictions, &batch.target);
+        let loss_value = f64::from(dgstereo_core::tensor::to_vec(loss.clone().detach())[0]);
+        if !loss_value.is_finite() {
+            return Err(Error::Other(format!(
+                "step {}: the loss is {loss_value} (pairs: {}); stopping with the weights after {step} completed steps",
+                step + 1,
+                batch.names.join(", "),
+            )));
+        }
+        let last = predictions.last().expect("at least one iteration").clone().detach();
+        let sums = batch_metrics(last, batch.target.disparity_bilinear.clone(), batch.target.valid.clone())?;
+        let grads = GradientsParams::from_grads(loss.backward(), &self.model);
+        let (grads, clip) = clip_global_norm(&self.model, grads, t.clip);
+        if let Some(param) = clip.non_finite {
+            return Err(Error::Other(format!(
+                "step {}: the gradient of '{param}' is not finite (loss {loss_value}); stopping with the weights after {step} completed steps",
+                step + 1
+            )));
+        }
+        let lr = self.schedule.lr(step);
+        self.model = self.optimizer.step(lr, self.model.clone(), grads);
+        self.step += 1;
+        let m = sums.metrics();
+        Ok(StepReport { step, loss: loss_value, epe: m.epe, bad3: m.bad_3, lr, grad_norm: clip.total_norm })
+    }
+
+    /// The prior provider of the run.
+    pub fn prior(&self) -> &Prior {
+        &self.prior
+    }
+
+    /// The network without autodiff, for inference and saving.
+    pub fn inference_model(&self) -> RaftStereo {
+        self.model.valid()
+    }
+}

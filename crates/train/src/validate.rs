@@ -1,0 +1,60 @@
+//! Validation on held-out synthetic pairs with the eval crate's metrics.
+
+use burn::tensor::Device;
+use dgstereo_core::Result;
+use dgstereo_data::synthetic::generate;
+use dgstereo_data::{DisparityMap, SyntheticConfig};
+use dgstereo_eval::{MetricSums, Metrics, ValidOptions, accumulate};
+use dgstereo_model::{ModelConfig, RaftStereo};
+use dgstereo_prior::Prior;
+
+use crate::batch::{TrainingPair, to_tensors};
+use crate::config::ValidationConfig;
+use crate::trainer::{batch_prior, forward_disparities};
+
+/// The validation pairs, rendered once.
+pub struct ValidationSet {
+    pairs: Vec<TrainingPair>,
+    iters: usize,
+}
+
+impl ValidationSet {
+    /// Renders `config.count` synthetic pairs (scene seeds `seed .. seed + count`).
+    pub fn new(config: &ValidationConfig) -> Self {
+        let synth = SyntheticConfig::with_size(config.width, config.height);
+        let pairs = (0..config.count as u64)
+            .map(|i| {
+                let seed = config.seed.wrapping_add(i);
+                let s = generate(&synth, seed);
+                TrainingPair {
+                    name: format!("validation/{seed}"),
+                    left: s.left,
+                    right: s.right,
+                    disparity_nearest: s.disparity.clone(),
+                    disparity: s.disparity,
+                    valid: s.valid,
+                }
+            })
+            .collect();
+        Self { pairs, iters: config.iters.max(1) }
+    }
+
+    /// Whether there is nothing to validate on.
+    pub fn is_empty(&self) -> bool {
+        self.pairs.is_empty()
+    }
+
+    /// Pooled metrics of `model` (plain device) over the set, one pair at a time.
+    pub fn evaluate(&self, model: &RaftStereo, config: &ModelConfig, prior: &Prior, device: &Device) -> Result<Metrics> {
+        let mut sums = MetricSums::default();
+        for pair in &self.pairs {
+            let batch = to_tensors(std::slice::from_ref(pair), device)?;
+            let p = batch_prior(prior, config.needs_prior(), &batch)?;
+            let out = forward_disparities(model, config, batch.left, batch.right, p.as_ref(), self.iters, false);
+            let pred = dgstereo_core::tensor::to_vec(out.last().expect("one iteration").clone());
+            let pred = DisparityMap::from_vec(pair.disparity.width, pair.disparity.height, pred)?;
+            sums.merge(&accumulate(&pred, &pair.disparity, Some(&pair.valid), ValidOptions::default())?);
+        }
+        Ok(sums.metrics())
+    }
+}
