@@ -15,7 +15,7 @@
 use std::hint::black_box;
 
 use burn::module::Module;
-use burn::optim::{AdamWConfig, GradientsParams, Optimizer as _};
+use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Distribution, Int, Tensor};
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use dgstereo_core::default_device;
@@ -97,9 +97,7 @@ fn update(c: &mut Criterion) {
     for ([h, w], name) in SIZES {
         let (h, w) = (h / 4, w / 4);
         let hidden: Vec<Tensor<4>> = (0..3).map(|l| random([1, 128, h >> l, w >> l]).tanh()).collect();
-        let gates: Vec<_> = (0..3)
-            .map(|l| GateContext::from_zqr(random([1, 384, h >> l, w >> l])))
-            .collect();
+        let gates: Vec<_> = (0..3).map(|l| GateContext::from_zqr(random([1, 384, h >> l, w >> l]))).collect();
         let corr = random([1, 36, h, w]);
         let flow = Tensor::cat(vec![random([1, 1, h, w]), Tensor::zeros([1, 1, h, w], &default_device())], 1);
         group.bench_function(BenchmarkId::new("one iteration (3 GRU levels, flow head)", name), |b| {
@@ -166,7 +164,9 @@ fn training_step(c: &mut Criterion) {
                 .flow_up
                 .iter()
                 .enumerate()
-                .map(|(k, f)| (f.clone().neg() - target.clone()).abs().mean().mul_scalar(0.9f64.powi((n - k - 1) as i32)))
+                .map(|(k, f)| {
+                    (f.clone().neg() - target.clone()).abs().mean().mul_scalar(0.9f64.powi((n - k - 1) as i32))
+                })
                 .reduce(|a, b| a + b)
                 .expect("at least one iteration");
             let grads = GradientsParams::from_grads(loss.backward(), &m);

@@ -59,6 +59,10 @@ pub struct ModelArgs {
     /// `depth-anything-v2:WEIGHTS` (default: the experiment's `[prior]`, else none).
     #[arg(long)]
     pub prior: Option<String>,
+    /// Depth Anything V2 weights (`depth_anything_v2_vit{s,b,l}.pth`) for the prior: the same as
+    /// `--prior depth-anything-v2:WEIGHTS`, or the weights of the experiment's Depth Anything prior.
+    #[arg(long, conflicts_with = "prior")]
+    pub prior_weights: Option<PathBuf>,
     /// Device: `cpu` or `gpu` (the GPU needs a build with `--features gpu`).
     #[arg(long, default_value = "cpu")]
     pub device: String,
@@ -126,6 +130,20 @@ pub fn parse_prior(spec: &str) -> anyhow::Result<PriorConfig> {
         }
         _ => bail!("--prior '{spec}': expected none, file:DIR or depth-anything-v2:WEIGHTS"),
     })
+}
+
+/// `--prior-weights`: the experiment's Depth Anything V2 prior (kept inside a cache) with these
+/// weights, or a plain Depth Anything V2 prior when the experiment names none.
+fn with_prior_weights(config: PriorConfig, weights: &std::path::Path) -> PriorConfig {
+    match config {
+        PriorConfig::DepthAnythingV2 { encoder, input_size, .. } => {
+            PriorConfig::DepthAnythingV2 { weights: weights.to_path_buf(), encoder, input_size }
+        }
+        PriorConfig::Cache { dir, inner } => {
+            PriorConfig::Cache { dir, inner: Box::new(with_prior_weights(*inner, weights)) }
+        }
+        _ => PriorConfig::DepthAnythingV2 { weights: weights.to_path_buf(), encoder: None, input_size: 518 },
+    }
 }
 
 /// The model and prior configurations of an experiment file's run: the only run, or the one
@@ -203,9 +221,10 @@ impl Engine {
             }
             None => (None, PriorConfig::None),
         };
-        let prior_config = match &a.prior {
-            Some(spec) => parse_prior(spec)?,
-            None => experiment_prior,
+        let prior_config = match (&a.prior, &a.prior_weights) {
+            (Some(spec), _) => parse_prior(spec)?,
+            (None, Some(w)) => with_prior_weights(experiment_prior, w),
+            (None, None) => experiment_prior,
         };
         let weights = match &a.weights {
             Some(w) => w.clone(),

@@ -65,15 +65,15 @@ mod tests {
     #[test]
     fn pad_then_unpad_is_identity_and_replicates_border() {
         let device = crate::default_device();
-        let x = Tensor::<1>::arange(0..15, &device).float().reshape([1, 1, 3, 5]);
+        let x = Tensor::<1, burn::tensor::Int>::arange(0..15, &device).float().reshape([1, 1, 3, 5]);
         let p = InputPadder::new(3, 5, 4);
         let y = p.pad(x.clone());
         assert_eq!(y.dims(), [1, 1, 4, 8]);
-        let yv = y.clone().into_data().to_vec::<f32>().unwrap();
+        let yv = y.clone().into_data().try_to_vec::<f32>().unwrap();
         // pad = [l=1, r=2, t=0, b=1]: the first column replicates column 0 of row 0 (value 0).
         assert_eq!(yv[0], 0.0);
         assert_eq!(yv[7], 4.0); // right border replicated
-        let back = p.unpad(y).into_data().to_vec::<f32>().unwrap();
-        assert_eq!(back, x.into_data().to_vec::<f32>().unwrap());
+        let back = p.unpad(y).into_data().try_to_vec::<f32>().unwrap();
+        assert_eq!(back, x.into_data().try_to_vec::<f32>().unwrap());
     }
 }

@@ -45,30 +45,41 @@ pub fn pool_rows(level: &HostLevel, rows: usize) -> HostLevel {
 pub fn lookup(levels: &[HostLevel], coords: &[f32], [n, h, w1]: [usize; 3], radius: usize) -> Vec<f32> {
     let k = 2 * radius + 1;
     let plane = h * w1;
-    let planes = levels.len() * k;
-    let mut out = vec![0f32; n * planes * plane];
-    out.par_chunks_mut(plane).enumerate().for_each(|(p, dst)| {
-        let (b, c) = (p / planes, p % planes);
-        let (level, t) = (c / k, c % k);
-        let HostLevel { values, width } = &levels[level];
-        let width = *width;
-        if width == 0 {
-            return;
+    let channels = levels.len() * k;
+    if channels == 0 || plane == 0 {
+        return Vec::new();
+    }
+    // Pixel-major first, so each pixel's pyramid rows are read once for all their taps (the
+    // rows do not fit in cache; plane by plane they were re-read `2r + 1` times).
+    let mut by_pixel = vec![0f32; n * plane * channels];
+    by_pixel.par_chunks_mut(channels * w1.max(1)).enumerate().for_each(|(chunk, dst)| {
+        for (i, out) in dst.chunks_exact_mut(channels).enumerate() {
+            let m = chunk * w1 + i;
+            for (level, HostLevel { values, width }) in levels.iter().enumerate() {
+                let width = *width;
+                if width == 0 {
+                    continue;
+                }
+                let x = coords[m] / (1u64 << level) as f32;
+                let x0 = x.floor();
+                let w = x - x0;
+                let row = &values[m * width..(m + 1) * width];
+                let last = (width - 1) as f32;
+                let at = |pos: f32| if (0.0..=last).contains(&pos) { row[pos as usize] } else { 0.0 };
+                for (t, d) in out[level * k..(level + 1) * k].iter_mut().enumerate() {
+                    let pos = x0 + (t as f32 - radius as f32);
+                    *d = at(pos) * (-w + 1.0) + at(pos + 1.0) * w;
+                }
+            }
         }
-        let scale = (1u64 << level) as f32;
-        let offset = t as f32 - radius as f32;
-        let last = (width - 1) as f32;
-        let base = b * plane;
+    });
+    // [N, H·W1, C] -> [N, C, H·W1]
+    let mut out = vec![0f32; n * channels * plane];
+    out.par_chunks_mut(plane.max(1)).enumerate().for_each(|(p, dst)| {
+        let (b, c) = (p / channels, p % channels);
+        let src = &by_pixel[b * plane * channels..(b + 1) * plane * channels];
         for (j, d) in dst.iter_mut().enumerate() {
-            let m = base + j;
-            let x = coords[m] / scale;
-            let x0 = x.floor();
-            let w = x - x0;
-            let row = &values[m * width..(m + 1) * width];
-            let at = |pos: f32| if (0.0..=last).contains(&pos) { row[pos as usize] } else { 0.0 };
-            let lo = at(x0 + offset);
-            let hi = at(x0 + offset + 1.0);
-            *d = lo * (-w + 1.0) + hi * w;
+            *d = src[j * channels + c];
         }
     });
     out

@@ -142,11 +142,7 @@ impl CostVolume for CorrelationPyramid {
             let width = level.dims()[1];
             let xi = x.clone().div_scalar((1u64 << i) as f64);
             let (idx, inside, w) = taps(xi, self.radius, width.max(1));
-            let values = if width == 0 {
-                inside.zeros_like()
-            } else {
-                level.clone().gather(1, idx) * inside
-            };
+            let values = if width == 0 { inside.zeros_like() } else { level.clone().gather(1, idx) * inside };
             out.push(interpolate_taps(values, w, self.radius));
         }
         let levels = self.levels;

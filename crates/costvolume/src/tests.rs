@@ -10,9 +10,8 @@ use crate::{CorrelationConfig, CorrelationImplementation, CorrelationPyramid, Co
 fn features(n: usize, c: usize, h: usize, w: usize, seed: u64) -> Tensor<4> {
     let device = default_device();
     // Deterministic pseudo-random features of unit scale.
-    let v: Vec<f32> = (0..n * c * h * w)
-        .map(|i| (((i as u64 + 1) * 2654435761 + seed * 97) % 1000) as f32 / 500.0 - 1.0)
-        .collect();
+    let v: Vec<f32> =
+        (0..n * c * h * w).map(|i| (((i as u64 + 1) * 2654435761 + seed * 97) % 1000) as f32 / 500.0 - 1.0).collect();
     from_vec(v, [n, c, h, w], &device)
 }
 
@@ -88,7 +87,8 @@ fn lookup_at_integer_offsets_equals_direct_dot_products() {
             for (t, dx) in (-(r as i64)..=r as i64).enumerate() {
                 let x2 = x as i64 - disparity as i64 + dx;
                 let expected = if (0..w as i64).contains(&x2) {
-                    (0..c).map(|ch| a[(ch * h + y) * w + x] * b[(ch * h + y) * w + x2 as usize]).sum::<f32>() / (c as f32).sqrt()
+                    (0..c).map(|ch| a[(ch * h + y) * w + x] * b[(ch * h + y) * w + x2 as usize]).sum::<f32>()
+                        / (c as f32).sqrt()
                 } else {
                     0.0
                 };

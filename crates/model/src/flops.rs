@@ -101,7 +101,8 @@ impl StageMacs {
             (2 * (trunk_macs + conv_macs(128, fdim, 1, h4, w4)), trunk_macs)
         };
         // Heads: per level two (block + 3x3), the coarsest two plain 3x3 convolutions.
-        let head = |dim: usize, [hh, ww]: [usize; 2]| residual_block(128, 128, 1, [hh, ww]).0 + conv_macs(128, dim, 3, hh, ww);
+        let head =
+            |dim: usize, [hh, ww]: [usize; 2]| residual_block(128, 128, 1, [hh, ww]).0 + conv_macs(128, dim, 3, hh, ww);
         context_encoder += 2 * head(d08, [h4, w4]) + conv_macs(d08, 3 * d08, 3, h4, w4);
         if n >= 2 {
             context_encoder += layer(128, 128, 2, [h4, w4]).0 + 2 * head(d16, [h8, w8]);
@@ -128,7 +129,8 @@ impl StageMacs {
         let gru_coarse = if n >= 3 { gru(d32, d16, h16, w16) } else { 0 };
         let factor = 1usize << u.n_downsample;
         // Resizes: 1/8 -> 1/4 for the fine GRU, 1/16 -> 1/8 for the middle one (rows then columns).
-        let resize = |c: usize, [hi, wi]: [usize; 2], [ho, wo]: [usize; 2]| (c * ho * hi * wi + c * ho * wi * wo) as u64;
+        let resize =
+            |c: usize, [hi, wi]: [usize; 2], [ho, wo]: [usize; 2]| (c * ho * hi * wi + c * ho * wi * wo) as u64;
         let mut interpolation = 0;
         if n >= 2 {
             interpolation += resize(d16, [h8, w8], [h4, w4]);

@@ -134,10 +134,11 @@ impl RaftStereo {
         let (context, fmap1, fmap2) = match (&self.fnet, &self.conv2) {
             (Some(fnet), _) => {
                 let context = self.cnet.context(normalise(fused_left), levels);
-                let n = feat_left.dims()[0];
-                let both = fnet.features(normalise(Tensor::cat(vec![feat_left, feat_right], 0)));
-                let f1 = both.clone().narrow(0, 0, n);
-                let f2 = both.narrow(0, n, n);
+                // One image at a time (the reference batches the pair): the result is the same,
+                // as every layer acts per image, and the full-resolution activations of the
+                // stem and layer1, the process's peak memory, are half as large.
+                let f1 = fnet.features(normalise(feat_left));
+                let f2 = fnet.features(normalise(feat_right));
                 (context, f1, f2)
             }
             (None, Some(head)) => {

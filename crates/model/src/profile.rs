@@ -121,11 +121,10 @@ pub fn profile_forward(
     };
     let (context, fmap1, fmap2) = match (&model.fnet, &model.conv2) {
         (Some(fnet), _) => {
-            let both = clock.time("feature encoder", macs.feature_encoder, || {
-                fnet.features(normalise(Tensor::cat(vec![feat_left, feat_right], 0)))
-            });
+            let f1 = clock.time("feature encoder", macs.feature_encoder / 2, || fnet.features(normalise(feat_left)));
+            let f2 = clock.time("feature encoder", macs.feature_encoder / 2, || fnet.features(normalise(feat_right)));
             let context = clock.time("context encoder", 0, || model.cnet.context(normalise(fused_left), levels));
-            (context, both.clone().narrow(0, 0, 1), both.narrow(0, 1, 1))
+            (context, f1, f2)
         }
         (None, Some(head)) => {
             let trunk = clock.time("context encoder", 0, || {
@@ -169,17 +168,22 @@ pub fn profile_forward(
         }
         if levels == 3 {
             let pooled = clock.time("interpolation", 0, || pool2x(hidden[1].clone()));
-            hidden[2] = clock.time("GRU 1/16", macs.gru_coarse, || block.gru32.forward(hidden[2].clone(), &gates[2], vec![pooled]));
+            hidden[2] = clock
+                .time("GRU 1/16", macs.gru_coarse, || block.gru32.forward(hidden[2].clone(), &gates[2], vec![pooled]));
         }
         if levels >= 2 {
             let mut inputs = vec![clock.time("interpolation", 0, || pool2x(hidden[0].clone()))];
             if levels > 2 {
-                inputs.push(clock.time("interpolation", macs.interpolation / 2, || interp(hidden[2].clone(), &hidden[1])));
+                inputs.push(
+                    clock.time("interpolation", macs.interpolation / 2, || interp(hidden[2].clone(), &hidden[1])),
+                );
             }
-            hidden[1] = clock.time("GRU 1/8", macs.gru_mid, || block.gru16.forward(hidden[1].clone(), &gates[1], inputs));
+            hidden[1] =
+                clock.time("GRU 1/8", macs.gru_mid, || block.gru16.forward(hidden[1].clone(), &gates[1], inputs));
         }
         let flow = Tensor::cat(vec![flow_x.clone(), zeros.clone()], 1);
-        let motion = clock.time("motion encoder", macs.motion_encoder, || block.encoder.forward(flow, lookup, guidance.as_ref()));
+        let motion = clock
+            .time("motion encoder", macs.motion_encoder, || block.encoder.forward(flow, lookup, guidance.as_ref()));
         let mut inputs = vec![motion];
         if levels > 1 {
             let share = macs.interpolation - macs.interpolation / 2 * (levels > 2) as u64;
@@ -191,7 +195,9 @@ pub fn profile_forward(
         if k + 1 == iters {
             let mask = clock.time("mask head", macs.mask_head, || block.upsample_mask(hidden[0].clone()));
             let factor = 1usize << model.n_downsample;
-            flow_up = Some(clock.time("convex upsample", macs.convex_upsample, || convex_upsample(flow_x.clone(), mask, factor)));
+            flow_up = Some(
+                clock.time("convex upsample", macs.convex_upsample, || convex_upsample(flow_x.clone(), mask, factor)),
+            );
         }
     }
     let flow_up = flow_up.expect("at least one iteration");

@@ -127,7 +127,7 @@ impl TrainingConfig {
 /// width = 640
 /// height = 384
 /// [data.validation]
-/// count = 8              # held-out synthetic pairs (seeds disjoint from training's)
+/// count = 8              # held-out synthetic pairs (scene seeds 2^40 + i; training draws other seeds)
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

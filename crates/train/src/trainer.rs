@@ -159,8 +159,14 @@ impl Trainer {
     /// A fresh run: weights initialised from `train.seed` on `device`.
     pub fn new(parts: TrainParts, device: &Device) -> Result<Self> {
         parts.validate()?;
-        device.seed(parts.train.seed);
-        let model = parts.model.init(device)?;
+        // The backend's generator may be process-wide: seed and draw under one lock, so runs
+        // started concurrently in one process (tests, ablations) get the same initial weights.
+        static INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+        let model = {
+            let _guard = INIT.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+            device.seed(parts.train.seed);
+            parts.model.init(device)?
+        };
         let optimizer = adamw(&parts.train);
         Self::with_model(parts, model, device, optimizer, 0)
     }

@@ -139,7 +139,7 @@ fn non_finite_loss_stops_the_run_and_keeps_the_last_checkpoint() {
     train(parts.clone(), &device, &opts(dir.path(), false, Some(2))).unwrap();
     // An absurd learning rate makes the weights, and then the loss, non-finite.
     parts.train.lr = 1e30;
-    let err = train(parts.clone(), &device, &opts(dir.path(), true, None)).err().expect("the run must stop").to_string();
+    let err = train(parts.clone(), &device, &opts(dir.path(), true, None)).expect_err("the run must stop").to_string();
     eprintln!("{err}");
     assert!(err.contains("not finite") || err.contains("loss is"), "{err}");
     assert!(err.contains("Last good checkpoint"), "{err}");

@@ -10,7 +10,10 @@ use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::module::conv2d as conv2d_op;
 use burn::tensor::ops::ConvOptions;
-use burn::tensor::{Device, Tensor, activation::{sigmoid, tanh}};
+use burn::tensor::{
+    Device, Tensor,
+    activation::{sigmoid, tanh},
+};
 use dgstereo_core::layers::{ConvInit, conv2d};
 
 /// A ConvGRU whose gates also receive precomputed context terms.

@@ -54,11 +54,13 @@ pub struct BenchArgs {
 
 /// Parses `HxW`.
 pub fn parse_size(s: &str) -> anyhow::Result<[usize; 2]> {
-    let (h, w) = s
-        .split_once(['x', 'X'])
-        .with_context(|| format!("--size '{s}': expected HxW, e.g. 375x1242"))?;
+    let (h, w) = s.split_once(['x', 'X']).with_context(|| format!("--size '{s}': expected HxW, e.g. 375x1242"))?;
     let parse = |v: &str, what: &str| {
-        v.trim().parse::<usize>().ok().filter(|&n| n >= 1).with_context(|| format!("--size '{s}': {what} '{v}' is not a positive integer"))
+        v.trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|&n| n >= 1)
+            .with_context(|| format!("--size '{s}': {what} '{v}' is not a positive integer"))
     };
     Ok([parse(h, "height")?, parse(w, "width")?])
 }
@@ -106,7 +108,8 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let config = match &a.config {
         Some(p) => {
             let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
-            toml::from_str::<ModelConfig>(&text).with_context(|| format!("{}: not a model configuration", p.display()))?
+            toml::from_str::<ModelConfig>(&text)
+                .with_context(|| format!("{}: not a model configuration", p.display()))?
         }
         None => ModelConfig::default(),
     };
@@ -160,7 +163,8 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
 
     if a.stages {
         let (pl, pr) = (padder.pad(left.clone()), padder.pad(right.clone()));
-        let pp = prior.as_ref().map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
+        let pp =
+            prior.as_ref().map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
         let mut net_config = config.clone();
         net_config.correlation.implementation = implementation;
         let mut network = model.network.clone();
@@ -175,7 +179,13 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
                 Some(g) => (format!("{g:.1}"), format!("{:.0} %", 100.0 * g / a.peak_gflops)),
                 None => ("-".into(), "-".into()),
             };
-            println!("| {} | {} | {:.3} | {:.1} % | {gf} | {peak} |", s.name, s.calls, s.seconds, 100.0 * s.seconds / total);
+            println!(
+                "| {} | {} | {:.3} | {:.1} % | {gf} | {peak} |",
+                s.name,
+                s.calls,
+                s.seconds,
+                100.0 * s.seconds / total
+            );
         }
         println!("| total | | {total:.3} | 100 % | | |");
     }
