@@ -15,7 +15,10 @@ use dgstereo_suite::shared_dir_for_test;
 
 fn golden(name: &str) -> Option<(PathBuf, PathBuf)> {
     let shared = shared_dir_for_test(name, "golden/raft_stereo_random.pth")?;
-    Some((shared.join("golden/raft_stereo_random.pth"), shared.join("golden/raft_stereo_random.activations.safetensors")))
+    Some((
+        shared.join("golden/raft_stereo_random.pth"),
+        shared.join("golden/raft_stereo_random.activations.safetensors"),
+    ))
 }
 
 #[test]

@@ -40,7 +40,8 @@ pub struct Calibration {
 impl Calibration {
     /// Reads a calibration file, its layout chosen by content (see the module doc).
     pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the calibration", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read the calibration", path.display()))?;
         let calib = if text.trim_start().starts_with('{') {
             from_json(path, &text)?
         } else if text.contains("cam0") {
@@ -119,7 +120,8 @@ fn from_middlebury(path: &Path) -> anyhow::Result<Calibration> {
 }
 
 fn from_json(path: &Path, text: &str) -> anyhow::Result<Calibration> {
-    let v: Value = serde_json::from_str(text).with_context(|| format!("{}: calibration JSON does not parse", path.display()))?;
+    let v: Value =
+        serde_json::from_str(text).with_context(|| format!("{}: calibration JSON does not parse", path.display()))?;
     let num = |key: &str| v.get(key).and_then(Value::as_f64);
     let need = |keys: &[&str]| -> anyhow::Result<f64> {
         keys.iter()
@@ -216,7 +218,10 @@ mod tests {
 
     #[test]
     fn json_and_k_txt_agree() {
-        let (_a, j) = write("c.json", r#"{"fx": 400, "fy": 400, "cx0": 320, "cx1": 320, "cy": 240, "baseline_meters": 0.1, "extra": 1}"#);
+        let (_a, j) = write(
+            "c.json",
+            r#"{"fx": 400, "fy": 400, "cx0": 320, "cx1": 320, "cy": 240, "baseline_meters": 0.1, "extra": 1}"#,
+        );
         let (_b, k) = write("K.txt", "400 0 320 0 400 240 0 0 1\n0.1\n");
         let (cj, ck) = (Calibration::load(&j).unwrap(), Calibration::load(&k).unwrap());
         assert_eq!(cj.intrinsics, ck.intrinsics);

@@ -158,7 +158,9 @@ fn experiment_configs(path: &Path, run: Option<&str>) -> anyhow::Result<(ModelCo
             .with_context(|| format!("{}: no run named '{name}' (runs: {})", path.display(), names()))?,
         (None, 1) => &runs[0],
         (None, 0) => bail!("{}: the experiment defines no run", path.display()),
-        (None, _) => bail!("{}: the experiment has {} runs; pick one with --run NAME ({})", path.display(), runs.len(), names()),
+        (None, _) => {
+            bail!("{}: the experiment has {} runs; pick one with --run NAME ({})", path.display(), runs.len(), names())
+        }
     };
     Ok((chosen.config.model.clone(), chosen.config.prior.clone()))
 }
@@ -166,7 +168,13 @@ fn experiment_configs(path: &Path, run: Option<&str>) -> anyhow::Result<(ModelCo
 /// The cost volume `choice` gives for a `width x height` input of a model of `config`: with
 /// [`CorrChoice::Auto`], "alt" when the materialised pyramid of the padded input's features
 /// would take more than `budget` bytes.
-pub fn corr_for(config: &ModelConfig, choice: CorrChoice, budget: u64, width: usize, height: usize) -> CorrelationImplementation {
+pub fn corr_for(
+    config: &ModelConfig,
+    choice: CorrChoice,
+    budget: u64,
+    width: usize,
+    height: usize,
+) -> CorrelationImplementation {
     match choice {
         CorrChoice::Reg => CorrelationImplementation::Reg,
         CorrChoice::Alt => CorrelationImplementation::Alt,
@@ -248,7 +256,9 @@ impl Engine {
             None
         };
         if model.config.needs_prior() && prior.is_none() {
-            bail!("this model uses a depth prior (fusion or guidance): pass --prior (e.g. depth-anything-v2:WEIGHTS or file:DIR)");
+            bail!(
+                "this model uses a depth prior (fusion or guidance): pass --prior (e.g. depth-anything-v2:WEIGHTS or file:DIR)"
+            );
         }
         Ok(Self { model, prior, iters: a.iters, max_size: a.max_size, budget, corr: a.corr, weights, device })
     }

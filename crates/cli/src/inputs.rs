@@ -49,9 +49,7 @@ pub struct PairList {
 const IMAGE_EXTENSIONS: [&str; 8] = ["png", "jpg", "jpeg", "bmp", "tif", "tiff", "ppm", "pgm"];
 
 fn is_image(p: &Path) -> bool {
-    p.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+    p.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
 fn has_glob_chars(s: &str) -> bool {
@@ -109,13 +107,17 @@ pub fn from_left_right(left: &[String], right: &[String]) -> anyhow::Result<Pair
     for l in lefts {
         match by_key.remove(&side_key(&l, &left_words)) {
             Some(r) => pairs.push((l, r)),
-            None => problems.push(PairProblem { path: l, message: "missing right image: no -r file matches it".into() }),
+            None => {
+                problems.push(PairProblem { path: l, message: "missing right image: no -r file matches it".into() })
+            }
         }
     }
     let mut unmatched: Vec<PathBuf> = by_key.into_values().collect();
     unmatched.sort();
     problems.extend(
-        unmatched.into_iter().map(|r| PairProblem { path: r, message: "missing left image: no -l file matches it".into() }),
+        unmatched
+            .into_iter()
+            .map(|r| PairProblem { path: r, message: "missing left image: no -l file matches it".into() }),
     );
     Ok(named(pairs, problems))
 }
@@ -190,7 +192,8 @@ pub fn from_folder(dir: &Path) -> anyhow::Result<PairList> {
 /// The pairs of a list file: one `LEFT RIGHT` pair per line (whitespace or a comma between),
 /// paths relative to the list's folder, `#` starting a comment. A line with one path is a problem.
 pub fn from_list(list: &Path) -> anyhow::Result<PairList> {
-    let text = std::fs::read_to_string(list).with_context(|| format!("{}: cannot read the pair list", list.display()))?;
+    let text =
+        std::fs::read_to_string(list).with_context(|| format!("{}: cannot read the pair list", list.display()))?;
     let base = list.parent().unwrap_or(Path::new(""));
     let mut pairs = Vec::new();
     let mut problems = Vec::new();

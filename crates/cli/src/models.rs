@@ -24,11 +24,9 @@ fn asset_roots() -> Vec<PathBuf> {
 
 /// A file under `assets/`, wherever the assets are.
 pub fn asset(relative: &str) -> anyhow::Result<PathBuf> {
-    asset_roots()
-        .into_iter()
-        .map(|r| r.join(relative))
-        .find(|p| p.exists())
-        .with_context(|| format!("bundled asset '{relative}' not found (set DGSTEREO_ASSETS to the repository's assets/ folder)"))
+    asset_roots().into_iter().map(|r| r.join(relative)).find(|p| p.exists()).with_context(|| {
+        format!("bundled asset '{relative}' not found (set DGSTEREO_ASSETS to the repository's assets/ folder)")
+    })
 }
 
 /// The weights used when none are given: the project's default model if it is bundled, else

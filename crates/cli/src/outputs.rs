@@ -75,9 +75,7 @@ pub struct OutputOptions {
 impl OutputOptions {
     /// The farthest depth kept for `calib` (see [`OutputOptions::max_depth`]).
     pub fn max_depth_for(&self, calib: &Calibration) -> f64 {
-        self.max_depth
-            .or(calib.depth_range.map(|(_, far)| far))
-            .unwrap_or_else(|| calib.depth(1.0) as f64)
+        self.max_depth.or(calib.depth_range.map(|(_, far)| far)).unwrap_or_else(|| calib.depth(1.0) as f64)
     }
 }
 

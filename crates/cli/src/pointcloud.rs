@@ -38,11 +38,7 @@ pub struct PointCloud {
 
 /// The depth (metres) of every pixel of a disparity map; `inf` where unknown.
 pub fn depth_map(disp: &DisparityMap, calib: &Calibration) -> DisparityMap {
-    DisparityMap {
-        width: disp.width,
-        height: disp.height,
-        data: disp.data.iter().map(|d| calib.depth(*d)).collect(),
-    }
+    DisparityMap { width: disp.width, height: disp.height, data: disp.data.iter().map(|d| calib.depth(*d)).collect() }
 }
 
 /// Whether a depth belongs in the point cloud: finite, positive, at most `max_depth`.
@@ -55,7 +51,12 @@ pub fn keeps(z: f32, max_depth: f64) -> bool {
 /// # Shapes
 /// `depth` and `image` have the same width and height (that of `calib`, see
 /// [`Calibration::for_size`]).
-pub fn point_cloud(depth: &DisparityMap, image: &RgbImage, calib: &Calibration, max_depth: f64) -> anyhow::Result<PointCloud> {
+pub fn point_cloud(
+    depth: &DisparityMap,
+    image: &RgbImage,
+    calib: &Calibration,
+    max_depth: f64,
+) -> anyhow::Result<PointCloud> {
     if (depth.width, depth.height) != (image.width, image.height) {
         anyhow::bail!(
             "depth map is {}x{} but the image is {}x{}",

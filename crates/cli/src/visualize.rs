@@ -5,9 +5,11 @@ use dgstereo_data::{DisparityMap, RgbImage};
 /// Google's Turbo colour map (polynomial fit by its authors), `t` in 0..1, RGB 0..255.
 pub fn turbo(t: f32) -> [f32; 3] {
     let x = t.clamp(0.0, 1.0) as f64;
-    let r = 0.13572138 + x * (4.61539260 + x * (-42.66032258 + x * (132.13108234 + x * (-152.94239396 + x * 59.28637943))));
+    let r =
+        0.13572138 + x * (4.61539260 + x * (-42.66032258 + x * (132.13108234 + x * (-152.94239396 + x * 59.28637943))));
     let g = 0.09140261 + x * (2.19418839 + x * (4.84296658 + x * (-14.18503333 + x * (4.27729857 + x * 2.82956604))));
-    let b = 0.10667330 + x * (12.64194608 + x * (-60.58204836 + x * (110.36276771 + x * (-89.90310912 + x * 27.34824973))));
+    let b =
+        0.10667330 + x * (12.64194608 + x * (-60.58204836 + x * (110.36276771 + x * (-89.90310912 + x * 27.34824973))));
     [r, g, b].map(|c| (c.clamp(0.0, 1.0) * 255.0) as f32)
 }
 
@@ -171,7 +173,11 @@ mod tests {
         assert_eq!(with.get(1, 0), with.get(1, 48));
         // The text band holds white glyph pixels and black background.
         let text_rows = 48 + 6..with.height;
-        let white = text_rows.clone().flat_map(|y| (0..64).map(move |x| (x, y))).filter(|&(x, y)| with.get(x, y) == [255.0; 3]).count();
+        let white = text_rows
+            .clone()
+            .flat_map(|y| (0..64).map(move |x| (x, y)))
+            .filter(|&(x, y)| with.get(x, y) == [255.0; 3])
+            .count();
         assert!(white > 10 && white < 64 * text_rows.len() / 2, "{white}");
     }
 }

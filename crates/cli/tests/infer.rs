@@ -37,12 +37,8 @@ fn read_ply(path: &Path) -> (usize, Vec<u8>) {
     let end = bytes.windows(11).position(|w| w == b"end_header\n").expect("PLY header ends") + 11;
     let header = std::str::from_utf8(&bytes[..end]).unwrap();
     assert!(header.starts_with("ply\n"), "{header}");
-    let count = header
-        .lines()
-        .find_map(|l| l.strip_prefix("element vertex "))
-        .expect("a vertex element")
-        .parse()
-        .unwrap();
+    let count =
+        header.lines().find_map(|l| l.strip_prefix("element vertex ")).expect("a vertex element").parse().unwrap();
     (count, bytes[end..].to_vec())
 }
 
@@ -248,8 +244,14 @@ fn whole_run_problems_fail_before_any_pair() {
     let out = tmp.path().join("out");
     let base = ["infer", "-l", l.to_str().unwrap(), "-r", r.to_str().unwrap(), "--out", out.to_str().unwrap()];
     let cases: [(Vec<&str>, &str); 3] = [
-        (vec!["--save", "depth", "--calib", bad_calib.to_str().unwrap(), "--weights", w.to_str().unwrap()], "broken.json"),
-        (vec!["--experiment", experiment.to_str().unwrap(), "--weights", w.to_str().unwrap()], "raft_stereo_random.pth"),
+        (
+            vec!["--save", "depth", "--calib", bad_calib.to_str().unwrap(), "--weights", w.to_str().unwrap()],
+            "broken.json",
+        ),
+        (
+            vec!["--experiment", experiment.to_str().unwrap(), "--weights", w.to_str().unwrap()],
+            "raft_stereo_random.pth",
+        ),
         (vec!["--weights", "/nonexistent/weights.pth"], "/nonexistent/weights.pth"),
     ];
     for (extra, needle) in cases {
@@ -293,7 +295,8 @@ fn eval_scores_the_cones_fixture_and_writes_csv_and_json() {
     assert!(lines[0].starts_with("name,group,valid_pixels,epe,"), "{csv}");
     assert!(lines[0].contains("noc-epe"), "the occlusion mask gives non-occluded columns: {csv}");
     assert!(lines[1].starts_with("left_rgb,") && lines[2].starts_with("mean:all,"), "{csv}");
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("eval.json")).unwrap()).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("eval.json")).unwrap()).unwrap();
     assert_eq!(json["rows"].as_array().unwrap().len(), 1);
     let epe = json["rows"][0]["all"]["epe"].as_f64().unwrap();
     let mean = json["aggregates"][0]["all"]["epe"].as_f64().unwrap();
@@ -309,7 +312,8 @@ fn eval_reads_a_middlebury_layout_and_honours_limit() {
     for scene in ["Cones", "ConesAgain"] {
         let d = root.join(scene);
         std::fs::create_dir_all(&d).unwrap();
-        for (from, to) in [("left_rgb.png", "im0.png"), ("right_rgb.png", "im1.png"), ("disp_left.pfm", "disp0GT.pfm")] {
+        for (from, to) in [("left_rgb.png", "im0.png"), ("right_rgb.png", "im1.png"), ("disp_left.pfm", "disp0GT.pfm")]
+        {
             std::fs::copy(cones.join(from), d.join(to)).unwrap();
         }
     }
@@ -335,7 +339,8 @@ fn eval_reads_a_middlebury_layout_and_honours_limit() {
     let (stdout, stderr) = text(&o);
     assert!(o.status.success(), "{stdout}\n{stderr}");
     assert!(stdout.contains("protocol: middlebury (MeanPerImage; headline bad-2)"), "{stdout}");
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("eval.json")).unwrap()).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("eval.json")).unwrap()).unwrap();
     let rows = json["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 1, "--limit 1");
     assert_eq!(rows[0]["name"], "Cones");

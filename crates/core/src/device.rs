@@ -25,9 +25,7 @@ impl std::str::FromStr for DeviceChoice {
         match s.to_ascii_lowercase().as_str() {
             "cpu" | "flex" => Ok(Self::Cpu),
             "gpu" | "wgpu" | "vulkan" => Ok(Self::Gpu),
-            other => Err(crate::Error::Config(format!(
-                "unknown device '{other}' (expected 'cpu' or 'gpu')"
-            ))),
+            other => Err(crate::Error::Config(format!("unknown device '{other}' (expected 'cpu' or 'gpu')"))),
         }
     }
 }
@@ -41,8 +39,7 @@ impl DeviceChoice {
             Self::Gpu => Ok(Device::vulkan(Default::default())),
             #[cfg(not(feature = "gpu"))]
             Self::Gpu => Err(crate::Error::Config(
-                "this binary was built without the GPU backend; rebuild with `--features gpu`"
-                    .into(),
+                "this binary was built without the GPU backend; rebuild with `--features gpu`".into(),
             )),
         }
     }

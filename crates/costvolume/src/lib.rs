@@ -84,7 +84,12 @@ impl CorrelationConfig {
     }
 
     /// Builds the volume with an explicit implementation.
-    pub fn build_with(&self, implementation: CorrelationImplementation, fmap1: Tensor<4>, fmap2: Tensor<4>) -> Correlation {
+    pub fn build_with(
+        &self,
+        implementation: CorrelationImplementation,
+        fmap1: Tensor<4>,
+        fmap2: Tensor<4>,
+    ) -> Correlation {
         match implementation {
             CorrelationImplementation::Reg => {
                 Correlation::Reg(CorrelationPyramid::new(fmap1, fmap2, self.levels, self.radius))

@@ -19,7 +19,8 @@ pub(crate) fn taps(x: Tensor<2>, radius: usize, width: usize) -> (Tensor<2, Int>
     let n = 2 * radius + 2;
     let offsets = Tensor::<1, Int>::arange(0..n as i64, &device).float().sub_scalar(radius as f64);
     let pos = x0.expand([m, n]) + offsets.unsqueeze::<2>().expand([m, n]);
-    let inside = pos.clone().greater_equal_elem(0.0).float() * pos.clone().lower_equal_elem((width as f64) - 1.0).float();
+    let inside =
+        pos.clone().greater_equal_elem(0.0).float() * pos.clone().lower_equal_elem((width as f64) - 1.0).float();
     let idx = pos.clamp(0.0, (width as f64) - 1.0).int();
     (idx, inside, w)
 }

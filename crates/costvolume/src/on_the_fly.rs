@@ -64,7 +64,8 @@ impl CostVolume for OnTheFlyCorrelation {
                 dots.push((sampled * self.fmap1.clone()).sum_dim(1));
             }
             // [N, T, H, W1] -> [M, T]
-            let values = Tensor::cat(dots, 1).permute([0, 2, 3, 1]).reshape([m, taps_n]).div_scalar((c as f64).sqrt()) * inside;
+            let values =
+                Tensor::cat(dots, 1).permute([0, 2, 3, 1]).reshape([m, taps_n]).div_scalar((c as f64).sqrt()) * inside;
             out.push(interpolate_taps(values, w, self.radius));
         }
         let k = 2 * self.radius + 1;

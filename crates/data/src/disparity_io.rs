@@ -22,18 +22,12 @@ pub enum DisparityFormat {
 impl DisparityFormat {
     /// The format named by the file's extension (case-insensitive).
     pub fn from_path(path: &Path) -> Result<Self> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
+        let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
         match ext.as_deref() {
             Some("pfm") => Ok(Self::Pfm),
             Some("png") => Ok(Self::KittiPng),
             Some("npy") => Ok(Self::Npy),
-            _ => Err(Error::format(
-                path,
-                "unknown disparity format (expected .pfm, .png or .npy)",
-            )),
+            _ => Err(Error::format(path, "unknown disparity format (expected .pfm, .png or .npy)")),
         }
     }
 }

@@ -24,19 +24,11 @@ pub struct RgbImage {
 impl RgbImage {
     /// A black image.
     pub fn new(width: usize, height: usize) -> Self {
-        Self {
-            width,
-            height,
-            data: vec![0.0; 3 * width * height],
-        }
+        Self { width, height, data: vec![0.0; 3 * width * height] }
     }
 
     /// An image whose pixel `(x, y)` is `f(x, y)` (`[r, g, b]`).
-    pub fn from_fn(
-        width: usize,
-        height: usize,
-        mut f: impl FnMut(usize, usize) -> [f32; 3],
-    ) -> Self {
+    pub fn from_fn(width: usize, height: usize, mut f: impl FnMut(usize, usize) -> [f32; 3]) -> Self {
         let mut img = Self::new(width, height);
         for y in 0..height {
             for x in 0..width {
@@ -108,9 +100,7 @@ impl RgbImage {
     /// The sub-image of `width x height` whose top-left corner is `(x0, y0)`.
     pub fn crop(&self, x0: usize, y0: usize, width: usize, height: usize) -> Result<Self> {
         check_crop(self.width, self.height, x0, y0, width, height)?;
-        Ok(Self::from_fn(width, height, |x, y| {
-            self.get(x0 + x, y0 + y)
-        }))
+        Ok(Self::from_fn(width, height, |x, y| self.get(x0 + x, y0 + y)))
     }
 }
 
@@ -132,11 +122,7 @@ pub struct DisparityMap {
 impl DisparityMap {
     /// A map filled with `value`.
     pub fn filled(width: usize, height: usize, value: f32) -> Self {
-        Self {
-            width,
-            height,
-            data: vec![value; width * height],
-        }
+        Self { width, height, data: vec![value; width * height] }
     }
 
     /// A map from row-major values; errors if the length does not match.
@@ -148,11 +134,7 @@ impl DisparityMap {
                 data.len()
             )));
         }
-        Ok(Self {
-            width,
-            height,
-            data,
-        })
+        Ok(Self { width, height, data })
     }
 
     /// The value at `(x, y)`.
@@ -170,21 +152,13 @@ impl DisparityMap {
         Mask {
             width: self.width,
             height: self.height,
-            data: self
-                .data
-                .iter()
-                .map(|v| v.is_finite() && *v > 0.0)
-                .collect(),
+            data: self.data.iter().map(|v| v.is_finite() && *v > 0.0).collect(),
         }
     }
 
     /// The pixels whose value is finite.
     pub fn valid_finite(&self) -> Mask {
-        Mask {
-            width: self.width,
-            height: self.height,
-            data: self.data.iter().map(|v| v.is_finite()).collect(),
-        }
+        Mask { width: self.width, height: self.height, data: self.data.iter().map(|v| v.is_finite()).collect() }
     }
 
     /// The sub-map of `width x height` whose top-left corner is `(x0, y0)`.
@@ -194,11 +168,7 @@ impl DisparityMap {
         for y in y0..y0 + height {
             data.extend_from_slice(&self.data[y * self.width + x0..y * self.width + x0 + width]);
         }
-        Ok(Self {
-            width,
-            height,
-            data,
-        })
+        Ok(Self { width, height, data })
     }
 }
 
@@ -216,11 +186,7 @@ pub struct Mask {
 impl Mask {
     /// A mask with every pixel set to `value`.
     pub fn filled(width: usize, height: usize, value: bool) -> Self {
-        Self {
-            width,
-            height,
-            data: vec![value; width * height],
-        }
+        Self { width, height, data: vec![value; width * height] }
     }
 
     /// The flag at `(x, y)`.
@@ -244,12 +210,7 @@ impl Mask {
         Ok(Mask {
             width: self.width,
             height: self.height,
-            data: self
-                .data
-                .iter()
-                .zip(&other.data)
-                .map(|(a, b)| *a && *b)
-                .collect(),
+            data: self.data.iter().zip(&other.data).map(|(a, b)| *a && *b).collect(),
         })
     }
 
@@ -260,19 +221,13 @@ impl Mask {
         for y in y0..y0 + height {
             data.extend_from_slice(&self.data[y * self.width + x0..y * self.width + x0 + width]);
         }
-        Ok(Self {
-            width,
-            height,
-            data,
-        })
+        Ok(Self { width, height, data })
     }
 }
 
 fn check_crop(w: usize, h: usize, x0: usize, y0: usize, cw: usize, ch: usize) -> Result<()> {
     if x0 + cw > w || y0 + ch > h {
-        return Err(Error::Shape(format!(
-            "crop {cw}x{ch} at ({x0}, {y0}) does not fit in {w}x{h}"
-        )));
+        return Err(Error::Shape(format!("crop {cw}x{ch} at ({x0}, {y0}) does not fit in {w}x{h}")));
     }
     Ok(())
 }
@@ -288,9 +243,7 @@ pub(crate) fn image_error(path: &Path, e: image::ImageError) -> Error {
 /// Opens and decodes a picture, naming `path` in any error.
 pub(crate) fn open_dynamic(path: &Path) -> Result<image::DynamicImage> {
     let reader = image::ImageReader::open(path).map_err(|e| Error::io(path, e))?;
-    let reader = reader
-        .with_guessed_format()
-        .map_err(|e| Error::io(path, e))?;
+    let reader = reader.with_guessed_format().map_err(|e| Error::io(path, e))?;
     reader.decode().map_err(|e| image_error(path, e))
 }
 
@@ -304,24 +257,13 @@ pub fn load_rgb(path: impl AsRef<Path>) -> Result<RgbImage> {
     let (w, h) = (img.width() as usize, img.height() as usize);
     use image::DynamicImage as D;
     let hwc: Vec<f32> = match img {
-        D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => img
-            .to_rgb8()
-            .into_raw()
-            .into_iter()
-            .map(f32::from)
-            .collect(),
-        D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => img
-            .to_rgb16()
-            .into_raw()
-            .into_iter()
-            .map(|v| f32::from(v) * (255.0 / 65535.0))
-            .collect(),
-        _ => img
-            .to_rgb32f()
-            .into_raw()
-            .into_iter()
-            .map(|v| v * 255.0)
-            .collect(),
+        D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => {
+            img.to_rgb8().into_raw().into_iter().map(f32::from).collect()
+        }
+        D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => {
+            img.to_rgb16().into_raw().into_iter().map(|v| f32::from(v) * (255.0 / 65535.0)).collect()
+        }
+        _ => img.to_rgb32f().into_raw().into_iter().map(|v| v * 255.0).collect(),
     };
     RgbImage::from_interleaved(w, h, &hwc).map_err(|e| Error::format(path, e.to_string()))
 }
@@ -330,11 +272,7 @@ pub fn load_rgb(path: impl AsRef<Path>) -> Result<RgbImage> {
 /// clamping samples to 0..255.
 pub fn save_rgb(path: impl AsRef<Path>, img: &RgbImage) -> Result<()> {
     let path = path.as_ref();
-    let raw: Vec<u8> = img
-        .to_interleaved()
-        .iter()
-        .map(|v| v.round().clamp(0.0, 255.0) as u8)
-        .collect();
+    let raw: Vec<u8> = img.to_interleaved().iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect();
     let buf = image::RgbImage::from_raw(img.width as u32, img.height as u32, raw)
         .ok_or_else(|| Error::format(path, "image buffer of the wrong size"))?;
     buf.save(path).map_err(|e| image_error(path, e))
@@ -346,11 +284,7 @@ pub fn load_mask(path: impl AsRef<Path>) -> Result<Mask> {
     let img = open_dynamic(path)?.to_rgb16();
     let (w, h) = (img.width() as usize, img.height() as usize);
     let data = img.pixels().map(|p| p.0.iter().any(|v| *v != 0)).collect();
-    Ok(Mask {
-        width: w,
-        height: h,
-        data,
-    })
+    Ok(Mask { width: w, height: h, data })
 }
 
 /// Saves a mask as an 8-bit grayscale PNG (255 = `true`, 0 = `false`).

@@ -18,23 +18,12 @@ pub fn read_kitti_png(path: impl AsRef<Path>) -> Result<DisparityMap> {
     use image::DynamicImage as D;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let data: Vec<f32> = match img {
-        D::ImageLuma16(buf) => buf
-            .into_raw()
-            .into_iter()
-            .map(|v| f32::from(v) / 256.0)
-            .collect(),
-        D::ImageRgb16(buf) => buf
-            .into_raw()
-            .chunks_exact(3)
-            .map(|c| f32::from(c[0]) / 256.0)
-            .collect(),
+        D::ImageLuma16(buf) => buf.into_raw().into_iter().map(|v| f32::from(v) / 256.0).collect(),
+        D::ImageRgb16(buf) => buf.into_raw().chunks_exact(3).map(|c| f32::from(c[0]) / 256.0).collect(),
         other => {
             return Err(Error::format(
                 path,
-                format!(
-                    "KITTI disparity PNG must be 16-bit grayscale, found {:?}",
-                    other.color()
-                ),
+                format!("KITTI disparity PNG must be 16-bit grayscale, found {:?}", other.color()),
             ));
         }
     };
@@ -43,11 +32,7 @@ pub fn read_kitti_png(path: impl AsRef<Path>) -> Result<DisparityMap> {
 
 /// Encodes one disparity value as KITTI's 16-bit integer.
 pub fn kitti_encode(d: f32) -> u16 {
-    if d.is_finite() && d > 0.0 {
-        (d * 256.0).round().clamp(1.0, 65535.0) as u16
-    } else {
-        0
-    }
+    if d.is_finite() && d > 0.0 { (d * 256.0).round().clamp(1.0, 65535.0) as u16 } else { 0 }
 }
 
 /// Writes a disparity map as a KITTI 16-bit grayscale PNG.
@@ -57,6 +42,5 @@ pub fn write_kitti_png(path: impl AsRef<Path>, disp: &DisparityMap) -> Result<()
     let buf: image::ImageBuffer<image::Luma<u16>, Vec<u16>> =
         image::ImageBuffer::from_raw(disp.width as u32, disp.height as u32, raw)
             .ok_or_else(|| Error::format(path, "disparity buffer of the wrong size"))?;
-    buf.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| image_error(path, e))
+    buf.save_with_format(path, image::ImageFormat::Png).map_err(|e| image_error(path, e))
 }

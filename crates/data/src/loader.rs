@@ -42,11 +42,7 @@ impl<T: Send + 'static> PrefetchLoader<T> {
                 }
             }
         });
-        Self {
-            rx: Some(rx),
-            feeder: Some(feeder),
-            remaining,
-        }
+        Self { rx: Some(rx), feeder: Some(feeder), remaining }
     }
 }
 

@@ -45,22 +45,17 @@ pub fn decode_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
             if bytes.len() < 12 {
                 return Err(err("truncated header".into()));
             }
-            (
-                u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-                12,
-            )
+            (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12)
         }
         v => return Err(err(format!("unsupported version {v}"))),
     };
     if bytes.len() < start + hlen {
         return Err(err("truncated header".into()));
     }
-    let header = std::str::from_utf8(&bytes[start..start + hlen])
-        .map_err(|_| err("header is not text".into()))?;
+    let header = std::str::from_utf8(&bytes[start..start + hlen]).map_err(|_| err("header is not text".into()))?;
     let descr = dict_value(header, "descr").ok_or_else(|| err("header lacks 'descr'".into()))?;
     let descr = descr.trim().trim_matches(|c| c == '\'' || c == '"');
-    let fortran = dict_value(header, "fortran_order")
-        .ok_or_else(|| err("header lacks 'fortran_order'".into()))?;
+    let fortran = dict_value(header, "fortran_order").ok_or_else(|| err("header lacks 'fortran_order'".into()))?;
     if fortran.trim().starts_with("True") {
         return Err(err("Fortran-order arrays are not supported".into()));
     }
@@ -85,17 +80,11 @@ pub fn decode_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
         "<f8" => (8, true, true),
         ">f8" => (8, false, true),
         d => {
-            return Err(err(format!(
-                "unsupported dtype {d:?} (need float32 or float64)"
-            )));
+            return Err(err(format!("unsupported dtype {d:?} (need float32 or float64)")));
         }
     };
     if body.len() < n * size {
-        return Err(err(format!(
-            "truncated: shape {shape:?} needs {} data bytes, found {}",
-            n * size,
-            body.len()
-        )));
+        return Err(err(format!("truncated: shape {shape:?} needs {} data bytes, found {}", n * size, body.len())));
     }
     let data = body[..n * size]
         .chunks_exact(size)
@@ -104,11 +93,7 @@ pub fn decode_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
             (false, false) => f32::from_be_bytes([c[0], c[1], c[2], c[3]]),
             (true, le) => {
                 let b = [c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]];
-                (if le {
-                    f64::from_le_bytes(b)
-                } else {
-                    f64::from_be_bytes(b)
-                }) as f32
+                (if le { f64::from_le_bytes(b) } else { f64::from_be_bytes(b) }) as f32
             }
         })
         .collect();
@@ -119,10 +104,8 @@ pub fn decode_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
 fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
     let pat_sq = format!("'{key}'");
     let pat_dq = format!("\"{key}\"");
-    let at = header
-        .find(&pat_sq)
-        .map(|i| i + pat_sq.len())
-        .or_else(|| header.find(&pat_dq).map(|i| i + pat_dq.len()))?;
+    let at =
+        header.find(&pat_sq).map(|i| i + pat_sq.len()).or_else(|| header.find(&pat_dq).map(|i| i + pat_dq.len()))?;
     let rest = header[at..].trim_start().strip_prefix(':')?;
     let mut depth = 0i32;
     for (i, c) in rest.char_indices() {
@@ -140,22 +123,11 @@ fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
 pub fn encode_npy(arr: &NpyArray, dtype: NpyDtype) -> Result<Vec<u8>> {
     let n: usize = arr.shape.iter().product();
     if n != arr.data.len() {
-        return Err(Error::Shape(format!(
-            "npy shape {:?} needs {n} samples, got {}",
-            arr.shape,
-            arr.data.len()
-        )));
+        return Err(Error::Shape(format!("npy shape {:?} needs {n} samples, got {}", arr.shape, arr.data.len())));
     }
     let shape = match arr.shape.len() {
         1 => format!("({},)", arr.shape[0]),
-        _ => format!(
-            "({})",
-            arr.shape
-                .iter()
-                .map(|d| d.to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
+        _ => format!("({})", arr.shape.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")),
     };
     let descr = if dtype == NpyDtype::F32 { "<f4" } else { "<f8" };
     let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
@@ -204,18 +176,11 @@ pub fn read_npy_disparity(path: impl AsRef<Path>) -> Result<DisparityMap> {
             ));
         }
     };
-    Ok(DisparityMap {
-        width: w,
-        height: h,
-        data: arr.data,
-    })
+    Ok(DisparityMap { width: w, height: h, data: arr.data })
 }
 
 /// Writes a disparity map as a `(H, W)` `float32` `.npy`.
 pub fn write_npy_disparity(path: impl AsRef<Path>, disp: &DisparityMap) -> Result<()> {
-    let arr = NpyArray {
-        shape: vec![disp.height, disp.width],
-        data: disp.data.clone(),
-    };
+    let arr = NpyArray { shape: vec![disp.height, disp.width], data: disp.data.clone() };
     write_npy(path, &arr, NpyDtype::F32)
 }

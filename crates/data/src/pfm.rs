@@ -60,15 +60,9 @@ pub fn decode_pfm(bytes: &[u8], path: &Path) -> Result<Pfm> {
         "Pf" => 1,
         m => return Err(err(format!("bad magic {m:?}, expected \"PF\" or \"Pf\""))),
     };
-    let width: usize = token("width")?
-        .parse()
-        .map_err(|_| err("bad width".into()))?;
-    let height: usize = token("height")?
-        .parse()
-        .map_err(|_| err("bad height".into()))?;
-    let scale: f32 = token("scale")?
-        .parse()
-        .map_err(|_| err("bad scale".into()))?;
+    let width: usize = token("width")?.parse().map_err(|_| err("bad width".into()))?;
+    let height: usize = token("height")?.parse().map_err(|_| err("bad height".into()))?;
+    let scale: f32 = token("scale")?.parse().map_err(|_| err("bad scale".into()))?;
     if scale == 0.0 || !scale.is_finite() {
         return Err(err(format!("scale {scale} must be finite and non-zero")));
     }
@@ -94,30 +88,18 @@ pub fn decode_pfm(bytes: &[u8], path: &Path) -> Result<Pfm> {
     let mut data = vec![0f32; n];
     for (i, chunk) in body[..n * 4].chunks_exact(4).enumerate() {
         let b = [chunk[0], chunk[1], chunk[2], chunk[3]];
-        let v = if little {
-            f32::from_le_bytes(b)
-        } else {
-            f32::from_be_bytes(b)
-        };
+        let v = if little { f32::from_le_bytes(b) } else { f32::from_be_bytes(b) };
         // File row r (bottom first) goes to memory row height-1-r.
         let (r, c) = (i / row, i % row);
         data[(height - 1 - r) * row + c] = v;
     }
-    Ok(Pfm {
-        width,
-        height,
-        channels,
-        data,
-    })
+    Ok(Pfm { width, height, channels, data })
 }
 
 /// Encodes a PFM with the given byte order.
 pub fn encode_pfm(pfm: &Pfm, endian: Endian) -> Result<Vec<u8>> {
     if pfm.channels != 1 && pfm.channels != 3 {
-        return Err(Error::Shape(format!(
-            "PFM needs 1 or 3 channels, got {}",
-            pfm.channels
-        )));
+        return Err(Error::Shape(format!("PFM needs 1 or 3 channels, got {}", pfm.channels)));
     }
     let row = pfm.width * pfm.channels;
     if pfm.data.len() != row * pfm.height {
@@ -131,20 +113,12 @@ pub fn encode_pfm(pfm: &Pfm, endian: Endian) -> Result<Vec<u8>> {
         )));
     }
     let magic = if pfm.channels == 3 { "PF" } else { "Pf" };
-    let scale = if endian == Endian::Little {
-        "-1.0"
-    } else {
-        "1.0"
-    };
+    let scale = if endian == Endian::Little { "-1.0" } else { "1.0" };
     let mut out = format!("{magic}\n{} {}\n{scale}\n", pfm.width, pfm.height).into_bytes();
     out.reserve(pfm.data.len() * 4);
     for r in (0..pfm.height).rev() {
         for v in &pfm.data[r * row..(r + 1) * row] {
-            let b = if endian == Endian::Little {
-                v.to_le_bytes()
-            } else {
-                v.to_be_bytes()
-            };
+            let b = if endian == Endian::Little { v.to_le_bytes() } else { v.to_be_bytes() };
             out.extend_from_slice(&b);
         }
     }
@@ -169,25 +143,12 @@ pub fn write_pfm(path: impl AsRef<Path>, pfm: &Pfm, endian: Endian) -> Result<()
 /// disparity as `Pf`; some tools write three equal channels). Values are kept, inf included.
 pub fn read_pfm_disparity(path: impl AsRef<Path>) -> Result<DisparityMap> {
     let pfm = read_pfm(path)?;
-    let data = if pfm.channels == 1 {
-        pfm.data
-    } else {
-        pfm.data.chunks_exact(pfm.channels).map(|c| c[0]).collect()
-    };
-    Ok(DisparityMap {
-        width: pfm.width,
-        height: pfm.height,
-        data,
-    })
+    let data = if pfm.channels == 1 { pfm.data } else { pfm.data.chunks_exact(pfm.channels).map(|c| c[0]).collect() };
+    Ok(DisparityMap { width: pfm.width, height: pfm.height, data })
 }
 
 /// Writes a disparity map as a little-endian grayscale (`Pf`) PFM.
 pub fn write_pfm_disparity(path: impl AsRef<Path>, disp: &DisparityMap) -> Result<()> {
-    let pfm = Pfm {
-        width: disp.width,
-        height: disp.height,
-        channels: 1,
-        data: disp.data.clone(),
-    };
+    let pfm = Pfm { width: disp.width, height: disp.height, channels: 1, data: disp.data.clone() };
     write_pfm(path, &pfm, Endian::Little)
 }

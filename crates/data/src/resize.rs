@@ -38,9 +38,7 @@ fn linear_taps(n_in: usize, n_out: usize, scale: f64) -> Vec<(usize, f32)> {
 }
 
 fn nearest_taps(n_in: usize, n_out: usize, scale: f64) -> Vec<usize> {
-    (0..n_out)
-        .map(|d| (((d as f64 + 0.5) / scale).floor() as usize).min(n_in - 1))
-        .collect()
+    (0..n_out).map(|d| (((d as f64 + 0.5) / scale).floor() as usize).min(n_in - 1)).collect()
 }
 
 #[inline]
@@ -55,13 +53,7 @@ fn mix(a: f32, b: f32, t: f32) -> f32 {
 }
 
 /// Resizes a row-major plane by factors `fx`, `fy` with `INTER_LINEAR`; returns `(plane, w, h)`.
-pub fn resize_plane_linear(
-    src: &[f32],
-    width: usize,
-    height: usize,
-    fx: f64,
-    fy: f64,
-) -> (Vec<f32>, usize, usize) {
+pub fn resize_plane_linear(src: &[f32], width: usize, height: usize, fx: f64, fy: f64) -> (Vec<f32>, usize, usize) {
     let (ow, oh) = scaled_size(width, height, fx, fy);
     let xs = linear_taps(width, ow, fx);
     let ys = linear_taps(height, oh, fy);
@@ -72,11 +64,7 @@ pub fn resize_plane_linear(
         for &(sx, tx) in &xs {
             let sx1 = (sx + 1).min(width - 1);
             let top = mix(r0[sx], r0[sx1], tx);
-            let bot = if ty == 0.0 {
-                0.0
-            } else {
-                mix(r1[sx], r1[sx1], tx)
-            };
+            let bot = if ty == 0.0 { 0.0 } else { mix(r1[sx], r1[sx1], tx) };
             out.push(mix(top, bot, ty));
         }
     }
@@ -110,11 +98,7 @@ pub fn resize_rgb(img: &RgbImage, fx: f64, fy: f64) -> RgbImage {
     for c in 0..3 {
         data.extend(resize_plane_linear(img.plane(c), img.width, img.height, fx, fy).0);
     }
-    RgbImage {
-        width: ow,
-        height: oh,
-        data,
-    }
+    RgbImage { width: ow, height: oh, data }
 }
 
 /// Resizes a disparity map both bilinearly and by nearest neighbour, each multiplied by `fx`
@@ -124,27 +108,15 @@ pub fn resize_disparity(d: &DisparityMap, fx: f64, fy: f64) -> (DisparityMap, Di
     let (lin, w, h) = resize_plane_linear(&d.data, d.width, d.height, fx, fy);
     let (near, _, _) = resize_plane_nearest(&d.data, d.width, d.height, fx, fy);
     (
-        DisparityMap {
-            width: w,
-            height: h,
-            data: lin.into_iter().map(|v| v * s).collect(),
-        },
-        DisparityMap {
-            width: w,
-            height: h,
-            data: near.into_iter().map(|v| v * s).collect(),
-        },
+        DisparityMap { width: w, height: h, data: lin.into_iter().map(|v| v * s).collect() },
+        DisparityMap { width: w, height: h, data: near.into_iter().map(|v| v * s).collect() },
     )
 }
 
 /// Resizes a mask by nearest neighbour.
 pub fn resize_mask(m: &Mask, fx: f64, fy: f64) -> Mask {
     let (data, width, height) = resize_plane_nearest(&m.data, m.width, m.height, fx, fy);
-    Mask {
-        width,
-        height,
-        data,
-    }
+    Mask { width, height, data }
 }
 
 #[cfg(test)]

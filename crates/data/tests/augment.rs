@@ -22,11 +22,7 @@ fn identity_cfg(crop: [usize; 2]) -> AugmentConfig {
 }
 
 fn scene(w: usize, h: usize, wl: f64) -> dgstereo_data::SyntheticSample {
-    let cfg = SyntheticConfig {
-        min_wavelength: wl,
-        max_disparity: 20.0,
-        ..SyntheticConfig::with_size(w, h)
-    };
+    let cfg = SyntheticConfig { min_wavelength: wl, max_disparity: 20.0, ..SyntheticConfig::with_size(w, h) };
     generate(&cfg, 42)
 }
 
@@ -43,52 +39,27 @@ fn deterministic_per_seed_and_sized_to_the_crop() {
         assert_eq!((out.left.width, out.left.height), (96, 64));
         assert_eq!((out.right.width, out.right.height), (96, 64));
         assert_eq!((out.disparity.width, out.disparity.height), (96, 64));
-        assert_eq!(
-            (out.disparity_nearest.width, out.disparity_nearest.height),
-            (96, 64)
-        );
+        assert_eq!((out.disparity_nearest.width, out.disparity_nearest.height), (96, 64));
         assert_eq!(out.valid.data.len(), 96 * 64);
-        assert!(
-            out.left
-                .data
-                .iter()
-                .chain(&out.right.data)
-                .all(|v| (0.0..=255.0).contains(v))
-        );
+        assert!(out.left.data.iter().chain(&out.right.data).all(|v| (0.0..=255.0).contains(v)));
     }
 }
 
 #[test]
 fn scale_is_clipped_to_fit_the_crop() {
     let s = scene(100, 80, 4.0);
-    let cfg = AugmentConfig {
-        min_scale: -1.0,
-        max_scale: -1.0,
-        ..AugmentConfig::with_crop(64, 64)
-    };
+    let cfg = AugmentConfig { min_scale: -1.0, max_scale: -1.0, ..AugmentConfig::with_crop(64, 64) };
     for seed in 0..5 {
         let out = augment(&cfg, &s.left, &s.right, &s.disparity, None, seed).unwrap();
         // 2^-1 is below max((64+8)/80, (64+8)/100) = 0.9.
-        assert!(
-            out.scale[0] >= 0.9 - 1e-12 && out.scale[1] >= 0.9 - 1e-12,
-            "{:?}",
-            out.scale
-        );
+        assert!(out.scale[0] >= 0.9 - 1e-12 && out.scale[1] >= 0.9 - 1e-12, "{:?}", out.scale);
     }
 }
 
 #[test]
 fn identity_settings_give_an_exact_crop() {
     let s = scene(64, 48, 4.0);
-    let out = augment(
-        &identity_cfg([32, 40]),
-        &s.left,
-        &s.right,
-        &s.disparity,
-        None,
-        1,
-    )
-    .unwrap();
+    let out = augment(&identity_cfg([32, 40]), &s.left, &s.right, &s.disparity, None, 1).unwrap();
     assert_eq!(out.scale, [1.0, 1.0]);
     // Find the crop offset from the disparity and check every map against it.
     let mut found = false;
@@ -109,10 +80,7 @@ fn identity_settings_give_an_exact_crop() {
 #[test]
 fn y_jitter_shifts_the_right_crop_by_at_most_2_rows() {
     let s = scene(64, 48, 4.0);
-    let cfg = AugmentConfig {
-        yjitter: true,
-        ..identity_cfg([32, 40])
-    };
+    let cfg = AugmentConfig { yjitter: true, ..identity_cfg([32, 40]) };
     let mut shifts = std::collections::BTreeSet::new();
     for seed in 0..40 {
         let out = augment(&cfg, &s.left, &s.right, &s.disparity, None, seed).unwrap();
@@ -124,16 +92,11 @@ fn y_jitter_shifts_the_right_crop_by_at_most_2_rows() {
                 }
             }
         }
-        assert!(
-            x0 != usize::MAX,
-            "left crop not found; corner must lie 2 px inside"
-        );
+        assert!(x0 != usize::MAX, "left crop not found; corner must lie 2 px inside");
         let dy: Vec<i64> = (-2i64..=2)
             .filter(|d| {
                 let y1 = y0 as i64 + d;
-                y1 >= 0
-                    && (y1 as usize) + 32 <= 48
-                    && s.right.crop(x0, y1 as usize, 40, 32).unwrap() == out.right
+                y1 >= 0 && (y1 as usize) + 32 <= 48 && s.right.crop(x0, y1 as usize, 40, 32).unwrap() == out.right
             })
             .collect();
         assert_eq!(dy.len(), 1, "seed {seed}");
@@ -145,13 +108,8 @@ fn y_jitter_shifts_the_right_crop_by_at_most_2_rows() {
 #[test]
 fn eraser_fills_boxes_of_the_right_image_with_its_mean_colour() {
     let s = scene(200, 160, 4.0);
-    let cfg = AugmentConfig {
-        eraser_prob: 1.0,
-        ..identity_cfg([150, 190])
-    };
-    let mean: Vec<f32> = (0..3)
-        .map(|c| s.right.plane(c).iter().sum::<f32>() / (200.0 * 160.0))
-        .collect();
+    let cfg = AugmentConfig { eraser_prob: 1.0, ..identity_cfg([150, 190]) };
+    let mean: Vec<f32> = (0..3).map(|c| s.right.plane(c).iter().sum::<f32>() / (200.0 * 160.0)).collect();
     let mut erased_any = false;
     for seed in 0..6 {
         let out = augment(&cfg, &s.left, &s.right, &s.disparity, None, seed).unwrap();
@@ -185,23 +143,13 @@ fn eraser_fills_boxes_of_the_right_image_with_its_mean_colour() {
 fn scaled_disparity_still_maps_left_to_right() {
     // Smooth textures; colour, eraser and y-jitter off; scale 2^U(-0.2, 0.4) with stretch.
     let s = scene(160, 120, 16.0);
-    let cfg = AugmentConfig {
-        min_scale: -0.2,
-        max_scale: 0.4,
-        stretch_prob: 1.0,
-        ..identity_cfg([80, 120])
-    };
+    let cfg = AugmentConfig { min_scale: -0.2, max_scale: 0.4, stretch_prob: 1.0, ..identity_cfg([80, 120]) };
     for seed in 0..3 {
         let out = augment(&cfg, &s.left, &s.right, &s.disparity, None, seed).unwrap();
         let [sx, _] = out.scale;
         // Nearest values are input values times sx.
         let scaled: Vec<f32> = s.disparity.data.iter().map(|d| d * sx as f32).collect();
-        assert!(
-            out.disparity_nearest
-                .data
-                .iter()
-                .all(|d| scaled.contains(d))
-        );
+        assert!(out.disparity_nearest.data.iter().all(|d| scaled.contains(d)));
         let (mut n, mut err) = (0, 0f64);
         let w = out.left.width;
         for y in 0..out.left.height {
@@ -223,10 +171,7 @@ fn scaled_disparity_still_maps_left_to_right() {
         }
         let mean = err / n as f64;
         // Occluded pixels are included (no mask after resizing), hence a loose bound.
-        assert!(
-            n > 10_000 && mean < 4.0,
-            "seed {seed}: {n} samples, mean error {mean}"
-        );
+        assert!(n > 10_000 && mean < 4.0, "seed {seed}: {n} samples, mean error {mean}");
     }
 }
 
@@ -234,23 +179,12 @@ fn scaled_disparity_still_maps_left_to_right() {
 fn symmetric_colour_jitter_treats_both_views_alike() {
     let img = RgbImage::from_fn(120, 100, |x, y| [(x * 2) as f32, (y * 2) as f32, 100.0]);
     let d = DisparityMap::filled(120, 100, 3.0);
-    let cfg = AugmentConfig {
-        brightness: 0.4,
-        contrast: 0.4,
-        saturation: [0.6, 1.4],
-        hue: 0.1,
-        ..identity_cfg([90, 100])
-    };
+    let cfg =
+        AugmentConfig { brightness: 0.4, contrast: 0.4, saturation: [0.6, 1.4], hue: 0.1, ..identity_cfg([90, 100]) };
     let out = augment(&cfg, &img, &img, &d, None, 9).unwrap();
-    assert!(
-        out.left == out.right,
-        "same draw applied to identical views"
-    );
+    assert!(out.left == out.right, "same draw applied to identical views");
     assert!(out.left != img.crop(0, 0, 100, 90).unwrap());
-    let asym = AugmentConfig {
-        asymmetric_color_prob: 1.0,
-        ..cfg
-    };
+    let asym = AugmentConfig { asymmetric_color_prob: 1.0, ..cfg };
     let out = augment(&asym, &img, &img, &d, None, 9).unwrap();
     assert!(out.left != out.right, "independent draws");
 }
@@ -261,10 +195,7 @@ fn mismatched_sizes_are_an_error() {
     let b = RgbImage::new(51, 40);
     let d = DisparityMap::filled(50, 40, 1.0);
     assert!(augment(&AugmentConfig::with_crop(16, 16), &a, &b, &d, None, 0).is_err());
-    let cfg = AugmentConfig {
-        spatial_prob: 0.0,
-        ..AugmentConfig::with_crop(64, 64)
-    };
+    let cfg = AugmentConfig { spatial_prob: 0.0, ..AugmentConfig::with_crop(64, 64) };
     let e = augment(&cfg, &a, &a, &d, None, 0).unwrap_err();
     assert!(e.to_string().contains("too small"), "{e}");
 }

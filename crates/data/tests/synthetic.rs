@@ -1,9 +1,7 @@
 //! The synthetic generator: exact correspondence, determinism, speed.
 
 use dgstereo_data::RgbImage;
-use dgstereo_data::synthetic::{
-    DisparityField, Outline, Surface, SyntheticConfig, SyntheticScene, Texture, generate,
-};
+use dgstereo_data::synthetic::{DisparityField, Outline, Surface, SyntheticConfig, SyntheticScene, Texture, generate};
 
 fn small(seed_wl: f64) -> SyntheticConfig {
     SyntheticConfig {
@@ -43,10 +41,7 @@ fn right_view_at_the_disparity_reproduces_the_left_view_exactly() {
         for y in 0..s.left.height {
             for x in 0..s.left.width {
                 let d = f64::from(s.disparity.get(x, y));
-                assert!(
-                    d.is_finite() && d >= cfg.min_disparity - 1e-6 && d <= cfg.max_disparity + 1e-6,
-                    "d {d}"
-                );
+                assert!(d.is_finite() && d >= cfg.min_disparity - 1e-6 && d <= cfg.max_disparity + 1e-6, "d {d}");
                 if s.occlusion.get(x, y) {
                     continue;
                 }
@@ -54,19 +49,13 @@ fn right_view_at_the_disparity_reproduces_the_left_view_exactly() {
                 let r = scene.right_colour(x as f64 - d, y as f64);
                 let l = s.left.get(x, y);
                 for c in 0..3 {
-                    assert!(
-                        (r[c] - l[c]).abs() < 1e-3,
-                        "seed {seed} ({x},{y}) {l:?} vs {r:?}"
-                    );
+                    assert!((r[c] - l[c]).abs() < 1e-3, "seed {seed} ({x},{y}) {l:?} vs {r:?}");
                 }
                 checked += 1;
             }
         }
         let n = s.left.width * s.left.height;
-        assert!(
-            checked > n / 2,
-            "seed {seed}: only {checked} of {n} pixels visible in both views"
-        );
+        assert!(checked > n / 2, "seed {seed}: only {checked} of {n} pixels visible in both views");
     }
 }
 
@@ -85,10 +74,7 @@ fn warping_the_right_image_by_the_left_disparity_reproduces_the_left_image() {
                 let xr = x as f64 - f64::from(s.disparity.get(x, y));
                 // Skip points whose interpolation mixes two surfaces of the right view.
                 let own = s.surface_left[y * s.left.width + x];
-                let (x0, x1) = (
-                    xr.floor().max(0.0) as usize,
-                    (xr.ceil().max(0.0) as usize).min(s.left.width - 1),
-                );
+                let (x0, x1) = (xr.floor().max(0.0) as usize, (xr.ceil().max(0.0) as usize).min(s.left.width - 1));
                 let w = s.left.width;
                 if s.surface_right[y * w + x0] != own || s.surface_right[y * w + x1] != own {
                     continue;
@@ -105,62 +91,26 @@ fn warping_the_right_image_by_the_left_disparity_reproduces_the_left_image() {
         }
         let mean = sum / (3 * n) as f64;
         assert!(n > 2000, "seed {seed}: {n} pixels compared");
-        assert!(
-            mean < 0.5 && worst < 6.0,
-            "seed {seed}: mean {mean}, worst {worst}"
-        );
+        assert!(mean < 0.5 && worst < 6.0, "seed {seed}: mean {mean}, worst {worst}");
     }
 }
 
 #[test]
 fn slanted_plane_disparity_is_exact_and_occludes_the_background() {
-    let tex = |v: f64| Texture {
-        base: [v; 3],
-        gratings: vec![],
-        noise_cell: 0.0,
-        noise_amp: [0.0; 3],
-        noise_seed: 0,
-    };
-    let plane = DisparityField {
-        c: 10.0,
-        a: 0.1,
-        b: -0.05,
-        kx: 0.0,
-        ky: 0.0,
-        x0: 20.0,
-        y0: 10.0,
-    };
+    let tex = |v: f64| Texture { base: [v; 3], gratings: vec![], noise_cell: 0.0, noise_amp: [0.0; 3], noise_seed: 0 };
+    let plane = DisparityField { c: 10.0, a: 0.1, b: -0.05, kx: 0.0, ky: 0.0, x0: 20.0, y0: 10.0 };
     let fg = Surface::new(
-        Outline::Rect {
-            cx: 20.0,
-            cy: 10.0,
-            hw: 6.0,
-            hh: 5.0,
-            cos: 1.0,
-            sin: 0.0,
-        },
+        Outline::Rect { cx: 20.0, cy: 10.0, hw: 6.0, hh: 5.0, cos: 1.0, sin: 0.0 },
         plane.clone(),
         tex(200.0),
     );
-    let bg = Surface::new(
-        Outline::Everything,
-        DisparityField::constant(2.0),
-        tex(50.0),
-    );
-    let scene = SyntheticScene {
-        width: 40,
-        height: 20,
-        surfaces: vec![bg, fg],
-    };
+    let bg = Surface::new(Outline::Everything, DisparityField::constant(2.0), tex(50.0));
+    let scene = SyntheticScene { width: 40, height: 20, surfaces: vec![bg, fg] };
     let s = scene.render();
     for y in 0..20 {
         for x in 0..40 {
             let inside = (x as f64 - 20.0).abs() <= 6.0 && (y as f64 - 10.0).abs() <= 5.0;
-            let want = if inside {
-                plane.at(x as f64, y as f64) as f32
-            } else {
-                2.0
-            };
+            let want = if inside { plane.at(x as f64, y as f64) as f32 } else { 2.0 };
             assert!((s.disparity.get(x, y) - want).abs() < 1e-5);
             assert_eq!(s.left.get(x, y)[0], if inside { 200.0 } else { 50.0 });
         }
@@ -182,15 +132,7 @@ fn slanted_plane_disparity_is_exact_and_occludes_the_background() {
 
 #[test]
 fn curved_patch_right_solution_is_consistent() {
-    let f = DisparityField {
-        c: 20.0,
-        a: 0.05,
-        b: 0.02,
-        kx: 0.004,
-        ky: -0.003,
-        x0: 50.0,
-        y0: 30.0,
-    };
+    let f = DisparityField { c: 20.0, a: 0.05, b: 0.02, kx: 0.004, ky: -0.003, x0: 50.0, y0: 30.0 };
     for xl in [30.0, 45.0, 50.0, 61.5, 70.0] {
         for y in [20.0, 30.0, 41.0] {
             let xr = xl - f.at(xl, y);

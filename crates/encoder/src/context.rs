@@ -80,9 +80,7 @@ impl ContextEncoder {
             layer5: make_layer(128, 128, norm, 2, device),
             outputs08: (0..2).map(|_| ContextHead::new(dims[2], norm, device)).collect(),
             outputs16: (0..2).map(|_| ContextHead::new(dims[1], norm, device)).collect(),
-            outputs32: (0..2)
-                .map(|_| conv2d([128, dims[0]], 3, 1, 1, ConvInit::KaimingFanOut, device))
-                .collect(),
+            outputs32: (0..2).map(|_| conv2d([128, dims[0]], 3, 1, 1, ConvInit::KaimingFanOut, device)).collect(),
         }
     }
 

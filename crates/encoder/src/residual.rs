@@ -59,7 +59,13 @@ impl ResidualBlock {
 }
 
 /// Two residual blocks, the first with `stride` (`_make_layer` of the reference).
-pub fn make_layer(in_planes: usize, planes: usize, norm: NormKind, stride: usize, device: &Device) -> Vec<ResidualBlock> {
+pub fn make_layer(
+    in_planes: usize,
+    planes: usize,
+    norm: NormKind,
+    stride: usize,
+    device: &Device,
+) -> Vec<ResidualBlock> {
     vec![
         ResidualBlock::new(in_planes, planes, norm, stride, device),
         ResidualBlock::new(planes, planes, norm, 1, device),

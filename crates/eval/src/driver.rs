@@ -53,12 +53,12 @@ where
     let mut failures = Vec::new();
     let loader = PrefetchLoader::for_dataset(dataset, indices.clone(), 2);
     for (index, loaded) in indices.into_iter().zip(loader) {
-        let outcome = loaded
-            .map_err(|e| SampleFailure { name: format!("#{index}"), message: e.to_string() })
-            .and_then(|sample| {
+        let outcome = loaded.map_err(|e| SampleFailure { name: format!("#{index}"), message: e.to_string() }).and_then(
+            |sample| {
                 score_sample(&sample, protocol, &mut predict)
                     .map_err(|e| SampleFailure { name: sample.name.clone(), message: e.to_string() })
-            });
+            },
+        );
         match outcome {
             Ok(row) => {
                 on_sample(Ok(&row));
@@ -135,7 +135,8 @@ mod tests {
     fn wrong_sized_prediction_is_a_failure() {
         let config = SyntheticConfig { width: 40, height: 24, ..SyntheticConfig::default() };
         let data = Arc::new(SyntheticDataset { config, seed: 1, len: 1 });
-        let result = evaluate_dataset(data, vec![0], Protocol::Generic, |_| Ok(DisparityMap::filled(8, 8, 1.0)), |_| {});
+        let result =
+            evaluate_dataset(data, vec![0], Protocol::Generic, |_| Ok(DisparityMap::filled(8, 8, 1.0)), |_| {});
         assert!(result.table.rows.is_empty());
         assert!(result.failures[0].message.contains("8x8"), "{}", result.failures[0].message);
     }

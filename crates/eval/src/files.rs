@@ -13,12 +13,7 @@ use crate::metrics::{Metrics, ValidOptions, accumulate};
 /// `pred` and `gt` are disparity files (`.pfm`, KITTI 16-bit `.png` (/256), `.npy`); `mask` is a
 /// picture whose non-zero pixels are kept. Errors name the file at fault (unreadable, malformed,
 /// or of another size than the ground truth).
-pub fn metrics_for_files(
-    pred: &Path,
-    gt: &Path,
-    mask: Option<&Path>,
-    max_disp: Option<f32>,
-) -> Result<Metrics> {
+pub fn metrics_for_files(pred: &Path, gt: &Path, mask: Option<&Path>, max_disp: Option<f32>) -> Result<Metrics> {
     let g = read_disparity(gt)?;
     let p = read_disparity(pred)?;
     if (p.width, p.height) != (g.width, g.height) {
@@ -60,11 +55,6 @@ pub fn metrics_for_files(
 /// The JSON object printed by `dgstereo metrics`: keys `epe`, `bad-0.5`, `bad-1`, `bad-2`,
 /// `bad-3`, `bad-4`, `d1-all` (numbers, percentages 0..100; `null` when nothing is valid) and
 /// `valid_pixels` (integer). See [`metrics_for_files`].
-pub fn metrics_json(
-    pred: &Path,
-    gt: &Path,
-    mask: Option<&Path>,
-    max_disp: Option<f32>,
-) -> Result<serde_json::Value> {
+pub fn metrics_json(pred: &Path, gt: &Path, mask: Option<&Path>, max_disp: Option<f32>) -> Result<serde_json::Value> {
     Ok(metrics_for_files(pred, gt, mask, max_disp)?.to_json())
 }

@@ -17,8 +17,6 @@ pub mod table;
 
 pub use driver::{DatasetEvaluation, SampleFailure, evaluate_dataset, score_sample};
 pub use files::{metrics_for_files, metrics_json};
-pub use metrics::{
-    BAD_THRESHOLDS, METRIC_NAMES, MetricSums, Metrics, ValidOptions, accumulate, evaluate,
-};
+pub use metrics::{BAD_THRESHOLDS, METRIC_NAMES, MetricSums, Metrics, ValidOptions, accumulate, evaluate};
 pub use protocol::{Aggregation, Protocol};
 pub use table::{AggregateRow, EvalRow, EvalTable};

@@ -18,9 +18,7 @@ use dgstereo_data::{DisparityMap, Mask};
 pub const BAD_THRESHOLDS: [f32; 5] = [0.5, 1.0, 2.0, 3.0, 4.0];
 
 /// The metric names, in output order (keys of the JSON object, CSV columns).
-pub const METRIC_NAMES: [&str; 7] = [
-    "epe", "bad-0.5", "bad-1", "bad-2", "bad-3", "bad-4", "d1-all",
-];
+pub const METRIC_NAMES: [&str; 7] = ["epe", "bad-0.5", "bad-1", "bad-2", "bad-3", "bad-4", "d1-all"];
 
 /// Which pixels count, beyond "ground truth finite and > 0".
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -70,18 +68,10 @@ impl MetricSums {
     pub fn metrics(&self) -> Metrics {
         let n = self.valid_pixels as f64;
         let pct = |c: u64| {
-            if n > 0.0 {
-                100.0 * c as f64 / n
-            } else {
-                f64::NAN
-            }
+            if n > 0.0 { 100.0 * c as f64 / n } else { f64::NAN }
         };
         Metrics {
-            epe: if n > 0.0 {
-                self.abs_error / n
-            } else {
-                f64::NAN
-            },
+            epe: if n > 0.0 { self.abs_error / n } else { f64::NAN },
             bad_0_5: pct(self.bad[0]),
             bad_1: pct(self.bad[1]),
             bad_2: pct(self.bad[2]),
@@ -117,23 +107,12 @@ pub struct Metrics {
 impl Metrics {
     /// The values in the order of [`METRIC_NAMES`].
     pub fn values(&self) -> [f64; 7] {
-        [
-            self.epe,
-            self.bad_0_5,
-            self.bad_1,
-            self.bad_2,
-            self.bad_3,
-            self.bad_4,
-            self.d1_all,
-        ]
+        [self.epe, self.bad_0_5, self.bad_1, self.bad_2, self.bad_3, self.bad_4, self.d1_all]
     }
 
     /// A metric by its name in [`METRIC_NAMES`].
     pub fn get(&self, name: &str) -> Option<f64> {
-        METRIC_NAMES
-            .iter()
-            .position(|n| *n == name)
-            .map(|i| self.values()[i])
+        METRIC_NAMES.iter().position(|n| *n == name).map(|i| self.values()[i])
     }
 
     /// The JSON object `{"epe": .., "bad-0.5": .., .., "d1-all": .., "valid_pixels": n}`
@@ -194,10 +173,7 @@ pub fn accumulate(
     if let Some(m) = mask
         && (m.width, m.height) != (gt.width, gt.height)
     {
-        return Err(Error::Shape(format!(
-            "mask is {}x{}, ground truth {}x{}",
-            m.width, m.height, gt.width, gt.height
-        )));
+        return Err(Error::Shape(format!("mask is {}x{}, ground truth {}x{}", m.width, m.height, gt.width, gt.height)));
     }
     let max = opts.max_disp.unwrap_or(f32::INFINITY);
     let mut sums = MetricSums::default();
@@ -211,11 +187,6 @@ pub fn accumulate(
 }
 
 /// The metrics of `pred` against `gt` over valid pixels (see the module doc).
-pub fn evaluate(
-    pred: &DisparityMap,
-    gt: &DisparityMap,
-    mask: Option<&Mask>,
-    opts: ValidOptions,
-) -> Result<Metrics> {
+pub fn evaluate(pred: &DisparityMap, gt: &DisparityMap, mask: Option<&Mask>, opts: ValidOptions) -> Result<Metrics> {
     Ok(accumulate(pred, gt, mask, opts)?.metrics())
 }

@@ -46,21 +46,15 @@ impl Protocol {
     pub fn aggregation(self) -> Aggregation {
         match self {
             Protocol::Kitti | Protocol::FlyingThings | Protocol::Generic => Aggregation::Pooled,
-            Protocol::Middlebury | Protocol::Eth3d | Protocol::DrivingStereo => {
-                Aggregation::MeanPerImage
-            }
+            Protocol::Middlebury | Protocol::Eth3d | Protocol::DrivingStereo => Aggregation::MeanPerImage,
         }
     }
 
     /// The validity options (beyond finite and `> 0`).
     pub fn valid_options(self) -> ValidOptions {
         match self {
-            Protocol::Eth3d => ValidOptions {
-                max_disp: Some(512.0),
-            },
-            Protocol::FlyingThings => ValidOptions {
-                max_disp: Some(192.0),
-            },
+            Protocol::Eth3d => ValidOptions { max_disp: Some(512.0) },
+            Protocol::FlyingThings => ValidOptions { max_disp: Some(192.0) },
             _ => ValidOptions::default(),
         }
     }
@@ -93,11 +87,7 @@ impl Protocol {
     /// [`Protocol::aggregation`], `valid_pixels` is the total. Images without valid pixels are
     /// skipped.
     pub fn aggregate(self, images: &[MetricSums]) -> Metrics {
-        let per_image: Vec<Metrics> = images
-            .iter()
-            .filter(|s| s.valid_pixels > 0)
-            .map(|s| s.metrics())
-            .collect();
+        let per_image: Vec<Metrics> = images.iter().filter(|s| s.valid_pixels > 0).map(|s| s.metrics()).collect();
         let mean = Metrics::mean_of(&per_image);
         match self.aggregation() {
             Aggregation::MeanPerImage => mean,
@@ -106,10 +96,7 @@ impl Protocol {
                 for s in images {
                     pooled.merge(s);
                 }
-                Metrics {
-                    epe: mean.epe,
-                    ..pooled.metrics()
-                }
+                Metrics { epe: mean.epe, ..pooled.metrics() }
             }
         }
     }

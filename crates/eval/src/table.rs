@@ -49,10 +49,7 @@ pub struct EvalTable {
 impl EvalTable {
     /// An empty table.
     pub fn new(protocol: Protocol) -> Self {
-        Self {
-            protocol,
-            rows: Vec::new(),
-        }
+        Self { protocol, rows: Vec::new() }
     }
 
     /// Adds a row.
@@ -84,11 +81,7 @@ impl EvalTable {
             }
         }
         for g in groups {
-            let rows: Vec<&EvalRow> = self
-                .rows
-                .iter()
-                .filter(|r| r.group.as_deref() == Some(g))
-                .collect();
+            let rows: Vec<&EvalRow> = self.rows.iter().filter(|r| r.group.as_deref() == Some(g)).collect();
             out.push(self.aggregate_rows(g, &rows));
         }
         out
@@ -116,11 +109,7 @@ impl EvalTable {
         noc: Option<&Metrics>,
         fmt_num: fn(f64) -> String,
     ) -> Vec<String> {
-        let mut c = vec![
-            name.to_string(),
-            group.to_string(),
-            all.valid_pixels.to_string(),
-        ];
+        let mut c = vec![name.to_string(), group.to_string(), all.valid_pixels.to_string()];
         c.extend(all.values().iter().map(|v| fmt_num(*v)));
         if self.has_noc() {
             match noc {
@@ -139,11 +128,7 @@ impl EvalTable {
     /// non-occluded results, the same prefixed `noc-`. NaN is written as an empty cell.
     pub fn to_csv(&self) -> String {
         let num = |v: f64| {
-            if v.is_finite() {
-                format!("{v:.6}")
-            } else {
-                String::new()
-            }
+            if v.is_finite() { format!("{v:.6}") } else { String::new() }
         };
         let mut out = self.header().join(",") + "\n";
         for r in &self.rows {
@@ -158,13 +143,7 @@ impl EvalTable {
             out += &(cells.join(",") + "\n");
         }
         for a in self.aggregates() {
-            let cells = self.cells(
-                &csv_escape(&format!("mean:{}", a.label)),
-                "",
-                &a.all,
-                a.noc.as_ref(),
-                num,
-            );
+            let cells = self.cells(&csv_escape(&format!("mean:{}", a.label)), "", &a.all, a.noc.as_ref(), num);
             out += &(cells.join(",") + "\n");
         }
         out
@@ -208,29 +187,20 @@ impl EvalTable {
     /// Writes [`EvalTable::to_json`] (pretty) to `path`.
     pub fn write_json(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
-        let text = serde_json::to_string_pretty(&self.to_json())
-            .map_err(|e| Error::format(path, e.to_string()))?;
+        let text = serde_json::to_string_pretty(&self.to_json()).map_err(|e| Error::format(path, e.to_string()))?;
         std::fs::write(path, text + "\n").map_err(|e| Error::io(path, e))
     }
 }
 
 fn csv_escape(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
+    if s.contains([',', '"', '\n']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
 }
 
 /// A fixed-width text table: per-image rows, a rule, aggregate rows.
 impl fmt::Display for EvalTable {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let num = |v: f64| {
-            if v.is_finite() {
-                format!("{v:.3}")
-            } else {
-                "-".to_string()
-            }
+            if v.is_finite() { format!("{v:.3}") } else { "-".to_string() }
         };
         let header = self.header();
         let mut lines: Vec<Vec<String>> = self
@@ -238,46 +208,21 @@ impl fmt::Display for EvalTable {
             .iter()
             .map(|r| {
                 let noc = r.noc.map(|s| s.metrics());
-                self.cells(
-                    &r.name,
-                    r.group.as_deref().unwrap_or(""),
-                    &r.all.metrics(),
-                    noc.as_ref(),
-                    num,
-                )
+                self.cells(&r.name, r.group.as_deref().unwrap_or(""), &r.all.metrics(), noc.as_ref(), num)
             })
             .collect();
         let n_rows = lines.len();
         for a in self.aggregates() {
-            lines.push(self.cells(
-                &format!("mean:{}", a.label),
-                "",
-                &a.all,
-                a.noc.as_ref(),
-                num,
-            ));
+            lines.push(self.cells(&format!("mean:{}", a.label), "", &a.all, a.noc.as_ref(), num));
         }
         let widths: Vec<usize> = (0..header.len())
-            .map(|i| {
-                lines
-                    .iter()
-                    .map(|l| l[i].len())
-                    .chain([header[i].len()])
-                    .max()
-                    .unwrap_or(0)
-            })
+            .map(|i| lines.iter().map(|l| l[i].len()).chain([header[i].len()]).max().unwrap_or(0))
             .collect();
         let fmt_line = |cells: &[String]| -> String {
             cells
                 .iter()
                 .enumerate()
-                .map(|(i, c)| {
-                    if i < 2 {
-                        format!("{c:<w$}", w = widths[i])
-                    } else {
-                        format!("{c:>w$}", w = widths[i])
-                    }
-                })
+                .map(|(i, c)| if i < 2 { format!("{c:<w$}", w = widths[i]) } else { format!("{c:>w$}", w = widths[i]) })
                 .collect::<Vec<_>>()
                 .join("  ")
         };
@@ -291,11 +236,7 @@ impl fmt::Display for EvalTable {
         writeln!(f, "{}", fmt_line(&header))?;
         for (i, l) in lines.iter().enumerate() {
             if i == n_rows {
-                writeln!(
-                    f,
-                    "{}",
-                    "-".repeat(widths.iter().sum::<usize>() + 2 * (widths.len() - 1))
-                )?;
+                writeln!(f, "{}", "-".repeat(widths.iter().sum::<usize>() + 2 * (widths.len() - 1)))?;
             }
             writeln!(f, "{}", fmt_line(l))?;
         }

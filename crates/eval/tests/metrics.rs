@@ -4,19 +4,14 @@
 use std::path::{Path, PathBuf};
 
 use dgstereo_data::{DisparityMap, Mask, read_disparity, write_disparity};
-use dgstereo_eval::{
-    EvalRow, EvalTable, MetricSums, Metrics, Protocol, ValidOptions, evaluate, metrics_json,
-};
+use dgstereo_eval::{EvalRow, EvalTable, MetricSums, Metrics, Protocol, ValidOptions, evaluate, metrics_json};
 
 fn close(a: f64, b: f64) -> bool {
     (a - b).abs() < 1e-5
 }
 
 fn check(m: &Metrics, want: [f64; 7], n: u64) {
-    for (name, (got, w)) in dgstereo_eval::METRIC_NAMES
-        .iter()
-        .zip(m.values().iter().zip(want))
-    {
+    for (name, (got, w)) in dgstereo_eval::METRIC_NAMES.iter().zip(m.values().iter().zip(want)) {
         assert!(close(*got, w), "{name}: got {got}, want {w}");
     }
     assert_eq!(m.valid_pixels, n);
@@ -25,10 +20,7 @@ fn check(m: &Metrics, want: [f64; 7], n: u64) {
 fn tiny() -> (DisparityMap, DisparityMap) {
     let gt = vec![1.0, 2.0, 10.0, 100.0, 0.0, f32::NAN, f32::INFINITY, 5.0];
     let pred = vec![1.4, 3.5, 13.5, 104.0, 7.0, 1.0, 1.0, f32::NAN];
-    (
-        DisparityMap::from_vec(4, 2, pred).unwrap(),
-        DisparityMap::from_vec(4, 2, gt).unwrap(),
-    )
+    (DisparityMap::from_vec(4, 2, pred).unwrap(), DisparityMap::from_vec(4, 2, gt).unwrap())
 }
 
 #[test]
@@ -45,15 +37,7 @@ fn metrics_match_hand_computed_values() {
     let m = evaluate(&pred, &gt, Some(&mask), ValidOptions::default()).unwrap();
     check(&m, [2.35, 75.0, 75.0, 50.0, 50.0, 0.0, 25.0], 4);
     // max-disp 50 drops gt 100: errors 0.4, 1.5, 3.5, 5.
-    let m = evaluate(
-        &pred,
-        &gt,
-        None,
-        ValidOptions {
-            max_disp: Some(50.0),
-        },
-    )
-    .unwrap();
+    let m = evaluate(&pred, &gt, None, ValidOptions { max_disp: Some(50.0) }).unwrap();
     check(&m, [2.6, 75.0, 75.0, 50.0, 50.0, 25.0, 50.0], 4);
 }
 
@@ -81,15 +65,7 @@ fn size_mismatch_is_an_error() {
     let a = DisparityMap::filled(2, 2, 1.0);
     let b = DisparityMap::filled(3, 2, 1.0);
     assert!(evaluate(&a, &b, None, ValidOptions::default()).is_err());
-    assert!(
-        evaluate(
-            &a,
-            &a,
-            Some(&Mask::filled(1, 1, true)),
-            ValidOptions::default()
-        )
-        .is_err()
-    );
+    assert!(evaluate(&a, &a, Some(&Mask::filled(1, 1, true)), ValidOptions::default()).is_err());
 }
 
 fn sums(errors: &[f32]) -> MetricSums {
@@ -109,10 +85,7 @@ fn protocols_pool_or_average_as_documented() {
     let midd = Protocol::Middlebury.aggregate(&[a, b]);
     assert!(close(midd.bad_2, 50.0) && close(midd.epe, 2.0));
     let eth = Protocol::Eth3d.aggregate(&[a, b, MetricSums::default()]);
-    assert!(
-        close(eth.bad_1, 50.0),
-        "images without valid pixels are skipped"
-    );
+    assert!(close(eth.bad_1, 50.0), "images without valid pixels are skipped");
     assert_eq!(Protocol::Eth3d.valid_options().max_disp, Some(512.0));
     assert_eq!(Protocol::Kitti.headline(), &["bad-3", "d1-all"]);
 }
@@ -120,35 +93,25 @@ fn protocols_pool_or_average_as_documented() {
 #[test]
 fn table_writes_csv_json_and_text() {
     let mut t = EvalTable::new(Protocol::DrivingStereo);
-    t.push(EvalRow {
-        name: "sunny/0".into(),
-        group: Some("sunny".into()),
-        all: sums(&[4.0]),
-        noc: None,
-    });
+    t.push(EvalRow { name: "sunny/0".into(), group: Some("sunny".into()), all: sums(&[4.0]), noc: None });
     t.push(EvalRow {
         name: "sunny/1".into(),
         group: Some("sunny".into()),
         all: sums(&[0.0, 0.0]),
         noc: Some(sums(&[0.0])),
     });
-    t.push(EvalRow {
-        name: "rainy,0".into(),
-        group: Some("rainy".into()),
-        all: sums(&[2.0]),
-        noc: None,
-    });
+    t.push(EvalRow { name: "rainy,0".into(), group: Some("rainy".into()), all: sums(&[2.0]), noc: None });
     let aggs = t.aggregates();
-    assert_eq!(
-        aggs.iter().map(|a| a.label.as_str()).collect::<Vec<_>>(),
-        ["all", "sunny", "rainy"]
-    );
+    assert_eq!(aggs.iter().map(|a| a.label.as_str()).collect::<Vec<_>>(), ["all", "sunny", "rainy"]);
     assert!(close(aggs[1].all.bad_3, 50.0) && close(aggs[1].all.epe, 2.0));
     assert!(close(aggs[0].all.epe, 2.0) && close(aggs[2].all.epe, 2.0));
     let csv = t.to_csv();
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), 1 + 3 + 3);
-    assert!(lines[0].starts_with("name,group,valid_pixels,epe,bad-0.5,bad-1,bad-2,bad-3,bad-4,d1-all,noc-valid_pixels,noc-epe"));
+    assert!(
+        lines[0]
+            .starts_with("name,group,valid_pixels,epe,bad-0.5,bad-1,bad-2,bad-3,bad-4,d1-all,noc-valid_pixels,noc-epe")
+    );
     assert!(lines[3].starts_with("\"rainy,0\",rainy,1,2.000000"));
     assert!(lines[4].starts_with("mean:all,,4,"));
     let j = t.to_json();
@@ -161,15 +124,9 @@ fn table_writes_csv_json_and_text() {
     std::fs::create_dir_all(&dir).unwrap();
     t.write_csv(dir.join("t.csv")).unwrap();
     t.write_json(dir.join("t.json")).unwrap();
-    let back: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("t.json")).unwrap()).unwrap();
+    let back: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("t.json")).unwrap()).unwrap();
     assert_eq!(back, j);
-    assert!(
-        t.write_csv(dir.join("missing/t.csv"))
-            .unwrap_err()
-            .to_string()
-            .contains("missing")
-    );
+    assert!(t.write_csv(dir.join("missing/t.csv")).unwrap_err().to_string().contains("missing"));
 }
 
 fn cones() -> Option<PathBuf> {
@@ -184,8 +141,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn num(j: &serde_json::Value, k: &str) -> f64 {
-    j[k].as_f64()
-        .unwrap_or_else(|| panic!("{k} missing in {j}"))
+    j[k].as_f64().unwrap_or_else(|| panic!("{k} missing in {j}"))
 }
 
 #[test]
@@ -194,11 +150,7 @@ fn cones_against_itself_and_shifted_by_one_pixel() {
     let gt_path = dir.join("disp_left.pfm");
     let gt = read_disparity(&gt_path).unwrap();
     assert_eq!((gt.width, gt.height), (450, 375));
-    let known = gt
-        .data
-        .iter()
-        .filter(|v| v.is_finite() && **v > 0.0)
-        .count() as u64;
+    let known = gt.data.iter().filter(|v| v.is_finite() && **v > 0.0).count() as u64;
     assert!(known > 150_000);
 
     let j = metrics_json(&gt_path, &gt_path, None, None).unwrap();
@@ -209,10 +161,7 @@ fn cones_against_itself_and_shifted_by_one_pixel() {
 
     // +1 px everywhere, in each prediction format: the error is exactly 1 on every pixel.
     let out = scratch("cones");
-    let plus1 = DisparityMap {
-        data: gt.data.iter().map(|v| v + 1.0).collect(),
-        ..gt.clone()
-    };
+    let plus1 = DisparityMap { data: gt.data.iter().map(|v| v + 1.0).collect(), ..gt.clone() };
     for ext in ["pfm", "png", "npy"] {
         let p = out.join(format!("plus1.{ext}"));
         write_disparity(&p, &plus1).unwrap();
@@ -235,12 +184,7 @@ fn cones_against_itself_and_shifted_by_one_pixel() {
     // With the occlusion mask only pixels visible in both views count.
     let occ = dir.join("occlusion.png");
     let mask = dgstereo_data::load_mask(&occ).unwrap();
-    let noc = gt
-        .data
-        .iter()
-        .zip(&mask.data)
-        .filter(|(v, m)| **m && v.is_finite() && **v > 0.0)
-        .count() as u64;
+    let noc = gt.data.iter().zip(&mask.data).filter(|(v, m)| **m && v.is_finite() && **v > 0.0).count() as u64;
     assert!(noc < known && noc > known / 2);
     let p = out.join("plus1.pfm");
     let j = metrics_json(&p, &gt_path, Some(&occ), None).unwrap();
@@ -248,23 +192,12 @@ fn cones_against_itself_and_shifted_by_one_pixel() {
     assert!(close(num(&j, "epe"), 1.0) && close(num(&j, "bad-0.5"), 100.0));
 
     // +3.5 px: bad-3 100 %, and D1 too since 3.5 > 5 % of any gt below 70.
-    let plus35 = DisparityMap {
-        data: gt.data.iter().map(|v| v + 3.5).collect(),
-        ..gt.clone()
-    };
+    let plus35 = DisparityMap { data: gt.data.iter().map(|v| v + 3.5).collect(), ..gt.clone() };
     let p35 = out.join("plus35.pfm");
     write_disparity(&p35, &plus35).unwrap();
     let j = metrics_json(&p35, &gt_path, None, Some(30.0)).unwrap();
-    assert!(
-        close(num(&j, "bad-3"), 100.0)
-            && close(num(&j, "d1-all"), 100.0)
-            && close(num(&j, "bad-4"), 0.0)
-    );
-    let below30 = gt
-        .data
-        .iter()
-        .filter(|v| v.is_finite() && **v > 0.0 && **v < 30.0)
-        .count() as u64;
+    assert!(close(num(&j, "bad-3"), 100.0) && close(num(&j, "d1-all"), 100.0) && close(num(&j, "bad-4"), 0.0));
+    let below30 = gt.data.iter().filter(|v| v.is_finite() && **v > 0.0 && **v < 30.0).count() as u64;
     assert_eq!(j["valid_pixels"].as_u64(), Some(below30));
 }
 
@@ -275,19 +208,13 @@ fn file_errors_name_the_file() {
     write_disparity(&gt, &DisparityMap::filled(4, 3, 2.0)).unwrap();
     let small = out.join("small.pfm");
     write_disparity(&small, &DisparityMap::filled(3, 3, 2.0)).unwrap();
-    let e = metrics_json(&small, &gt, None, None)
-        .unwrap_err()
-        .to_string();
+    let e = metrics_json(&small, &gt, None, None).unwrap_err().to_string();
     assert!(e.contains("small.pfm") && e.contains("3x3"), "{e}");
     let missing = out.join("nope.pfm");
-    let e = metrics_json(&missing, &gt, None, None)
-        .unwrap_err()
-        .to_string();
+    let e = metrics_json(&missing, &gt, None, None).unwrap_err().to_string();
     assert!(e.contains("nope.pfm"), "{e}");
     let m = out.join("m.png");
     dgstereo_data::save_mask(&m, &Mask::filled(2, 2, true)).unwrap();
-    let e = metrics_json(&gt, &gt, Some(Path::new(&m)), None)
-        .unwrap_err()
-        .to_string();
+    let e = metrics_json(&gt, &gt, Some(Path::new(&m)), None).unwrap_err().to_string();
     assert!(e.contains("m.png"), "{e}");
 }

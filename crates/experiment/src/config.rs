@@ -118,7 +118,9 @@ fn leading_key(message: &str) -> String {
 
 /// Run names become folder names of outputs: printable, no whitespace, no `..`, relative.
 fn check_name(name: &str, add: &mut impl FnMut(&str, String)) {
-    let bad_char = name.chars().find(|c| c.is_whitespace() || c.is_control() || matches!(c, '\\' | ':' | '*' | '?' | '"' | '<' | '>' | '|'));
+    let bad_char = name
+        .chars()
+        .find(|c| c.is_whitespace() || c.is_control() || matches!(c, '\\' | ':' | '*' | '?' | '"' | '<' | '>' | '|'));
     if name.is_empty() {
         add("name", "the run name is empty".into());
     } else if let Some(c) = bad_char {
@@ -231,7 +233,10 @@ fn check_combination(config: &ExperimentConfig, add: &mut impl FnMut(&str, Strin
         if guidance != GuidanceKind::None {
             add(
                 "model.updater.guidance",
-                format!("{} guidance needs a depth prior, but prior.kind is none: set [prior]", guidance_name(guidance)),
+                format!(
+                    "{} guidance needs a depth prior, but prior.kind is none: set [prior]",
+                    guidance_name(guidance)
+                ),
             );
         }
     } else if !config.model.needs_prior() {

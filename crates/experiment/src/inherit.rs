@@ -59,7 +59,10 @@ fn read_chain(path: &Path, chain: &mut Vec<PathBuf>) -> Result<Document> {
         None => None,
         Some(Value::String(base)) => Some(base),
         Some(other) => {
-            return Err(Error::format(path, format!("base: expected a file name (string), found {}", other.type_str())));
+            return Err(Error::format(
+                path,
+                format!("base: expected a file name (string), found {}", other.type_str()),
+            ));
         }
     };
 
@@ -68,10 +71,7 @@ fn read_chain(path: &Path, chain: &mut Vec<PathBuf>) -> Result<Document> {
     if let Some(base) = base {
         let base_path = path.parent().unwrap_or(Path::new("")).join(&base);
         if !base_path.is_file() {
-            return Err(Error::format(
-                path,
-                format!("base = \"{base}\": {} is not a file", base_path.display()),
-            ));
+            return Err(Error::format(path, format!("base = \"{base}\": {} is not a file", base_path.display())));
         }
         let identity = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
         chain.push(identity);

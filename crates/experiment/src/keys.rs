@@ -74,7 +74,9 @@ pub fn set(table: &mut Table, path: &[String], value: Value) -> std::result::Res
     }
     let entry = table.entry(first.clone()).or_insert_with(|| Value::Table(Table::new()));
     match entry {
-        Value::Table(inner) => set(inner, rest, value).map_err(|e| if e.is_empty() { first.clone() } else { format!("{first}.{e}") }),
+        Value::Table(inner) => {
+            set(inner, rest, value).map_err(|e| if e.is_empty() { first.clone() } else { format!("{first}.{e}") })
+        }
         _ => Err(first.clone()),
     }
 }
@@ -119,7 +121,8 @@ pub fn deserialize(table: &Table, provenance: &Provenance, fallback: &Path) -> R
         let key = if key.is_empty() { "(top level)".to_string() } else { key };
         Error::format(file, format!("{key}: {}", e.message()))
     })?;
-    let written = Value::try_from(&config).map_err(|e| Error::format(fallback, format!("cannot serialise the configuration: {e}")))?;
+    let written = Value::try_from(&config)
+        .map_err(|e| Error::format(fallback, format!("cannot serialise the configuration: {e}")))?;
     if let Value::Table(written) = written
         && let Some(key) = unused_key(table, &written, &mut Vec::new())
     {
@@ -132,16 +135,17 @@ pub fn deserialize(table: &Table, provenance: &Provenance, fallback: &Path) -> R
 /// The most precise key for a serde message: the line's key, or for `unknown field` /
 /// `missing field` messages the field under the table of that line.
 fn refine_key(message: &str, located: Option<&str>, lines: &[(Vec<String>, Value)]) -> String {
-    let field = |prefix: &str| {
-        message.strip_prefix(prefix).and_then(|rest| rest.split('`').next()).map(str::to_string)
-    };
+    let field = |prefix: &str| message.strip_prefix(prefix).and_then(|rest| rest.split('`').next()).map(str::to_string);
     if let Some(name) = field("unknown field `") {
         // The offending key is a leaf whose last segment is the field, preferably near the line.
-        let candidates: Vec<String> =
-            lines.iter().filter(|(path, _)| path.contains(&name)).map(|(path, _)| {
+        let candidates: Vec<String> = lines
+            .iter()
+            .filter(|(path, _)| path.contains(&name))
+            .map(|(path, _)| {
                 let end = path.iter().position(|k| *k == name).unwrap_or(path.len() - 1);
                 dotted(&path[..=end])
-            }).collect();
+            })
+            .collect();
         let near = located.and_then(|at| {
             let table = at.rsplit_once('.').map_or("", |(t, _)| t);
             candidates.iter().find(|c| c.starts_with(table)).cloned()

@@ -76,7 +76,8 @@ pub fn synthetic_pair(size: [usize; 2], shift: usize, device: &Device) -> (Tenso
         }
         from_vec(values, [1, 3, h, w], device)
     };
-    let ramp: Vec<f32> = (0..h).flat_map(|y| (0..w).map(move |x| 1.0 + (y as f32) / h as f32 + 0.2 * (x as f32) / w as f32)).collect();
+    let ramp: Vec<f32> =
+        (0..h).flat_map(|y| (0..w).map(move |x| 1.0 + (y as f32) / h as f32 + 0.2 * (x as f32) / w as f32)).collect();
     let prior = from_vec(ramp, [1, 1, h, w], device);
     (image(0.0), image(shift as f32), DepthPrior { left: prior.clone(), right: prior })
 }
@@ -97,12 +98,18 @@ pub fn smoke_test(config: &ExperimentConfig, size: [usize; 2], iters: usize, dev
         let prior = config.model.needs_prior().then_some(prior);
         let prediction = model.predict(left, right, prior.as_ref(), iters, true, None)?;
         if prediction.disparities.len() != iters {
-            return Err(Error::Other(format!("{} disparity maps for {iters} iterations", prediction.disparities.len())));
+            return Err(Error::Other(format!(
+                "{} disparity maps for {iters} iterations",
+                prediction.disparities.len()
+            )));
         }
         let mut max_abs_disparity = 0.0f32;
         for (k, disparity) in prediction.disparities.iter().enumerate() {
             if disparity.dims() != [1, 1, size[0], size[1]] {
-                return Err(Error::Shape(format!("iteration {k}: disparity {:?} for a {size:?} input", disparity.dims())));
+                return Err(Error::Shape(format!(
+                    "iteration {k}: disparity {:?} for a {size:?} input",
+                    disparity.dims()
+                )));
             }
             let values = to_vec(disparity.clone());
             if let Some(bad) = values.iter().find(|v| !v.is_finite()) {

@@ -39,7 +39,10 @@ pub fn expand(document: &Document) -> Result<Vec<RunTable>> {
         Some(Value::Table(sweep)) => sweep,
         Some(other) => {
             let file = keys::file_of(&provenance, "sweep", &document.source);
-            return Err(Error::format(file, format!("sweep: expected a table of key = [values], found {}", other.type_str())));
+            return Err(Error::format(
+                file,
+                format!("sweep: expected a table of key = [values], found {}", other.type_str()),
+            ));
         }
     };
     let sweep_provenance = provenance.clone();
@@ -139,10 +142,13 @@ fn describe(value: &Value) -> String {
 /// `" (keys of 'loss': gamma, kind, ...)"` for the deepest existing table on `path`.
 fn known_keys(complete: &Table, path: &[String]) -> String {
     for depth in (0..path.len()).rev() {
-        let table = if depth == 0 { Some(complete) } else { keys::get(complete, &path[..depth]).and_then(Value::as_table) };
+        let table =
+            if depth == 0 { Some(complete) } else { keys::get(complete, &path[..depth]).and_then(Value::as_table) };
         if let Some(table) = table {
-            let names: Vec<&str> = table.keys().map(String::as_str).filter(|k| *k != "name" && *k != "description").collect();
-            let owner = if depth == 0 { "the top level".to_string() } else { format!("'{}'", keys::dotted(&path[..depth])) };
+            let names: Vec<&str> =
+                table.keys().map(String::as_str).filter(|k| *k != "name" && *k != "description").collect();
+            let owner =
+                if depth == 0 { "the top level".to_string() } else { format!("'{}'", keys::dotted(&path[..depth])) };
             return format!(" (keys of {owner}: {})", names.join(", "));
         }
     }

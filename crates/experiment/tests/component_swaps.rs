@@ -48,9 +48,13 @@ fn combination() -> impl Strategy<Value = Combination> {
         (0.1f64..3.0).prop_map(|tau| LossConfig::EdgeAware { tau, gamma: 0.9, max_disparity: 700.0 }),
     ];
     let model = (fusion, guidance, 1usize..=3, implementation, any::<bool>(), any::<bool>());
-    let sizes = (loss, prop_oneof![Just(8usize), Just(16)], prop_oneof![Just(16usize), Just(32)], 20usize..=32, 36usize..=64);
+    let sizes =
+        (loss, prop_oneof![Just(8usize), Just(16)], prop_oneof![Just(16usize), Just(32)], 20usize..=32, 36usize..=64);
     (model, sizes).prop_map(
-        |((fusion, guidance, n_gru_layers, implementation, shared_backbone, slow_fast_gru), (loss, hidden, feature_dim, h, w))| {
+        |(
+            (fusion, guidance, n_gru_layers, implementation, shared_backbone, slow_fast_gru),
+            (loss, hidden, feature_dim, h, w),
+        )| {
             Combination {
                 fusion,
                 guidance,
@@ -76,7 +80,8 @@ fn experiment(c: &Combination) -> ExperimentConfig {
     model.correlation.implementation = c.implementation;
     model.encoder.shared_backbone = c.shared_backbone;
     model.encoder.feature_dim = c.feature_dim;
-    let prior = if model.needs_prior() { PriorConfig::Simulated(SimulatedPriorConfig::default()) } else { PriorConfig::None };
+    let prior =
+        if model.needs_prior() { PriorConfig::Simulated(SimulatedPriorConfig::default()) } else { PriorConfig::None };
     ExperimentConfig {
         name: "swap".into(),
         description: None,

@@ -319,7 +319,10 @@ fn nonsense_combinations_name_the_file_and_the_key() {
         ("unused.toml", "[prior]\nkind = \"simulated\"\n"),
         // Dropping the prior of a base that uses it is reported against the dropping file.
         ("dropped.toml", "base = \"main.toml\"\n[prior]\nkind = \"none\"\n"),
-        ("cache.toml", "[model.fusion]\nkind = \"conv\"\n[prior]\nkind = \"cache\"\ndir = \"c\"\n[prior.inner]\nkind = \"none\"\n"),
+        (
+            "cache.toml",
+            "[model.fusion]\nkind = \"conv\"\n[prior]\nkind = \"cache\"\ndir = \"c\"\n[prior.inner]\nkind = \"none\"\n",
+        ),
     ]);
     names(&files.error("guidance.toml"), "guidance.toml", "model.updater.guidance");
     names(&files.error("depth.toml"), "depth.toml", "model.updater.guidance");

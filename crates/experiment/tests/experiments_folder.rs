@@ -87,7 +87,10 @@ fn the_ablation_rows_add_one_module_each() {
         }
     }
     assert_eq!(modules(&one("depth-cnn-both.toml")), ("conv", both, None, false, true));
-    assert_eq!(modules(&one("depth-dcn-context-only.toml")), ("deformable", FusionTarget::ContextOnly, None, false, true));
+    assert_eq!(
+        modules(&one("depth-dcn-context-only.toml")),
+        ("deformable", FusionTarget::ContextOnly, None, false, true)
+    );
     assert_eq!(modules(&one("depth-guided-gru.toml")), ("deformable", both, Depth, false, true));
 }
 

@@ -80,8 +80,7 @@ impl ImageFusion for DeformableFusion {
     /// # Panics
     /// When `depth` is `None`: this fusion needs the prior.
     fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Tensor<4> {
-        let depth =
-            depth.expect("deformable fusion needs the depth prior (FusionConfig::needs_prior)");
+        let depth = depth.expect("deformable fusion needs the depth prior (FusionConfig::needs_prior)");
         self.forward(image, depth)
     }
 }

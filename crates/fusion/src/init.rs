@@ -32,10 +32,7 @@ pub const MIXER_INIT_SCALE: f32 = 1e-2;
 pub(crate) const RGB: usize = 3;
 
 /// Rewrites a 4-d parameter through `edit(values, shape)`.
-fn edit_weight(
-    param: &Param<Tensor<4>>,
-    edit: impl FnOnce(&mut [f32], [usize; 4]),
-) -> Param<Tensor<4>> {
+fn edit_weight(param: &Param<Tensor<4>>, edit: impl FnOnce(&mut [f32], [usize; 4])) -> Param<Tensor<4>> {
     let value = param.val();
     let device = value.device();
     let shape = value.dims();

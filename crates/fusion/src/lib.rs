@@ -142,9 +142,7 @@ impl FusionConfig {
         match self {
             Self::None => Ok(()),
             Self::Deformable { features, .. } | Self::Conv { features, .. } if *features < 3 => {
-                Err(dgstereo_core::Error::Config(format!(
-                    "fusion features must be at least 3, got {features}"
-                )))
+                Err(dgstereo_core::Error::Config(format!("fusion features must be at least 3, got {features}")))
             }
             _ => Ok(()),
         }
@@ -157,9 +155,7 @@ impl FusionConfig {
     pub fn init(&self, device: &Device) -> Fusion {
         match self {
             Self::None => Fusion::None(IdentityFusion),
-            Self::Deformable { features, .. } => {
-                Fusion::Deformable(DeformableFusion::new(*features, device))
-            }
+            Self::Deformable { features, .. } => Fusion::Deformable(DeformableFusion::new(*features, device)),
             Self::Conv { features, .. } => Fusion::Conv(ConvFusion::new(*features, device)),
         }
     }

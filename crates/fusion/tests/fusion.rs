@@ -6,9 +6,7 @@ use burn::nn::conv::Conv2dConfig;
 use burn::tensor::{Device, Distribution, Gradients, Tensor};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{max_abs_diff, to_vec};
-use dgstereo_fusion::{
-    ConvFusion, DeformableFusion, Fusion, FusionConfig, FusionTarget, ImageFusion, normalize_depth,
-};
+use dgstereo_fusion::{ConvFusion, DeformableFusion, Fusion, FusionConfig, FusionTarget, ImageFusion, normalize_depth};
 use proptest::prelude::*;
 
 const SIZE: [usize; 4] = [2, 3, 10, 14];
@@ -22,10 +20,7 @@ fn depth(device: &Device) -> Tensor<4> {
 }
 
 fn learned(device: &Device) -> Vec<(&'static str, Fusion)> {
-    vec![
-        ("deformable", FusionConfig::deformable().init(device)),
-        ("conv", FusionConfig::conv().init(device)),
-    ]
+    vec![("deformable", FusionConfig::deformable().init(device)), ("conv", FusionConfig::conv().init(device))]
 }
 
 #[test]
@@ -42,9 +37,7 @@ fn configs_read_from_toml() {
     assert!(!FusionConfig::None.needs_prior());
     assert!(read("kind = \"deformable\"\ntau = 1").is_err());
     assert!(read("kind = \"deformable\"\ntarget = \"feature\"").is_err());
-    assert!(
-        FusionConfig::Deformable { target: FusionTarget::Both, features: 2 }.validate().is_err()
-    );
+    assert!(FusionConfig::Deformable { target: FusionTarget::Both, features: 2 }.validate().is_err());
     let text = toml::to_string(&FusionConfig::deformable()).unwrap();
     assert_eq!(read(&text).unwrap(), FusionConfig::deformable());
 }
@@ -109,10 +102,9 @@ impl ModuleVisitor for GradientCheck<'_> {
 #[test]
 fn every_parameter_gets_a_finite_gradient() {
     let device = default_device().autodiff();
-    for (name, fusion, params) in [
-        ("deformable", FusionConfig::deformable().init(&device), 8),
-        ("conv", FusionConfig::conv().init(&device), 6),
-    ] {
+    for (name, fusion, params) in
+        [("deformable", FusionConfig::deformable().init(&device), 8), ("conv", FusionConfig::conv().init(&device), 6)]
+    {
         let x = image(&device);
         let goal = image(&device);
         let out = fusion.fuse(x, Some(depth(&device)));
@@ -128,14 +120,12 @@ fn every_parameter_gets_a_finite_gradient() {
 /// that the comparison exercises every tap).
 fn matched_pair(device: &Device) -> (DeformableFusion, ConvFusion) {
     let mut deformable = DeformableFusion::new(8, device);
-    let weight =
-        Tensor::random(deformable.mixer.weight.dims(), Distribution::Uniform(-0.2, 0.2), device);
+    let weight = Tensor::random(deformable.mixer.weight.dims(), Distribution::Uniform(-0.2, 0.2), device);
     let bias = Tensor::random([3], Distribution::Uniform(-1.0, 1.0), device);
     deformable.mixer.weight = Param::from_tensor(weight.clone());
     deformable.mixer.bias = Some(Param::from_tensor(bias.clone()));
-    let mut mixer = Conv2dConfig::new([16, 3], [3, 3])
-        .with_padding(burn::nn::PaddingConfig2d::Explicit(1, 1, 1, 1))
-        .init(device);
+    let mut mixer =
+        Conv2dConfig::new([16, 3], [3, 3]).with_padding(burn::nn::PaddingConfig2d::Explicit(1, 1, 1, 1)).init(device);
     mixer.weight = Param::from_tensor(weight);
     mixer.bias = Some(Param::from_tensor(bias));
     let conv = ConvFusion { projection: deformable.projection.clone(), mixer };
@@ -161,10 +151,8 @@ fn integer_offsets_shift_the_sampling_grid() {
     for (dy, dx) in [(0i32, 1i32), (1, 0), (-1, 0), (0, -1)] {
         let (mut deformable, conv) = matched_pair(&device);
         // Constant offsets through the bias; torchvision order: (dy, dx) per tap.
-        let bias: Vec<f32> =
-            (0..18).map(|c| if c % 2 == 0 { dy as f32 } else { dx as f32 }).collect();
-        deformable.offset.bias =
-            Some(Param::from_tensor(Tensor::from_floats(bias.as_slice(), &device)));
+        let bias: Vec<f32> = (0..18).map(|c| if c % 2 == 0 { dy as f32 } else { dx as f32 }).collect();
+        deformable.offset.bias = Some(Param::from_tensor(Tensor::from_floats(bias.as_slice(), &device)));
         let (x, d) = (image(&device), depth(&device));
         let shifted = deformable.forward(x.clone(), d.clone());
         let plain = conv.forward(x, d);

@@ -38,16 +38,8 @@ impl EdgeAwareLoss {
     /// # Shapes
     /// - output: `[N, 1, H, W]`
     pub fn mask(&self, target: &LossTarget) -> Tensor<4> {
-        let supervised = supervised_mask(
-            target.disparity_bilinear.clone(),
-            target.valid.clone(),
-            self.max_disparity,
-        );
-        let edges = edge_mask(
-            target.disparity_bilinear.clone(),
-            target.disparity_nearest.clone(),
-            self.tau,
-        );
+        let supervised = supervised_mask(target.disparity_bilinear.clone(), target.valid.clone(), self.max_disparity);
+        let edges = edge_mask(target.disparity_bilinear.clone(), target.disparity_nearest.clone(), self.tau);
         supervised.float() * edges
     }
 }

@@ -108,11 +108,7 @@ impl Default for LossConfig {
 impl LossConfig {
     /// EALS with the paper's defaults (`tau = 0.9`, `gamma = 0.9`, `max_disparity = 700`).
     pub fn edge_aware() -> Self {
-        Self::EdgeAware {
-            tau: DEFAULT_TAU,
-            gamma: DEFAULT_GAMMA,
-            max_disparity: DEFAULT_MAX_DISPARITY,
-        }
+        Self::EdgeAware { tau: DEFAULT_TAU, gamma: DEFAULT_GAMMA, max_disparity: DEFAULT_MAX_DISPARITY }
     }
 
     /// Whether the loss reads [`LossTarget::disparity_nearest`] (the data pipeline may then skip

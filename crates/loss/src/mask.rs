@@ -9,11 +9,7 @@ use burn::tensor::{Bool, Tensor};
 /// # Shapes
 /// - `disparity`, `valid`: `[N, 1, H, W]`
 /// - output: `[N, 1, H, W]` boolean
-pub fn supervised_mask(
-    disparity: Tensor<4>,
-    valid: Tensor<4>,
-    max_disparity: f64,
-) -> Tensor<4, Bool> {
+pub fn supervised_mask(disparity: Tensor<4>, valid: Tensor<4>, max_disparity: f64) -> Tensor<4, Bool> {
     valid.greater_equal_elem(0.5).bool_and(disparity.abs().lower_elem(max_disparity))
 }
 

@@ -4,8 +4,7 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_loss::{
-    DisparityLoss, EdgeAwareLoss, LossConfig, LossTarget, SequenceL1Loss, edge_mask,
-    sequence_weights,
+    DisparityLoss, EdgeAwareLoss, LossConfig, LossTarget, SequenceL1Loss, edge_mask, sequence_weights,
 };
 use proptest::prelude::*;
 
@@ -41,10 +40,7 @@ fn example(device: &Device) -> LossTarget {
 
 /// Predictions: all zeros, then the (finite) ground truth plus one.
 fn example_predictions(device: &Device) -> Vec<Tensor<4>> {
-    vec![
-        Tensor::zeros([1, 1, 2, 3], device),
-        map(&[2.0, 3.0, 4.0, 5.0, 6.0, 801.0], [1, 1, 2, 3], device),
-    ]
+    vec![Tensor::zeros([1, 1, 2, 3], device), map(&[2.0, 3.0, 4.0, 5.0, 6.0, 801.0], [1, 1, 2, 3], device)]
 }
 
 #[test]
@@ -70,8 +66,7 @@ fn eals_averages_over_the_batch_images() {
         disparity_nearest: Tensor::cat(vec![one.disparity_nearest.clone(); 2], 0),
         valid: Tensor::cat(vec![one.valid.clone(), Tensor::zeros([1, 1, 2, 3], &device)], 0),
     };
-    let predictions: Vec<_> =
-        example_predictions(&device).into_iter().map(|p| Tensor::cat(vec![p; 2], 0)).collect();
+    let predictions: Vec<_> = example_predictions(&device).into_iter().map(|p| Tensor::cat(vec![p; 2], 0)).collect();
     let value = scalar(LossConfig::edge_aware().loss(&predictions, &target));
     assert!((value - 0.925).abs() < 1e-5, "{value}");
 }
@@ -156,8 +151,7 @@ fn configs_read_from_toml() {
     assert!(config.needs_nearest());
     let config: LossConfig = toml::from_str("kind = \"edge-aware\"\ntau = 0.5").unwrap();
     assert_eq!(config, LossConfig::EdgeAware { tau: 0.5, gamma: 0.9, max_disparity: 700.0 });
-    let config: LossConfig =
-        toml::from_str("kind = \"sequence-l1\"\ngamma = 0.8\nmax_disparity = 192.0").unwrap();
+    let config: LossConfig = toml::from_str("kind = \"sequence-l1\"\ngamma = 0.8\nmax_disparity = 192.0").unwrap();
     assert_eq!(config, LossConfig::SequenceL1 { gamma: 0.8, max_disparity: 192.0 });
     assert!(!config.needs_nearest());
     assert!(toml::from_str::<LossConfig>("kind = \"sequence-l1\"\ntau = 0.5").is_err());
@@ -167,9 +161,8 @@ fn configs_read_from_toml() {
 
 /// Random small disparity maps: `(values, shape)`.
 fn disparity_map() -> impl Strategy<Value = (Vec<f32>, [usize; 4])> {
-    (1usize..3, 1usize..5, 1usize..6).prop_flat_map(|(n, h, w)| {
-        (proptest::collection::vec(0.0f32..200.0, n * h * w), Just([n, 1, h, w]))
-    })
+    (1usize..3, 1usize..5, 1usize..6)
+        .prop_flat_map(|(n, h, w)| (proptest::collection::vec(0.0f32..200.0, n * h * w), Just([n, 1, h, w])))
 }
 
 proptest! {

@@ -76,7 +76,10 @@ pub fn check_finite(model: &RaftStereo, path: &Path) -> Result<()> {
             .map_err(|e| Error::Checkpoint { path: path.into(), message: format!("{}: {e}", t.name) })?;
         let values = data.convert::<f32>().try_to_vec::<f32>().unwrap_or_default();
         if let Some(v) = values.iter().find(|v| !v.is_finite()) {
-            return Err(Error::Checkpoint { path: path.into(), message: format!("{}: non-finite weight ({v})", t.name) });
+            return Err(Error::Checkpoint {
+                path: path.into(),
+                message: format!("{}: non-finite weight ({v})", t.name),
+            });
         }
     }
     Ok(())
@@ -110,10 +113,16 @@ pub fn load_safetensors(mut model: RaftStereo, path: &Path) -> Result<RaftStereo
         return fail(e.to_string());
     }
     if let Some((k, _)) = result.missing.first() {
-        return fail(format!("missing key '{k}' ({} in all): the checkpoint was saved from another model configuration", result.missing.len()));
+        return fail(format!(
+            "missing key '{k}' ({} in all): the checkpoint was saved from another model configuration",
+            result.missing.len()
+        ));
     }
     if let Some(k) = result.unused.first() {
-        return fail(format!("unknown key '{k}' ({} in all): the checkpoint was saved from another model configuration", result.unused.len()));
+        return fail(format!(
+            "unknown key '{k}' ({} in all): the checkpoint was saved from another model configuration",
+            result.unused.len()
+        ));
     }
     check_finite(&model, path)?;
     Ok(model)

@@ -1,9 +1,9 @@
 //! The public inference API: any image size in, positive disparity out.
 
 use burn::tensor::{Device, Tensor};
+use dgstereo_core::DepthPrior;
 use dgstereo_core::{Error, InputPadder, Result};
 use dgstereo_costvolume::CorrelationImplementation;
-use dgstereo_core::DepthPrior;
 
 use crate::{ModelConfig, RaftStereo};
 
@@ -79,7 +79,8 @@ impl StereoModel {
         }
         let divisor = 32usize.max(1 << (self.config.updater.n_downsample + 3));
         let padder = InputPadder::new(h, w, divisor);
-        let padded_prior = prior.map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
+        let padded_prior =
+            prior.map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
         let out = self.network.forward_flow(
             padder.pad(left),
             padder.pad(right),

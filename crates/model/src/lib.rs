@@ -17,8 +17,11 @@ pub mod profile;
 pub mod verify;
 
 pub use config::{EncoderConfig, ModelConfig};
-/// The stage crates, re-exported so benchmarks and tools can drive single stages of a model
-/// (their traits included) through this crate alone.
-pub use {dgstereo_costvolume as costvolume, dgstereo_encoder as encoder, dgstereo_fusion as fusion, dgstereo_updater as updater};
 pub use inference::StereoModel;
 pub use network::{FlowOutput, RaftStereo, Trace};
+/// The stage crates, re-exported so benchmarks and tools can drive single stages of a model
+/// (their traits included) through this crate alone.
+pub use {
+    dgstereo_costvolume as costvolume, dgstereo_encoder as encoder, dgstereo_fusion as fusion,
+    dgstereo_updater as updater,
+};

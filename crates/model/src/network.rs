@@ -6,11 +6,13 @@ use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::activation::{relu, tanh};
 use burn::tensor::{Device, Tensor};
+use dgstereo_core::DepthPrior;
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CostVolume};
-use dgstereo_encoder::{ContextEncoder, ContextExtractor, FeatureEncoder, FeatureExtractor, NormKind, SharedFeatureHead};
+use dgstereo_encoder::{
+    ContextEncoder, ContextExtractor, FeatureEncoder, FeatureExtractor, NormKind, SharedFeatureHead,
+};
 use dgstereo_fusion::{Fusion, FusionTarget, ImageFusion};
-use dgstereo_core::DepthPrior;
 use dgstereo_updater::{GateContext, GuidanceKind, MultiLevelUpdateBlock, Updater, convex_upsample};
 
 use crate::config::ModelConfig;
@@ -70,7 +72,8 @@ impl RaftStereo {
         let shared = config.encoder.shared_backbone;
         Self {
             fusion: config.fusion.init(device),
-            fnet: (!shared).then(|| FeatureEncoder::new(config.encoder.feature_dim, NormKind::Instance, u.n_downsample, device)),
+            fnet: (!shared)
+                .then(|| FeatureEncoder::new(config.encoder.feature_dim, NormKind::Instance, u.n_downsample, device)),
             cnet: ContextEncoder::new(dims, config.encoder.context_norm, u.n_downsample, device),
             conv2: shared.then(|| SharedFeatureHead::new(config.encoder.feature_dim, device)),
             context_zqr_convs: (0..u.n_gru_layers)

@@ -78,7 +78,8 @@ impl fmt::Display for VerifyReport {
 /// Reads every float32 tensor of a safetensors file as `(shape, values)`.
 pub fn read_reference(path: &Path) -> Result<BTreeMap<String, (Vec<usize>, Vec<f32>)>> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let st = SafeTensors::deserialize(&bytes).map_err(|e| Error::format(path, format!("not a safetensors file: {e}")))?;
+    let st =
+        SafeTensors::deserialize(&bytes).map_err(|e| Error::format(path, format!("not a safetensors file: {e}")))?;
     let mut out = BTreeMap::new();
     for (name, view) in st.tensors() {
         if view.dtype() != safetensors::Dtype::F32 {
@@ -90,9 +91,17 @@ pub fn read_reference(path: &Path) -> Result<BTreeMap<String, (Vec<usize>, Vec<f
     Ok(out)
 }
 
-fn tensor4(reference: &BTreeMap<String, (Vec<usize>, Vec<f32>)>, key: &str, path: &Path, device: &Device) -> Result<Tensor<4>> {
+fn tensor4(
+    reference: &BTreeMap<String, (Vec<usize>, Vec<f32>)>,
+    key: &str,
+    path: &Path,
+    device: &Device,
+) -> Result<Tensor<4>> {
     let (shape, values) = reference.get(key).ok_or_else(|| Error::format(path, format!("missing key '{key}'")))?;
-    let shape: [usize; 4] = shape.as_slice().try_into().map_err(|_| Error::format(path, format!("{key}: expected 4 dimensions, found {shape:?}")))?;
+    let shape: [usize; 4] = shape
+        .as_slice()
+        .try_into()
+        .map_err(|_| Error::format(path, format!("{key}: expected 4 dimensions, found {shape:?}")))?;
     Ok(from_vec(values.clone(), shape, device))
 }
 
@@ -131,7 +140,13 @@ pub fn verify_raft_stereo(weights: &Path, reference: &Path, device: &Device) -> 
         if key == &format!("iter.{}.flow_up", iters.saturating_sub(1)) {
             final_flow_error = max_abs_error;
         }
-        lines.push(VerifyLine { key: key.clone(), shape: shape.clone(), max_abs_error, relative_error, passed: passed && max_abs_error.is_finite() });
+        lines.push(VerifyLine {
+            key: key.clone(),
+            shape: shape.clone(),
+            max_abs_error,
+            relative_error,
+            passed: passed && max_abs_error.is_finite(),
+        });
     }
     Ok(VerifyReport { lines, final_flow_error, unmatched })
 }

@@ -58,7 +58,8 @@ impl AblationTable {
     pub fn ranks(&self) -> Vec<(Option<usize>, Option<usize>)> {
         (0..self.columns.len())
             .map(|c| {
-                let mut order: Vec<usize> = (0..self.rows.len()).filter(|&r| self.rows[r].values[c].is_finite()).collect();
+                let mut order: Vec<usize> =
+                    (0..self.rows.len()).filter(|&r| self.rows[r].values[c].is_finite()).collect();
                 order.sort_by(|&a, &b| self.rows[a].values[c].total_cmp(&self.rows[b].values[c]));
                 (order.first().copied(), order.get(1).copied())
             })
@@ -117,7 +118,10 @@ impl AblationTable {
             .map(|r| {
                 let mut values = serde_json::Map::new();
                 for ((b, m), v) in self.columns.iter().zip(&r.values) {
-                    values.insert(format!("{b}/{m}"), serde_json::Number::from_f64(*v).map_or(serde_json::Value::Null, Into::into));
+                    values.insert(
+                        format!("{b}/{m}"),
+                        serde_json::Number::from_f64(*v).map_or(serde_json::Value::Null, Into::into),
+                    );
                 }
                 json!({"run": r.name, "values": values})
             })

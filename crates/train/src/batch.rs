@@ -81,7 +81,10 @@ fn dataset(source: &DataSource, index: usize) -> Result<Option<(String, FileData
                 "driving" => SceneFlowSubset::Driving,
                 "monkaa" => SceneFlowSubset::Monkaa,
                 other => {
-                    return Err(Error::Config(format!("{} = '{other}': expected flyingthings, driving or monkaa", key("subset"))));
+                    return Err(Error::Config(format!(
+                        "{} = '{other}': expected flyingthings, driving or monkaa",
+                        key("subset")
+                    )));
                 }
             };
             let pass = match pass.as_str() {
@@ -186,7 +189,14 @@ impl TrainingData {
             Some(cfg) => {
                 let a = dgstereo_data::augment(cfg, &left, &right, &disparity, Some(&valid), aug_seed)
                     .map_err(|e| Error::Other(format!("{name}: {e}")))?;
-                Ok(TrainingPair { name, left: a.left, right: a.right, disparity: a.disparity, disparity_nearest: a.disparity_nearest, valid: a.valid })
+                Ok(TrainingPair {
+                    name,
+                    left: a.left,
+                    right: a.right,
+                    disparity: a.disparity,
+                    disparity_nearest: a.disparity_nearest,
+                    valid: a.valid,
+                })
             }
             None => {
                 let (w, h) = (left.width, left.height);
@@ -236,7 +246,10 @@ pub fn to_tensors(pairs: &[TrainingPair], device: &Device) -> Result<TensorBatch
     let first = pairs.first().ok_or_else(|| Error::Other("empty batch".into()))?;
     let (w, h) = (first.left.width, first.left.height);
     if let Some(p) = pairs.iter().find(|p| (p.left.width, p.left.height) != (w, h)) {
-        return Err(Error::Shape(format!("batch mixes sizes: {} is {}x{}, {} is {w}x{h}", p.name, p.left.width, p.left.height, first.name)));
+        return Err(Error::Shape(format!(
+            "batch mixes sizes: {} is {}x{}, {} is {w}x{h}",
+            p.name, p.left.width, p.left.height, first.name
+        )));
     }
     let n = pairs.len();
     let mut left = Vec::with_capacity(n * 3 * h * w);

@@ -66,7 +66,8 @@ pub fn list_checkpoints(dir: &Path) -> Result<Vec<(usize, PathBuf)>> {
     for entry in std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))? {
         let path = entry.map_err(|e| Error::io(dir, e))?.path();
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        if let Some(step) = name.strip_prefix("step-").and_then(|s| s.strip_suffix(".safetensors")).and_then(|s| s.parse().ok())
+        if let Some(step) =
+            name.strip_prefix("step-").and_then(|s| s.strip_suffix(".safetensors")).and_then(|s| s.parse().ok())
             && path.is_file()
         {
             found.push((step, path));
@@ -139,7 +140,8 @@ pub fn save_checkpoint(trainer: &Trainer, dir: &Path, keep: usize) -> Result<Pat
 /// The metadata of a checkpoint.
 pub fn read_metadata(path: &Path) -> Result<BTreeMap<String, String>> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| Error::format(path, format!("not a safetensors file: {e}")))?;
+    let (_, meta) =
+        SafeTensors::read_metadata(&bytes).map_err(|e| Error::format(path, format!("not a safetensors file: {e}")))?;
     Ok(meta.metadata().clone().unwrap_or_default().into_iter().collect())
 }
 
@@ -148,7 +150,8 @@ pub fn read_metadata(path: &Path) -> Result<BTreeMap<String, String>> {
 pub fn load_checkpoint(parts: TrainParts, path: &Path, device: &burn::tensor::Device) -> Result<Trainer> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let bad = |m: String| Error::Checkpoint { path: path.into(), message: m };
-    let parsed = SafeTensors::deserialize(&bytes).map_err(|e| bad(format!("not a safetensors file (truncated?): {e}")))?;
+    let parsed =
+        SafeTensors::deserialize(&bytes).map_err(|e| bad(format!("not a safetensors file (truncated?): {e}")))?;
     let (_, header) = SafeTensors::read_metadata(&bytes).map_err(|e| bad(e.to_string()))?;
     let meta = header.metadata().clone().unwrap_or_default();
     if meta.get(FORMAT_KEY).map(String::as_str) != Some(FORMAT) {

@@ -71,7 +71,11 @@ pub fn global_grad_norm<M: Module>(module: &M, grads: &GradientsParams) -> (f64,
 
 /// Clips `grads` to a global norm of `max_norm` (PyTorch's `clip_grad_norm_`); `max_norm <= 0`
 /// only measures. Non-finite gradients are left as they are and reported.
-pub fn clip_global_norm<M: Module>(module: &M, mut grads: GradientsParams, max_norm: f64) -> (GradientsParams, ClipReport) {
+pub fn clip_global_norm<M: Module>(
+    module: &M,
+    mut grads: GradientsParams,
+    max_norm: f64,
+) -> (GradientsParams, ClipReport) {
     let (total_norm, non_finite) = global_grad_norm(module, &grads);
     let mut scale = 1.0;
     if non_finite.is_none() && max_norm > 0.0 {

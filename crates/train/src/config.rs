@@ -283,7 +283,13 @@ fn default_kitti() -> u32 {
 
 impl Default for DataSource {
     fn default() -> Self {
-        Self::Synthetic { weight: 1.0, width: default_width(), height: default_height(), max_disparity: None, count: None }
+        Self::Synthetic {
+            weight: 1.0,
+            width: default_width(),
+            height: default_height(),
+            max_disparity: None,
+            count: None,
+        }
     }
 }
 

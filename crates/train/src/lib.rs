@@ -27,6 +27,6 @@ pub mod trainer;
 pub mod validate;
 
 pub use config::{DataSource, TrainingConfig, TrainingDataConfig, ValidationConfig};
-pub use schedule::OneCycleLr;
 pub use run::{RunOptions, RunSummary, train};
+pub use schedule::OneCycleLr;
 pub use trainer::{StepReport, TrainParts, Trainer};

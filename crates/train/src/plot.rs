@@ -56,7 +56,8 @@ fn panel(img: &mut RgbImage, left: u32, series: &[(&Series, Rgb<u8>, bool)], max
     }
     line(img, (x0, y0), (x1, y0), AXIS);
     line(img, (x0, y0), (x0, y1), AXIS);
-    let to_px = |(s, v): (f64, f64)| (x0 + (x1 - x0) * s / max_step.max(1.0), y0 + (y1 - y0) * (v / top).clamp(0.0, 1.0));
+    let to_px =
+        |(s, v): (f64, f64)| (x0 + (x1 - x0) * s / max_step.max(1.0), y0 + (y1 - y0) * (v / top).clamp(0.0, 1.0));
     for (s, colour, dots) in series {
         let pts: Vec<_> = s.iter().copied().filter(|(_, v)| v.is_finite()).map(to_px).collect();
         for w in pts.windows(2) {

@@ -117,7 +117,10 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
         })?;
         let stored = crate::checkpoint::read_metadata(path)?.remove("config").unwrap_or_default();
         if stored != parts.resolved_toml {
-            eprintln!("warning: {} was saved with another resolved config; resuming with the current one", path.display());
+            eprintln!(
+                "warning: {} was saved with another resolved config; resuming with the current one",
+                path.display()
+            );
         }
         load_checkpoint(parts, path, device)?
     } else {
@@ -147,7 +150,13 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
     bar.set_position(trainer.step as u64);
     bar.reset_eta();
 
-    let mut summary = RunSummary { steps: trainer.step, last: None, validation: None, checkpoint: existing.last().map(|e| e.1.clone()), finished: false };
+    let mut summary = RunSummary {
+        steps: trainer.step,
+        last: None,
+        validation: None,
+        checkpoint: existing.last().map(|e| e.1.clone()),
+        finished: false,
+    };
     let mut interval_start = Instant::now();
     let mut interval_steps = 0usize;
     while trainer.step < end {
@@ -155,7 +164,8 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
             Ok(r) => r,
             Err(e) => {
                 bar.abandon();
-                let _ = append_line(&log_path, &json!({"kind": "error", "step": trainer.step, "message": e.to_string()}));
+                let _ =
+                    append_line(&log_path, &json!({"kind": "error", "step": trainer.step, "message": e.to_string()}));
                 let kept = summary.checkpoint.as_ref().map_or("none yet".to_string(), |p| p.display().to_string());
                 return Err(Error::Other(format!("training stopped: {e}. Last good checkpoint: {kept}")));
             }
@@ -180,10 +190,19 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
             interval_start = Instant::now();
             interval_steps = 0;
         }
-        let validate_now = !validation.is_empty() && ((t.validate_every > 0 && done % t.validate_every == 0) || done == t.steps);
+        let validate_now =
+            !validation.is_empty() && ((t.validate_every > 0 && done % t.validate_every == 0) || done == t.steps);
         if validate_now {
-            let m = validation.evaluate(&trainer.inference_model(), &trainer.parts.model, trainer.prior(), &trainer.device)?;
-            append_line(&log_path, &json!({"kind": "validation", "step": done, "epe": m.epe, "bad3": m.bad_3, "metrics": metrics_json(&m)}))?;
+            let m = validation.evaluate(
+                &trainer.inference_model(),
+                &trainer.parts.model,
+                trainer.prior(),
+                &trainer.device,
+            )?;
+            append_line(
+                &log_path,
+                &json!({"kind": "validation", "step": done, "epe": m.epe, "bad3": m.bad_3, "metrics": metrics_json(&m)}),
+            )?;
             bar.println(format!("validation at step {done}: EPE {:.3} px, bad-3 {:.2} %", m.epe, m.bad_3));
             curves.valid_epe.push((done as f64, m.epe));
             write_plot(&curves, &plot_path)?;

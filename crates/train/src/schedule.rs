@@ -55,10 +55,8 @@ impl OneCycleLr {
     pub fn lr(&self, step: usize) -> f64 {
         let step = step.min(self.total_steps - 1) as f64;
         let warmup_end = self.pct_start * self.total_steps as f64 - 1.0;
-        let phases = [
-            (warmup_end, self.initial_lr(), self.max_lr),
-            (self.total_steps as f64 - 1.0, self.max_lr, self.min_lr()),
-        ];
+        let phases =
+            [(warmup_end, self.initial_lr(), self.max_lr), (self.total_steps as f64 - 1.0, self.max_lr, self.min_lr())];
         let mut start = 0.0;
         for (i, &(end, start_lr, end_lr)) in phases.iter().enumerate() {
             if step <= end || i == phases.len() - 1 {

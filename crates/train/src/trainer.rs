@@ -130,7 +130,16 @@ pub fn forward_disparities(
     let divisor = 32usize.max(1 << (config.updater.n_downsample + 3));
     let padder = InputPadder::new(h, w, divisor);
     let prior = prior.map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
-    let out = model.forward_flow(padder.pad(left), padder.pad(right), prior.as_ref(), iters, None, None, all_iterations, None);
+    let out = model.forward_flow(
+        padder.pad(left),
+        padder.pad(right),
+        prior.as_ref(),
+        iters,
+        None,
+        None,
+        all_iterations,
+        None,
+    );
     out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect()
 }
 
@@ -143,7 +152,8 @@ pub fn batch_metrics(prediction: Tensor<4>, gt: Tensor<4>, valid: Tensor<4>) -> 
     let mut sums = MetricSums::default();
     for i in 0..n {
         let r = i * h * w..(i + 1) * h * w;
-        let gt: Vec<f32> = g[r.clone()].iter().zip(&v[r.clone()]).map(|(&d, &m)| if m >= 0.5 { d } else { f32::NAN }).collect();
+        let gt: Vec<f32> =
+            g[r.clone()].iter().zip(&v[r.clone()]).map(|(&d, &m)| if m >= 0.5 { d } else { f32::NAN }).collect();
         let s = accumulate(
             &DisparityMap::from_vec(w, h, p[r].to_vec())?,
             &DisparityMap::from_vec(w, h, gt)?,
@@ -172,11 +182,18 @@ impl Trainer {
     }
 
     /// A run from given weights (plain device), optimiser and step counter.
-    pub fn with_model(parts: TrainParts, model: RaftStereo, device: &Device, optimizer: ModuleOptimizer, step: usize) -> Result<Self> {
+    pub fn with_model(
+        parts: TrainParts,
+        model: RaftStereo,
+        device: &Device,
+        optimizer: ModuleOptimizer,
+        step: usize,
+    ) -> Result<Self> {
         parts.validate()?;
         let autodiff = device.clone().autodiff();
         let model = model.fork(&autodiff).train();
-        let schedule = OneCycleLr::new(parts.train.lr, parts.train.schedule_total_steps(), parts.train.warmup_fraction)?;
+        let schedule =
+            OneCycleLr::new(parts.train.lr, parts.train.schedule_total_steps(), parts.train.warmup_fraction)?;
         let data = TrainingData::new(&parts.data, &parts.train)?;
         let prior = parts.prior.init(device)?;
         Ok(Self { parts, model, optimizer, schedule, step, device: device.clone(), autodiff, data, prior })
@@ -190,8 +207,15 @@ impl Trainer {
         let pairs = self.data.batch(step, t.batch_size)?;
         let batch = to_tensors(&pairs, &self.autodiff)?;
         let prior = batch_prior(&self.prior, self.parts.model.needs_prior(), &batch)?;
-        let predictions =
-            forward_disparities(&self.model, &self.parts.model, batch.left.clone(), batch.right.clone(), prior.as_ref(), t.iters, true);
+        let predictions = forward_disparities(
+            &self.model,
+            &self.parts.model,
+            batch.left.clone(),
+            batch.right.clone(),
+            prior.as_ref(),
+            t.iters,
+            true,
+        );
         let loss = self.parts.loss.loss(&predictions, &batch.target);
         let loss_value = f64::from(dgstereo_core::tensor::to_vec(loss.clone().detach())[0]);
         if !loss_value.is_finite() {

@@ -45,7 +45,13 @@ impl ValidationSet {
     }
 
     /// Pooled metrics of `model` (plain device) over the set, one pair at a time.
-    pub fn evaluate(&self, model: &RaftStereo, config: &ModelConfig, prior: &Prior, device: &Device) -> Result<Metrics> {
+    pub fn evaluate(
+        &self,
+        model: &RaftStereo,
+        config: &ModelConfig,
+        prior: &Prior,
+        device: &Device,
+    ) -> Result<Metrics> {
         let mut sums = MetricSums::default();
         for pair in &self.pairs {
             let batch = to_tensors(std::slice::from_ref(pair), device)?;

@@ -4,7 +4,16 @@ use dgstereo_eval::Metrics;
 use dgstereo_train::ablation::AblationTable;
 
 fn metrics(epe: f64, bad_3: f64) -> Metrics {
-    Metrics { epe, bad_0_5: f64::NAN, bad_1: f64::NAN, bad_2: f64::NAN, bad_3, bad_4: f64::NAN, d1_all: f64::NAN, valid_pixels: 10 }
+    Metrics {
+        epe,
+        bad_0_5: f64::NAN,
+        bad_1: f64::NAN,
+        bad_2: f64::NAN,
+        bad_3,
+        bad_4: f64::NAN,
+        d1_all: f64::NAN,
+        valid_pixels: 10,
+    }
 }
 
 #[test]

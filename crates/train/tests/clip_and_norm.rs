@@ -7,9 +7,9 @@ use burn::tensor::Tensor;
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_encoder::norm::FrozenBatchNorm;
+use dgstereo_train::TrainingConfig;
 use dgstereo_train::clip::{clip_global_norm, global_grad_norm};
 use dgstereo_train::trainer::adamw;
-use dgstereo_train::TrainingConfig;
 
 #[derive(Module, Debug)]
 struct Two {
@@ -104,7 +104,8 @@ fn frozen_batch_norm_statistics_never_update_while_affine_trains() {
     let mut optimizer = adamw(&TrainingConfig { weight_decay: 0.1, ..TrainingConfig::default() });
     for k in 0..3 {
         // A batch whose statistics differ from the running ones: training-mode BN would move them.
-        let x: Tensor<4> = from_vec((0..4 * 4 * 9).map(|i| ((i * 7 + k) % 11) as f32 * 3.0 + 5.0).collect(), [4, 4, 3, 3], &device);
+        let x: Tensor<4> =
+            from_vec((0..4 * 4 * 9).map(|i| ((i * 7 + k) % 11) as f32 * 3.0 + 5.0).collect(), [4, 4, 3, 3], &device);
         let y = bn.forward(x);
         let loss = (y.clone() * y).mean();
         let grads = GradientsParams::from_grads(loss.backward(), &bn);

@@ -22,11 +22,15 @@ fn empty_tables_are_the_reference_recipe() {
 fn unknown_keys_and_bad_values_are_named() {
     let e = toml::from_str::<TrainingConfig>("learning_rate = 1e-3").unwrap_err().to_string();
     assert!(e.contains("learning_rate"), "{e}");
-    let e = toml::from_str::<TrainingDataConfig>("[[sources]]\nkind = \"synthetic\"\nwidht = 10").unwrap_err().to_string();
+    let e =
+        toml::from_str::<TrainingDataConfig>("[[sources]]\nkind = \"synthetic\"\nwidht = 10").unwrap_err().to_string();
     assert!(e.contains("widht"), "{e}");
     let e = TrainingConfig { clip: -1.0, ..TrainingConfig::default() }.validate().unwrap_err().to_string();
     assert!(e.contains("train.clip"), "{e}");
-    let d = TrainingDataConfig { sources: vec![DataSource::Folder { weight: 1.0, root: "/no/such/folder".into() }], ..TrainingDataConfig::default() };
+    let d = TrainingDataConfig {
+        sources: vec![DataSource::Folder { weight: 1.0, root: "/no/such/folder".into() }],
+        ..TrainingDataConfig::default()
+    };
     let e = TrainingData::new(&d, &TrainingConfig::default()).err().unwrap().to_string();
     assert!(e.contains("data.sources[0].root") && e.contains("/no/such/folder"), "{e}");
 }
@@ -52,7 +56,8 @@ fn batches_depend_only_on_seed_and_step() {
 fn augmented_batches_have_the_crop_size_and_both_targets() {
     let mut parts = common::tiny_parts(10, 1, 1e-3, None, 2);
     parts.data.augment = true;
-    parts.data.sources = vec![DataSource::Synthetic { weight: 1.0, width: 96, height: 64, max_disparity: None, count: None }];
+    parts.data.sources =
+        vec![DataSource::Synthetic { weight: 1.0, width: 96, height: 64, max_disparity: None, count: None }];
     let data = TrainingData::new(&parts.data, &parts.train).unwrap();
     let pairs = data.batch(3, 2).unwrap();
     for p in &pairs {

@@ -33,7 +33,10 @@ fn tiny_model_overfits_one_synthetic_pair() {
     let (first, last) = (first.unwrap(), last.unwrap());
     // Evaluate the trained weights (no autodiff) on the pair it saw.
     let model = trainer.inference_model();
-    let pair = dgstereo_train::batch::TrainingData::new(&trainer.parts.data, &trainer.parts.train).unwrap().pair(0, 0).unwrap();
+    let pair = dgstereo_train::batch::TrainingData::new(&trainer.parts.data, &trainer.parts.train)
+        .unwrap()
+        .pair(0, 0)
+        .unwrap();
     let batch = to_tensors(&[pair], &device).unwrap();
     let out = forward_disparities(&model, &trainer.parts.model, batch.left, batch.right, None, iters, false);
     let m = batch_metrics(out[0].clone(), batch.target.disparity_bilinear, batch.target.valid).unwrap().metrics();

@@ -6,9 +6,9 @@ use std::path::Path;
 
 use dgstereo_core::default_device;
 use dgstereo_model::RaftStereo;
+use dgstereo_train::Trainer;
 use dgstereo_train::checkpoint::{list_checkpoints, load_checkpoint, save_checkpoint, write_atomic};
 use dgstereo_train::run::{RunOptions, checkpoint_dir, train};
-use dgstereo_train::Trainer;
 
 fn weights(model: &RaftStereo) -> Vec<(String, Vec<f32>)> {
     use burn::store::ModuleSnapshot;

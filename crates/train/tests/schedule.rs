@@ -8,10 +8,8 @@ fn torch_one_cycle(max_lr: f64, total_steps: usize, pct_start: f64, step_num: us
     let initial_lr = max_lr / 25.0;
     let min_lr = initial_lr / 1e4;
     // self._schedule_phases
-    let phases = [
-        (pct_start * total_steps as f64 - 1.0, initial_lr, max_lr),
-        (total_steps as f64 - 1.0, max_lr, min_lr),
-    ];
+    let phases =
+        [(pct_start * total_steps as f64 - 1.0, initial_lr, max_lr), (total_steps as f64 - 1.0, max_lr, min_lr)];
     let step_num = step_num as f64;
     let mut start_step = 0.0;
     let mut lr = f64::NAN;
@@ -33,7 +31,20 @@ fn one_cycle_matches_pytorch_formula_for_raft_stereo_recipe() {
     for (steps, max_lr) in [(200_000usize, 2e-4), (1000, 1e-3), (4000, 2e-5)] {
         let total = steps + 100;
         let s = OneCycleLr::new(max_lr, total, 0.01).unwrap();
-        let probes = [0, 1, 2, 5, total / 200, total / 100 - 1, total / 100, total / 100 + 1, total / 2, steps - 1, total - 2, total - 1];
+        let probes = [
+            0,
+            1,
+            2,
+            5,
+            total / 200,
+            total / 100 - 1,
+            total / 100,
+            total / 100 + 1,
+            total / 2,
+            steps - 1,
+            total - 2,
+            total - 1,
+        ];
         for k in probes {
             let ours = s.lr(k);
             let torch = torch_one_cycle(max_lr, total, 0.01, k);

@@ -1,8 +1,8 @@
 //! Depth guidance of the GRU: the paper's gradient feature and its ablation variants.
 
-use burn::tensor::{Tensor, TensorData};
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::{ConvOptions, PadMode};
+use burn::tensor::{Tensor, TensorData};
 use dgstereo_core::resample::resize_bilinear;
 use dgstereo_core::tensor::instance_norm;
 use serde::{Deserialize, Serialize};

@@ -19,7 +19,5 @@ pub fn convex_upsample(flow: Tensor<4>, mask: Tensor<4>, factor: usize) -> Tenso
     let patches = unfold4d(flow.mul_scalar(factor as f64), [3, 3], UnfoldOptions::new([1, 1], [1, 1], [1, 1]));
     let patches = patches.reshape([n, d, 9, 1, h * w]);
     let up = (mask * patches).sum_dim(2); // [n, d, 1, ff, hw]
-    up.reshape([n, d, factor, factor, h, w])
-        .permute([0, 1, 4, 2, 5, 3])
-        .reshape([n, d, factor * h, factor * w])
+    up.reshape([n, d, factor, factor, h, w]).permute([0, 1, 4, 2, 5, 3]).reshape([n, d, factor * h, factor * w])
 }

@@ -55,11 +55,15 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
             }
             println!("{name}: finished run found in {}, reusing it", out.display());
         } else {
-            let resume = checkpoint_dir(&out).is_dir() && !dgstereo_train::checkpoint::list_checkpoints(&checkpoint_dir(&out))?.is_empty();
+            let resume = checkpoint_dir(&out).is_dir()
+                && !dgstereo_train::checkpoint::list_checkpoints(&checkpoint_dir(&out))?.is_empty();
             train_one(parts.clone(), &out, resume, !a.quiet, &device)?;
         }
         let metrics = evaluate_finished_run(&parts, &out, &device)?;
-        println!("{name}: {bench} EPE {:.3} px, bad-1 {:.2} %, bad-3 {:.2} %", metrics.epe, metrics.bad_1, metrics.bad_3);
+        println!(
+            "{name}: {bench} EPE {:.3} px, bad-1 {:.2} %, bad-3 {:.2} %",
+            metrics.epe, metrics.bad_1, metrics.bad_3
+        );
         table.push(&name, &[(bench.clone(), metrics)]);
         table.write(&a.out)?;
     }

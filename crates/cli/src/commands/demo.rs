@@ -43,7 +43,8 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     let model = load_model(&weights, None, &device)?;
 
     let start = Instant::now();
-    let pred = model.predict(image_tensor(&left, &device), image_tensor(&right, &device), None, a.iters, false, None)?;
+    let pred =
+        model.predict(image_tensor(&left, &device), image_tensor(&right, &device), None, a.iters, false, None)?;
     let disp = disparity_map(pred.last());
     let seconds = start.elapsed().as_secs_f64();
     println!("Cones {}x{}, {} iterations: {seconds:.2} s", left.width, left.height, a.iters);

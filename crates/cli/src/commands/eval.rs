@@ -117,7 +117,10 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
         protocol.name(),
         engine.weights.display(),
         a.model.iters,
-        a.model.max_size.map(|m| format!(", downscaled to at most {m} px (not the benchmark's protocol)")).unwrap_or_default()
+        a.model
+            .max_size
+            .map(|m| format!(", downscaled to at most {m} px (not the benchmark's protocol)"))
+            .unwrap_or_default()
     );
     let mut k = 0;
     let result = evaluate_dataset(

@@ -37,9 +37,7 @@ pub struct TrainArgs {
 
 /// A run name as a folder name.
 pub fn folder_name(name: &str) -> String {
-    name.chars()
-        .map(|c| if c.is_ascii_alphanumeric() || "-_.=,+".contains(c) { c } else { '_' })
-        .collect()
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || "-_.=,+".contains(c) { c } else { '_' }).collect()
 }
 
 /// The trainer's parts of a resolved experiment, with `steps` overriding `train.steps`.
@@ -60,12 +58,21 @@ pub fn parts_of(mut config: dgstereo_experiment::ExperimentConfig, steps: Option
 }
 
 /// Trains one run into `out`.
-pub fn train_one(parts: TrainParts, out: &Path, resume: bool, progress: bool, device: &burn::tensor::Device) -> anyhow::Result<dgstereo_train::RunSummary> {
+pub fn train_one(
+    parts: TrainParts,
+    out: &Path,
+    resume: bool,
+    progress: bool,
+    device: &burn::tensor::Device,
+) -> anyhow::Result<dgstereo_train::RunSummary> {
     let name = parts.name.clone();
     let options = RunOptions { out: out.to_path_buf(), resume, stop_after: None, progress };
     let summary = dgstereo_train::train(parts, device, &options).with_context(|| format!("run '{name}'"))?;
     if let Some(r) = summary.last {
-        println!("{name}: {} steps, loss {:.4}, train EPE {:.3} px, bad-3 {:.2} %", summary.steps, r.loss, r.epe, r.bad3);
+        println!(
+            "{name}: {} steps, loss {:.4}, train EPE {:.3} px, bad-3 {:.2} %",
+            summary.steps, r.loss, r.epe, r.bad3
+        );
     }
     if let Some(m) = summary.validation {
         println!("{name}: validation EPE {:.3} px, bad-3 {:.2} %", m.epe, m.bad_3);

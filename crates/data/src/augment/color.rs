@@ -33,13 +33,7 @@ pub struct JitterParams {
 impl JitterParams {
     /// Draws factors: brightness and contrast in `1 ± b`, `1 ± c`, saturation in `[s0, s1]`,
     /// hue in `±h`, and a random order.
-    pub fn draw(
-        rng: &mut impl Rng,
-        brightness: f32,
-        contrast: f32,
-        saturation: [f32; 2],
-        hue: f32,
-    ) -> Self {
+    pub fn draw(rng: &mut impl Rng, brightness: f32, contrast: f32, saturation: [f32; 2], hue: f32) -> Self {
         let mut order = [0, 1, 2, 3];
         for i in (1..4).rev() {
             order.swap(i, rng.gen_range(0..=i));
@@ -68,9 +62,7 @@ pub fn apply_jitter(images: &mut [&mut RgbImage], p: &JitterParams) {
         match op {
             0 => {
                 for img in images.iter_mut() {
-                    img.data
-                        .iter_mut()
-                        .for_each(|v| *v = (*v * p.brightness).clamp(0.0, 255.0));
+                    img.data.iter_mut().for_each(|v| *v = (*v * p.brightness).clamp(0.0, 255.0));
                 }
             }
             1 => {
@@ -84,9 +76,7 @@ pub fn apply_jitter(images: &mut [&mut RgbImage], p: &JitterParams) {
                 }
                 let m = (sum / n.max(1) as f64) as f32;
                 for img in images.iter_mut() {
-                    img.data.iter_mut().for_each(|v| {
-                        *v = (p.contrast * *v + (1.0 - p.contrast) * m).clamp(0.0, 255.0)
-                    });
+                    img.data.iter_mut().for_each(|v| *v = (p.contrast * *v + (1.0 - p.contrast) * m).clamp(0.0, 255.0));
                 }
             }
             2 => {
@@ -97,8 +87,7 @@ pub fn apply_jitter(images: &mut [&mut RgbImage], p: &JitterParams) {
                         let l = grey(r, g, b);
                         for c in 0..3 {
                             let v = img.data[c * n + i];
-                            img.data[c * n + i] =
-                                (p.saturation * v + (1.0 - p.saturation) * l).clamp(0.0, 255.0);
+                            img.data[c * n + i] = (p.saturation * v + (1.0 - p.saturation) * l).clamp(0.0, 255.0);
                         }
                     }
                 }
@@ -118,11 +107,7 @@ pub fn apply_jitter(images: &mut [&mut RgbImage], p: &JitterParams) {
 pub fn shift_hue(img: &mut RgbImage, h: f32) {
     let n = img.plane_len();
     for i in 0..n {
-        let rgb = [
-            img.data[i] / 255.0,
-            img.data[n + i] / 255.0,
-            img.data[2 * n + i] / 255.0,
-        ];
+        let rgb = [img.data[i] / 255.0, img.data[n + i] / 255.0, img.data[2 * n + i] / 255.0];
         let [hh, s, v] = rgb_to_hsv(rgb);
         let out = hsv_to_rgb([(hh + h).rem_euclid(1.0), s, v]);
         for (c, v) in out.iter().enumerate() {
@@ -170,9 +155,7 @@ pub fn adjust_gamma(img: &mut RgbImage, gamma: f32, gain: f32) {
     if gamma == 1.0 && gain == 1.0 {
         return;
     }
-    img.data
-        .iter_mut()
-        .for_each(|v| *v = (255.0 * gain * (*v / 255.0).powf(gamma)).clamp(0.0, 255.0));
+    img.data.iter_mut().for_each(|v| *v = (255.0 * gain * (*v / 255.0).powf(gamma)).clamp(0.0, 255.0));
 }
 
 #[cfg(test)]
@@ -181,12 +164,7 @@ mod tests {
 
     #[test]
     fn hsv_round_trips() {
-        for rgb in [
-            [0.2, 0.5, 0.9],
-            [1.0, 0.0, 0.0],
-            [0.3, 0.3, 0.3],
-            [0.9, 0.8, 0.1],
-        ] {
+        for rgb in [[0.2, 0.5, 0.9], [1.0, 0.0, 0.0], [0.3, 0.3, 0.3], [0.9, 0.8, 0.1]] {
             let back = hsv_to_rgb(rgb_to_hsv(rgb));
             for c in 0..3 {
                 assert!((back[c] - rgb[c]).abs() < 1e-5, "{rgb:?} -> {back:?}");
@@ -199,56 +177,21 @@ mod tests {
 
     #[test]
     fn each_operation_does_what_torchvision_does() {
-        let base = RgbImage::from_fn(2, 1, |x, _| {
-            if x == 0 {
-                [100.0, 50.0, 200.0]
-            } else {
-                [0.0, 0.0, 0.0]
-            }
-        });
-        let id = JitterParams {
-            order: [0, 1, 2, 3],
-            brightness: 1.0,
-            contrast: 1.0,
-            saturation: 1.0,
-            hue: 0.0,
-        };
+        let base = RgbImage::from_fn(2, 1, |x, _| if x == 0 { [100.0, 50.0, 200.0] } else { [0.0, 0.0, 0.0] });
+        let id = JitterParams { order: [0, 1, 2, 3], brightness: 1.0, contrast: 1.0, saturation: 1.0, hue: 0.0 };
         let mut img = base.clone();
         apply_jitter(&mut [&mut img], &id);
-        assert!(
-            img.data
-                .iter()
-                .zip(&base.data)
-                .all(|(a, b)| (a - b).abs() < 1e-4)
-        );
+        assert!(img.data.iter().zip(&base.data).all(|(a, b)| (a - b).abs() < 1e-4));
         let mut img = base.clone();
-        apply_jitter(
-            &mut [&mut img],
-            &JitterParams {
-                brightness: 2.0,
-                ..id.clone()
-            },
-        );
+        apply_jitter(&mut [&mut img], &JitterParams { brightness: 2.0, ..id.clone() });
         assert_eq!(img.get(0, 0), [200.0, 100.0, 255.0]);
         // Contrast 0 gives the mean grey everywhere: mean of grey(100, 50, 200) = 82.05 and 0.
         let mut img = base.clone();
-        apply_jitter(
-            &mut [&mut img],
-            &JitterParams {
-                contrast: 0.0,
-                ..id.clone()
-            },
-        );
+        apply_jitter(&mut [&mut img], &JitterParams { contrast: 0.0, ..id.clone() });
         assert!(img.data.iter().all(|v| (v - 41.025).abs() < 1e-3));
         // Saturation 0 gives per-pixel grey.
         let mut img = base.clone();
-        apply_jitter(
-            &mut [&mut img],
-            &JitterParams {
-                saturation: 0.0,
-                ..id.clone()
-            },
-        );
+        apply_jitter(&mut [&mut img], &JitterParams { saturation: 0.0, ..id.clone() });
         assert!(img.get(0, 0).iter().all(|v| (v - 82.05).abs() < 1e-3));
     }
 }

@@ -91,10 +91,7 @@ impl Default for AugmentConfig {
 impl AugmentConfig {
     /// The defaults with another crop `[height, width]`.
     pub fn with_crop(height: usize, width: usize) -> Self {
-        Self {
-            crop: [height, width],
-            ..Self::default()
-        }
+        Self { crop: [height, width], ..Self::default() }
     }
 }
 
@@ -136,10 +133,7 @@ pub fn augment(
     }
     let valid = match valid {
         Some(m) if (m.width, m.height) != (w, h) => {
-            return Err(Error::Shape(format!(
-                "augment: valid mask {}x{} for images {w}x{h}",
-                m.width, m.height
-            )));
+            return Err(Error::Shape(format!("augment: valid mask {}x{} for images {w}x{h}", m.width, m.height)));
         }
         Some(m) => m.clone(),
         None => disparity.valid_finite(),
@@ -150,24 +144,12 @@ pub fn augment(
     // Colour.
     if rng.gen_bool(cfg.asymmetric_color_prob.clamp(0.0, 1.0)) {
         for img in [&mut l, &mut r] {
-            let p = JitterParams::draw(
-                &mut rng,
-                cfg.brightness,
-                cfg.contrast,
-                cfg.saturation,
-                cfg.hue,
-            );
+            let p = JitterParams::draw(&mut rng, cfg.brightness, cfg.contrast, cfg.saturation, cfg.hue);
             apply_jitter(&mut [img], &p);
             gamma(&mut rng, cfg, img);
         }
     } else {
-        let p = JitterParams::draw(
-            &mut rng,
-            cfg.brightness,
-            cfg.contrast,
-            cfg.saturation,
-            cfg.hue,
-        );
+        let p = JitterParams::draw(&mut rng, cfg.brightness, cfg.contrast, cfg.saturation, cfg.hue);
         apply_jitter(&mut [&mut l, &mut r], &p);
         let (g, gain) = draw_gamma(&mut rng, cfg);
         adjust_gamma(&mut l, g, gain);
@@ -203,9 +185,7 @@ pub fn augment(
     let (w2, h2) = (l.width, l.height);
     let margin = if cfg.yjitter { 4 } else { 0 };
     if w2 < cw + margin + usize::from(cfg.yjitter) || h2 < ch + margin + usize::from(cfg.yjitter) {
-        return Err(Error::Shape(format!(
-            "augment: image {w2}x{h2} is too small for crop {cw}x{ch}"
-        )));
+        return Err(Error::Shape(format!("augment: image {w2}x{h2} is too small for crop {cw}x{ch}")));
     }
     let (x0, y0, y1) = if cfg.yjitter {
         let y0 = rng.gen_range(2..h2 - ch - 2);
@@ -221,12 +201,7 @@ pub fn augment(
     let valid = Mask {
         width: cw,
         height: ch,
-        data: valid
-            .data
-            .iter()
-            .zip(&disparity.data)
-            .map(|(v, d)| *v && d.is_finite())
-            .collect(),
+        data: valid.data.iter().zip(&disparity.data).map(|(v, d)| *v && d.is_finite()).collect(),
     };
     Ok(AugmentedSample {
         left: l.crop(x0, y0, cw, ch)?,
@@ -258,9 +233,7 @@ fn gamma(rng: &mut ChaCha8Rng, cfg: &AugmentConfig, img: &mut RgbImage) {
 fn erase(rng: &mut ChaCha8Rng, cfg: &AugmentConfig, img: &mut RgbImage) {
     let (w, h) = (img.width, img.height);
     let n = img.plane_len() as f64;
-    let mean: Vec<f32> = (0..3)
-        .map(|c| (img.plane(c).iter().map(|v| f64::from(*v)).sum::<f64>() / n) as f32)
-        .collect();
+    let mean: Vec<f32> = (0..3).map(|c| (img.plane(c).iter().map(|v| f64::from(*v)).sum::<f64>() / n) as f32).collect();
     let [lo, hi] = cfg.eraser_size;
     for _ in 0..rng.gen_range(1..3) {
         let x0 = rng.gen_range(0..w);

@@ -23,9 +23,7 @@ fn some_file(p: PathBuf) -> Option<PathBuf> {
 }
 
 fn file_name(p: &Path) -> String {
-    p.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default()
+    p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
 }
 
 /// Middlebury 2014 (and MiddEval3) scenes: every sub-folder of `root` holding `im0.png` and
@@ -43,15 +41,11 @@ pub fn middlebury2014(root: &Path) -> Result<FileDataset> {
             group: None,
             left,
             right,
-            disparity: some_file(dir.join("disp0GT.pfm"))
-                .or_else(|| some_file(dir.join("disp0.pfm"))),
+            disparity: some_file(dir.join("disp0GT.pfm")).or_else(|| some_file(dir.join("disp0.pfm"))),
             nonoccluded: some_file(dir.join("mask0nocc.png")),
         });
     }
-    Ok(FileDataset {
-        files,
-        rule: ValidRule::Finite,
-    })
+    Ok(FileDataset { files, rule: ValidRule::Finite })
 }
 
 /// The contents of a Middlebury `calib.txt`.
@@ -88,11 +82,7 @@ fn parse_matrix(s: &str) -> Option<[[f64; 3]; 3]> {
     }
     let mut m = [[0.0; 3]; 3];
     for (r, row) in rows.iter().enumerate() {
-        let vals: Vec<f64> = row
-            .split_whitespace()
-            .map(str::parse)
-            .collect::<std::result::Result<_, _>>()
-            .ok()?;
+        let vals: Vec<f64> = row.split_whitespace().map(str::parse).collect::<std::result::Result<_, _>>().ok()?;
         if vals.len() != 3 {
             return None;
         }
@@ -113,22 +103,13 @@ pub fn read_middlebury_calib(path: impl AsRef<Path>) -> Result<MiddleburyCalib> 
             kv.insert(k.trim().to_string(), v.trim().to_string());
         }
     }
-    let get = |k: &str| {
-        kv.get(k)
-            .ok_or_else(|| Error::format(path, format!("calib: missing key {k:?}")))
-    };
+    let get = |k: &str| kv.get(k).ok_or_else(|| Error::format(path, format!("calib: missing key {k:?}")));
     let num = |k: &str| -> Result<f64> {
-        get(k)?
-            .parse::<f64>()
-            .map_err(|_| Error::format(path, format!("calib: {k} is not a number")))
+        get(k)?.parse::<f64>().map_err(|_| Error::format(path, format!("calib: {k} is not a number")))
     };
     let mat = |k: &str| -> Result<[[f64; 3]; 3]> {
-        parse_matrix(get(k)?).ok_or_else(|| {
-            Error::format(
-                path,
-                format!("calib: {k} is not a 3x3 matrix [a b c; d e f; g h i]"),
-            )
-        })
+        parse_matrix(get(k)?)
+            .ok_or_else(|| Error::format(path, format!("calib: {k} is not a 3x3 matrix [a b c; d e f; g h i]")))
     };
     Ok(MiddleburyCalib {
         cam0: mat("cam0")?,
@@ -146,10 +127,7 @@ pub fn read_middlebury_calib(path: impl AsRef<Path>) -> Result<MiddleburyCalib> 
 /// `root/two_view_training_gt/<scene>/{disp0GT.pfm, mask0nocc.png}` or beside the images.
 /// Valid ground truth: finite and `< 512` (RAFT; occluded pixels included).
 pub fn eth3d(root: &Path) -> Result<FileDataset> {
-    let images = ["two_view_training", "two_view_test"]
-        .iter()
-        .map(|d| root.join(d))
-        .find(|p| p.is_dir());
+    let images = ["two_view_training", "two_view_test"].iter().map(|d| root.join(d)).find(|p| p.is_dir());
     let (img_root, gt_root) = match images {
         Some(p) => {
             let gt = PathBuf::from(format!("{}_gt", p.display()));
@@ -164,11 +142,7 @@ pub fn eth3d(root: &Path) -> Result<FileDataset> {
             continue;
         }
         let scene = file_name(&dir);
-        let gt_dir = gt_root
-            .as_ref()
-            .map(|g| g.join(&scene))
-            .filter(|g| g.is_dir())
-            .unwrap_or_else(|| dir.clone());
+        let gt_dir = gt_root.as_ref().map(|g| g.join(&scene)).filter(|g| g.is_dir()).unwrap_or_else(|| dir.clone());
         files.push(SampleFiles {
             name: scene,
             group: None,
@@ -178,10 +152,7 @@ pub fn eth3d(root: &Path) -> Result<FileDataset> {
             nonoccluded: some_file(gt_dir.join("mask0nocc.png")),
         });
     }
-    Ok(FileDataset {
-        files,
-        rule: ValidRule::Below(512.0),
-    })
+    Ok(FileDataset { files, rule: ValidRule::Below(512.0) })
 }
 
 /// KITTI version.
@@ -219,10 +190,7 @@ pub fn kitti(root: &Path, version: KittiVersion) -> Result<FileDataset> {
             nonoccluded: some_file(root.join(noc).join(&n)),
         })
         .collect();
-    Ok(FileDataset {
-        files,
-        rule: ValidRule::Positive,
-    })
+    Ok(FileDataset { files, rule: ValidRule::Positive })
 }
 
 /// The four DrivingStereo weather subsets.
@@ -233,11 +201,7 @@ pub const DRIVINGSTEREO_WEATHERS: [&str; 4] = ["sunny", "cloudy", "foggy", "rain
 /// `half-size` folders are used when the full-size ones are missing. `weathers` selects subsets
 /// (empty = all four present); each sample's group is its weather. Valid ground truth: `> 0`.
 pub fn drivingstereo(root: &Path, weathers: &[&str]) -> Result<FileDataset> {
-    let chosen: Vec<&str> = if weathers.is_empty() {
-        DRIVINGSTEREO_WEATHERS.to_vec()
-    } else {
-        weathers.to_vec()
-    };
+    let chosen: Vec<&str> = if weathers.is_empty() { DRIVINGSTEREO_WEATHERS.to_vec() } else { weathers.to_vec() };
     let mut files = Vec::new();
     for w in chosen {
         let wdir = root.join(w);
@@ -245,50 +209,31 @@ pub fn drivingstereo(root: &Path, weathers: &[&str]) -> Result<FileDataset> {
             if weathers.is_empty() {
                 continue;
             }
-            return Err(Error::format(
-                &wdir,
-                "DrivingStereo weather folder not found",
-            ));
+            return Err(Error::format(&wdir, "DrivingStereo weather folder not found"));
         }
-        let size = if wdir.join("left-image-full-size").is_dir() {
-            "full-size"
-        } else {
-            "half-size"
-        };
+        let size = if wdir.join("left-image-full-size").is_dir() { "full-size" } else { "half-size" };
         let left_dir = wdir.join(format!("left-image-{size}"));
         let mut lefts = Vec::new();
         walk(&left_dir, &mut lefts)?;
         for left in lefts {
             let name = file_name(&left);
-            let stem = left
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
+            let stem = left.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
             files.push(SampleFiles {
                 name: format!("{w}/{stem}"),
                 group: Some(w.to_string()),
                 right: wdir.join(format!("right-image-{size}")).join(&name),
-                disparity: some_file(
-                    wdir.join(format!("disparity-map-{size}"))
-                        .join(format!("{stem}.png")),
-                ),
+                disparity: some_file(wdir.join(format!("disparity-map-{size}")).join(format!("{stem}.png"))),
                 left,
                 nonoccluded: None,
             });
         }
     }
-    Ok(FileDataset {
-        files,
-        rule: ValidRule::Positive,
-    })
+    Ok(FileDataset { files, rule: ValidRule::Positive })
 }
 
 fn is_image(p: &Path) -> bool {
     p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
-        matches!(
-            e.to_ascii_lowercase().as_str(),
-            "png" | "jpg" | "jpeg" | "bmp" | "tif" | "tiff" | "ppm"
-        )
+        matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg" | "bmp" | "tif" | "tiff" | "ppm")
     })
 }
 
@@ -310,10 +255,7 @@ pub fn folder_pairs(root: &Path) -> Result<FileDataset> {
         if !is_image(p) || ["disp", "occ", "mask"].iter().any(|k| lower.contains(k)) {
             continue;
         }
-        let stem = p
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let stem = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let right_stem = if stem == "im0" {
             "im1".to_string()
         } else if stem.contains("left") {
@@ -323,10 +265,7 @@ pub fn folder_pairs(root: &Path) -> Result<FileDataset> {
         };
         let dir = p.parent().unwrap_or(Path::new(""));
         let right = all.iter().find(|q| {
-            q.parent() == Some(dir)
-                && q.file_stem()
-                    .is_some_and(|s| s.to_string_lossy() == right_stem)
-                && is_image(q)
+            q.parent() == Some(dir) && q.file_stem().is_some_and(|s| s.to_string_lossy() == right_stem) && is_image(q)
         });
         if let Some(right) = right {
             pairs.push((p.clone(), right.clone(), stem));
@@ -335,16 +274,11 @@ pub fn folder_pairs(root: &Path) -> Result<FileDataset> {
     let mut files = Vec::new();
     for (left, right, stem) in &pairs {
         let dir = left.parent().unwrap_or(Path::new(""));
-        let alone = pairs
-            .iter()
-            .filter(|(l, _, _)| l.parent() == Some(dir))
-            .count()
-            == 1;
+        let alone = pairs.iter().filter(|(l, _, _)| l.parent() == Some(dir)).count() == 1;
         let mut disp_names: Vec<String> = Vec::new();
         let mut mask_names: Vec<String> = Vec::new();
         if stem == "im0" {
-            disp_names
-                .extend(["disp0GT.pfm", "disp0.pfm", "disp0GT.png", "disp0.npy"].map(String::from));
+            disp_names.extend(["disp0GT.pfm", "disp0.pfm", "disp0GT.png", "disp0.npy"].map(String::from));
             mask_names.push("mask0nocc.png".into());
         } else {
             let d = stem.replacen("left", "disp", 1);
@@ -352,15 +286,11 @@ pub fn folder_pairs(root: &Path) -> Result<FileDataset> {
             mask_names.push(format!("{}.png", stem.replacen("left", "occ", 1)));
         }
         if alone {
-            disp_names
-                .extend(["disp_left.pfm", "disp_left.png", "disp_left.npy"].map(String::from));
+            disp_names.extend(["disp_left.pfm", "disp_left.png", "disp_left.npy"].map(String::from));
             mask_names.extend(["occlusion.png", "mask0nocc.png"].map(String::from));
         }
         let rel = left.strip_prefix(root).unwrap_or(left);
-        let name = rel
-            .with_file_name(stem.as_str())
-            .to_string_lossy()
-            .replace('\\', "/");
+        let name = rel.with_file_name(stem.as_str()).to_string_lossy().replace('\\', "/");
         files.push(SampleFiles {
             name,
             group: None,
@@ -370,8 +300,5 @@ pub fn folder_pairs(root: &Path) -> Result<FileDataset> {
             nonoccluded: mask_names.iter().find_map(|n| some_file(dir.join(n))),
         });
     }
-    Ok(FileDataset {
-        files,
-        rule: ValidRule::Positive,
-    })
+    Ok(FileDataset { files, rule: ValidRule::Positive })
 }

@@ -9,8 +9,8 @@ mod layouts;
 mod sceneflow;
 
 pub use layouts::{
-    DRIVINGSTEREO_WEATHERS, KittiVersion, MiddleburyCalib, drivingstereo, eth3d, folder_pairs,
-    kitti, middlebury2014, read_middlebury_calib,
+    DRIVINGSTEREO_WEATHERS, KittiVersion, MiddleburyCalib, drivingstereo, eth3d, folder_pairs, kitti, middlebury2014,
+    read_middlebury_calib,
 };
 pub use sceneflow::{SceneFlowPass, SceneFlowSubset, sceneflow};
 
@@ -46,11 +46,7 @@ impl ValidRule {
 
     /// The valid mask of a disparity map.
     pub fn mask(self, d: &DisparityMap) -> Mask {
-        Mask {
-            width: d.width,
-            height: d.height,
-            data: d.data.iter().map(|v| self.accepts(*v)).collect(),
-        }
+        Mask { width: d.width, height: d.height, data: d.data.iter().map(|v| self.accepts(*v)).collect() }
     }
 }
 
@@ -119,15 +115,7 @@ impl FileDataset {
         let disparity = files.disparity.as_ref().map(read_disparity).transpose()?;
         let valid = disparity.as_ref().map(|d| rule.mask(d));
         let nonoccluded = files.nonoccluded.as_ref().map(load_mask).transpose()?;
-        Ok(Sample {
-            name: files.name.clone(),
-            group: files.group.clone(),
-            left,
-            right,
-            disparity,
-            valid,
-            nonoccluded,
-        })
+        Ok(Sample { name: files.name.clone(), group: files.group.clone(), left, right, disparity, valid, nonoccluded })
     }
 }
 
@@ -138,10 +126,7 @@ impl Dataset for FileDataset {
 
     fn get(&self, index: usize) -> Result<Sample> {
         let f = self.files.get(index).ok_or_else(|| {
-            dgstereo_core::Error::Other(format!(
-                "sample {index} out of range (dataset of {})",
-                self.files.len()
-            ))
+            dgstereo_core::Error::Other(format!("sample {index} out of range (dataset of {})", self.files.len()))
         })?;
         Self::load(f, self.rule)
     }
@@ -165,10 +150,7 @@ impl Dataset for SyntheticDataset {
 
     fn get(&self, index: usize) -> Result<Sample> {
         let s = generate(&self.config, self.seed.wrapping_add(index as u64));
-        let nonoccluded = Mask {
-            data: s.occlusion.data.iter().map(|o| !o).collect(),
-            ..s.occlusion
-        };
+        let nonoccluded = Mask { data: s.occlusion.data.iter().map(|o| !o).collect(), ..s.occlusion };
         Ok(Sample {
             name: format!("synthetic/{}", self.seed.wrapping_add(index as u64)),
             group: None,

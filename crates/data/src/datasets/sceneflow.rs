@@ -72,20 +72,12 @@ pub fn sceneflow(root: &Path, subset: SceneFlowSubset, pass: SceneFlowPass) -> R
     walk(&start, &mut all)?;
     let mut files = Vec::new();
     for left in all {
-        let in_left = left
-            .parent()
-            .and_then(|p| p.file_name())
-            .is_some_and(|n| n == "left");
-        let is_img = left
-            .extension()
-            .is_some_and(|e| e == "png" || e == "webp" || e == "jpg");
+        let in_left = left.parent().and_then(|p| p.file_name()).is_some_and(|n| n == "left");
+        let is_img = left.extension().is_some_and(|e| e == "png" || e == "webp" || e == "jpg");
         if !in_left || !is_img {
             continue;
         }
-        let dir = left
-            .parent()
-            .and_then(Path::parent)
-            .unwrap_or(Path::new(""));
+        let dir = left.parent().and_then(Path::parent).unwrap_or(Path::new(""));
         let right = dir.join("right").join(left.file_name().unwrap_or_default());
         if !right.is_file() {
             continue;
@@ -101,8 +93,5 @@ pub fn sceneflow(root: &Path, subset: SceneFlowSubset, pass: SceneFlowPass) -> R
             nonoccluded: None,
         });
     }
-    Ok(FileDataset {
-        files,
-        rule: ValidRule::Below(512.0),
-    })
+    Ok(FileDataset { files, rule: ValidRule::Below(512.0) })
 }

@@ -55,46 +55,22 @@ impl SyntheticConfig {
     /// The default configuration at another size, disparities scaled with the width
     /// (`max_disparity = 0.15 · width`, at least 4).
     pub fn with_size(width: usize, height: usize) -> Self {
-        Self {
-            width,
-            height,
-            max_disparity: (0.15 * width as f64).max(4.0),
-            ..Self::default()
-        }
+        Self { width, height, max_disparity: (0.15 * width as f64).max(4.0), ..Self::default() }
     }
 }
 
 fn texture(rng: &mut ChaCha8Rng, cfg: &SyntheticConfig) -> Texture {
-    let base = [
-        rng.gen_range(40.0..215.0),
-        rng.gen_range(40.0..215.0),
-        rng.gen_range(40.0..215.0),
-    ];
-    let (lo, hi) = (
-        cfg.min_wavelength.max(2.0).ln(),
-        cfg.max_wavelength.max(cfg.min_wavelength.max(2.0)).ln(),
-    );
+    let base = [rng.gen_range(40.0..215.0), rng.gen_range(40.0..215.0), rng.gen_range(40.0..215.0)];
+    let (lo, hi) = (cfg.min_wavelength.max(2.0).ln(), cfg.max_wavelength.max(cfg.min_wavelength.max(2.0)).ln());
     let n = rng.gen_range(2..=4);
     let gratings = (0..n)
         .map(|_| {
-            let wl = if hi > lo {
-                rng.gen_range(lo..=hi).exp()
-            } else {
-                lo.exp()
-            };
+            let wl = if hi > lo { rng.gen_range(lo..=hi).exp() } else { lo.exp() };
             let t: f64 = rng.gen_range(0.0..PI);
             let f = 2.0 * PI / wl;
             let a: f64 = rng.gen_range(8.0..40.0);
-            let tint = [
-                rng.gen_range(0.5..1.0),
-                rng.gen_range(0.5..1.0),
-                rng.gen_range(0.5..1.0),
-            ];
-            Grating {
-                k: [f * t.cos(), f * t.sin()],
-                phase: rng.gen_range(0.0..2.0 * PI),
-                amp: tint.map(|c| a * c),
-            }
+            let tint = [rng.gen_range(0.5..1.0), rng.gen_range(0.5..1.0), rng.gen_range(0.5..1.0)];
+            Grating { k: [f * t.cos(), f * t.sin()], phase: rng.gen_range(0.0..2.0 * PI), amp: tint.map(|c| a * c) }
         })
         .collect();
     let wl_min = cfg.min_wavelength.max(2.0);
@@ -104,11 +80,7 @@ fn texture(rng: &mut ChaCha8Rng, cfg: &SyntheticConfig) -> Texture {
         base,
         gratings,
         noise_cell,
-        noise_amp: [
-            na,
-            na * rng.gen_range(0.5..1.0),
-            na * rng.gen_range(0.5..1.0),
-        ],
+        noise_amp: [na, na * rng.gen_range(0.5..1.0), na * rng.gen_range(0.5..1.0)],
         noise_seed: rng.r#gen(),
     }
 }
@@ -122,10 +94,7 @@ fn angle(rng: &mut ChaCha8Rng) -> (f64, f64) {
 pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (w, h) = (cfg.width as f64, cfg.height as f64);
-    let (dmin, dmax) = (
-        cfg.min_disparity,
-        cfg.max_disparity.max(cfg.min_disparity + 1.0),
-    );
+    let (dmin, dmax) = (cfg.min_disparity, cfg.max_disparity.max(cfg.min_disparity + 1.0));
     let range = dmax - dmin;
     let slant = cfg.max_slant.clamp(0.0, 0.9);
 
@@ -136,22 +105,11 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
     let a = rng.gen_range(-1.0..=1.0) * (budget * 0.3 / span_x).min(slant);
     let b = rng.gen_range(0.0..=1.0) * (budget * 0.7 / h.max(1.0)).min(slant);
     let corners = [(-dmax, 0.0), (w + dmax, 0.0), (-dmax, h), (w + dmax, h)];
-    let low = corners
-        .iter()
-        .map(|(x, y)| a * x + b * y)
-        .fold(f64::INFINITY, f64::min);
+    let low = corners.iter().map(|(x, y)| a * x + b * y).fold(f64::INFINITY, f64::min);
     let c = dmin - low + rng.gen_range(0.0..=0.05 * range);
     let background = Surface::new(
         Outline::Everything,
-        DisparityField {
-            c,
-            a,
-            b,
-            kx: 0.0,
-            ky: 0.0,
-            x0: 0.0,
-            y0: 0.0,
-        },
+        DisparityField { c, a, b, kx: 0.0, ky: 0.0, x0: 0.0, y0: 0.0 },
         texture(&mut rng, cfg),
     );
     let mut surfaces = vec![background];
@@ -161,12 +119,7 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
     } else {
         cfg.min_surfaces
     };
-    let total: f64 = cfg
-        .kind_weights
-        .iter()
-        .map(|v| v.max(0.0))
-        .sum::<f64>()
-        .max(1e-9);
+    let total: f64 = cfg.kind_weights.iter().map(|v| v.max(0.0)).sum::<f64>().max(1e-9);
     let side = w.min(h).max(4.0);
     for _ in 0..n {
         let mut pick = rng.gen_range(0.0..total);
@@ -186,27 +139,13 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
             let (cos, sin) = angle(&mut rng);
             let hw = rng.gen_range(0.8..3.5);
             let hh = rng.gen_range(0.2..0.7) * side;
-            Outline::Rect {
-                cx,
-                cy,
-                hw,
-                hh,
-                cos,
-                sin,
-            }
+            Outline::Rect { cx, cy, hw, hh, cos, sin }
         } else {
             let r = rng.gen_range(0.06..0.3) * side;
             match rng.gen_range(0..3) {
                 0 => {
                     let (cos, sin) = angle(&mut rng);
-                    Outline::Rect {
-                        cx,
-                        cy,
-                        hw: r * rng.gen_range(0.4..1.0),
-                        hh: r * rng.gen_range(0.4..1.0),
-                        cos,
-                        sin,
-                    }
+                    Outline::Rect { cx, cy, hw: r * rng.gen_range(0.4..1.0), hh: r * rng.gen_range(0.4..1.0), cos, sin }
                 }
                 1 => {
                     let (cos, sin) = angle(&mut rng);
@@ -224,12 +163,7 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
                     for hm in harmonics.iter_mut() {
                         *hm = (rng.gen_range(0.0..0.18), rng.gen_range(0.0..2.0 * PI));
                     }
-                    Outline::Blob {
-                        cx,
-                        cy,
-                        r0: r,
-                        harmonics,
-                    }
+                    Outline::Blob { cx, cy, r0: r, harmonics }
                 }
             }
         };
@@ -253,20 +187,8 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
             kx = rng.gen_range(-1.0..=1.0) * kmax_x;
             ky = rng.gen_range(-1.0..=1.0) * kmax_y;
         }
-        let field = DisparityField {
-            c,
-            a,
-            b,
-            kx,
-            ky,
-            x0: (bb[0] + bb[1]) / 2.0,
-            y0: (bb[2] + bb[3]) / 2.0,
-        };
+        let field = DisparityField { c, a, b, kx, ky, x0: (bb[0] + bb[1]) / 2.0, y0: (bb[2] + bb[3]) / 2.0 };
         surfaces.push(Surface::new(outline, field, texture(&mut rng, cfg)));
     }
-    SyntheticScene {
-        width: cfg.width,
-        height: cfg.height,
-        surfaces,
-    }
+    SyntheticScene { width: cfg.width, height: cfg.height, surfaces }
 }

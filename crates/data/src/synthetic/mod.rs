@@ -73,20 +73,12 @@ impl SyntheticScene {
 
     /// The nearest surface seen by the left view at `(x, y)`.
     pub fn hit_left(&self, x: f64, y: f64) -> Hit {
-        let mut best = Hit {
-            surface: 0,
-            x_left: x,
-            disparity: f64::NEG_INFINITY,
-        };
+        let mut best = Hit { surface: 0, x_left: x, disparity: f64::NEG_INFINITY };
         for (i, s) in self.surfaces.iter().enumerate() {
             if let Some(d) = s.hit_left(x, y)
                 && d > best.disparity
             {
-                best = Hit {
-                    surface: i,
-                    x_left: x,
-                    disparity: d,
-                };
+                best = Hit { surface: i, x_left: x, disparity: d };
             }
         }
         best
@@ -99,11 +91,7 @@ impl SyntheticScene {
             if let Some((x, d)) = s.hit_right(xr, y)
                 && best.is_none_or(|b| d > b.disparity)
             {
-                best = Some(Hit {
-                    surface: i,
-                    x_left: x,
-                    disparity: d,
-                });
+                best = Some(Hit { surface: i, x_left: x, disparity: d });
             }
         }
         best
@@ -131,8 +119,7 @@ impl SyntheticScene {
         if xr < -0.5 || xr > self.width as f64 - 0.5 {
             return false;
         }
-        self.hit_right(xr, y)
-            .is_some_and(|r| r.surface == h.surface)
+        self.hit_right(xr, y).is_some_and(|r| r.surface == h.surface)
     }
 
     /// Renders both views and the ground truth.
@@ -158,10 +145,7 @@ impl SyntheticScene {
                     disp.push(hl.disparity as f32);
                     surf.push(hl.surface as u16);
                     let xr = xf - hl.disparity;
-                    let visible = xr >= -0.5
-                        && self
-                            .hit_right(xr, yf)
-                            .is_some_and(|r| r.surface == hl.surface);
+                    let visible = xr >= -0.5 && self.hit_right(xr, yf).is_some_and(|r| r.surface == hl.surface);
                     occ.push(!visible);
                     match self.hit_right(xf, yf) {
                         Some(hr) => {
@@ -200,21 +184,9 @@ impl SyntheticScene {
         SyntheticSample {
             left,
             right,
-            disparity: DisparityMap {
-                width: w,
-                height: h,
-                data: disparity,
-            },
-            disparity_right: DisparityMap {
-                width: w,
-                height: h,
-                data: disparity_right,
-            },
-            occlusion: Mask {
-                width: w,
-                height: h,
-                data: occlusion,
-            },
+            disparity: DisparityMap { width: w, height: h, data: disparity },
+            disparity_right: DisparityMap { width: w, height: h, data: disparity_right },
+            occlusion: Mask { width: w, height: h, data: occlusion },
             valid: Mask::filled(w, h, true),
             surface_left,
             surface_right,

@@ -55,35 +55,16 @@ impl Outline {
     pub fn contains(&self, x: f64, y: f64) -> bool {
         match *self {
             Outline::Everything => true,
-            Outline::Rect {
-                cx,
-                cy,
-                hw,
-                hh,
-                cos,
-                sin,
-            } => {
+            Outline::Rect { cx, cy, hw, hh, cos, sin } => {
                 let (dx, dy) = (x - cx, y - cy);
                 (dx * cos + dy * sin).abs() <= hw && (-dx * sin + dy * cos).abs() <= hh
             }
-            Outline::Ellipse {
-                cx,
-                cy,
-                rx,
-                ry,
-                cos,
-                sin,
-            } => {
+            Outline::Ellipse { cx, cy, rx, ry, cos, sin } => {
                 let (dx, dy) = (x - cx, y - cy);
                 let (u, v) = ((dx * cos + dy * sin) / rx, (-dx * sin + dy * cos) / ry);
                 u * u + v * v <= 1.0
             }
-            Outline::Blob {
-                cx,
-                cy,
-                r0,
-                harmonics,
-            } => {
+            Outline::Blob { cx, cy, r0, harmonics } => {
                 let (dx, dy) = (x - cx, y - cy);
                 let r2 = dx * dx + dy * dy;
                 if r2 > (r0 * 1.6).powi(2) {
@@ -102,20 +83,8 @@ impl Outline {
     /// An axis-aligned box `[x0, x1] x [y0, y1]` holding the outline (infinite for the background).
     pub fn bounds(&self) -> [f64; 4] {
         match *self {
-            Outline::Everything => [
-                f64::NEG_INFINITY,
-                f64::INFINITY,
-                f64::NEG_INFINITY,
-                f64::INFINITY,
-            ],
-            Outline::Rect {
-                cx,
-                cy,
-                hw,
-                hh,
-                cos,
-                sin,
-            } => {
+            Outline::Everything => [f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY],
+            Outline::Rect { cx, cy, hw, hh, cos, sin } => {
                 let ex = hw * cos.abs() + hh * sin.abs();
                 let ey = hw * sin.abs() + hh * cos.abs();
                 [cx - ex, cx + ex, cy - ey, cy + ey]
@@ -159,15 +128,7 @@ pub struct DisparityField {
 impl DisparityField {
     /// A fronto-parallel field of constant disparity.
     pub fn constant(c: f64) -> Self {
-        Self {
-            c,
-            a: 0.0,
-            b: 0.0,
-            kx: 0.0,
-            ky: 0.0,
-            x0: 0.0,
-            y0: 0.0,
-        }
+        Self { c, a: 0.0, b: 0.0, kx: 0.0, ky: 0.0, x0: 0.0, y0: 0.0 }
     }
 
     /// The disparity at left-view point `(x, y)`.
@@ -237,25 +198,16 @@ impl Texture {
         if self.noise_cell > 0.0 {
             for (i, ch) in c.iter_mut().enumerate() {
                 *ch += self.noise_amp[i]
-                    * value_noise(
-                        x / self.noise_cell,
-                        y / self.noise_cell,
-                        self.noise_seed ^ (i as u64 * 0x9e37),
-                    );
+                    * value_noise(x / self.noise_cell, y / self.noise_cell, self.noise_seed ^ (i as u64 * 0x9e37));
             }
         }
-        [
-            c[0].clamp(0.0, 255.0) as f32,
-            c[1].clamp(0.0, 255.0) as f32,
-            c[2].clamp(0.0, 255.0) as f32,
-        ]
+        [c[0].clamp(0.0, 255.0) as f32, c[1].clamp(0.0, 255.0) as f32, c[2].clamp(0.0, 255.0) as f32]
     }
 }
 
 fn hash2(ix: i64, iy: i64, seed: u64) -> f64 {
-    let mut z = seed
-        ^ (ix as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        ^ (iy as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    let mut z =
+        seed ^ (ix as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (iy as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^= z >> 31;
@@ -313,13 +265,7 @@ impl Surface {
         } else {
             [f64::NEG_INFINITY, f64::INFINITY]
         };
-        Self {
-            outline,
-            field,
-            texture,
-            bounds,
-            disparity_bounds,
-        }
+        Self { outline, field, texture, bounds, disparity_bounds }
     }
 
     /// The disparity if the left-view point `(x, y)` is on this surface.
@@ -336,11 +282,7 @@ impl Surface {
     #[inline]
     pub fn hit_right(&self, xr: f64, y: f64) -> Option<(f64, f64)> {
         let b = &self.bounds;
-        if y < b[2]
-            || y > b[3]
-            || xr < b[0] - self.disparity_bounds[1]
-            || xr > b[1] - self.disparity_bounds[0]
-        {
+        if y < b[2] || y > b[3] || xr < b[0] - self.disparity_bounds[1] || xr > b[1] - self.disparity_bounds[0] {
             return None;
         }
         let x = self.field.left_x_from_right(xr, y)?;

@@ -35,7 +35,13 @@ pub fn tiny_parts(steps: usize, iters: usize, lr: f64, count: Option<usize>, bat
         ..TrainingConfig::default()
     };
     let data = TrainingDataConfig {
-        sources: vec![DataSource::Synthetic { weight: 1.0, width: SIZE[1], height: SIZE[0], max_disparity: Some(5.0), count }],
+        sources: vec![DataSource::Synthetic {
+            weight: 1.0,
+            width: SIZE[1],
+            height: SIZE[0],
+            max_disparity: Some(5.0),
+            count,
+        }],
         augment: false,
         validation: ValidationConfig { count: 0, ..ValidationConfig::default() },
         ..TrainingDataConfig::default()
