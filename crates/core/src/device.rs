@@ -36,13 +36,36 @@ impl DeviceChoice {
         match self {
             Self::Cpu => Ok(Device::flex()),
             #[cfg(feature = "gpu")]
-            Self::Gpu => Ok(Device::vulkan(Default::default())),
+            Self::Gpu => {
+                let device = Device::vulkan(Default::default());
+                probe_gpu(&device)?;
+                Ok(device)
+            }
             #[cfg(not(feature = "gpu"))]
             Self::Gpu => Err(crate::Error::Config(
                 "this binary was built without the GPU backend; rebuild with `--features gpu`".into(),
             )),
         }
     }
+}
+
+/// Runs one tiny operation on the GPU so that a machine without a usable Vulkan adapter gives an
+/// error here instead of a panic inside the backend later (burn's wgpu runtime panics when it
+/// finds no adapter). The panic hook is silenced during the probe.
+#[cfg(feature = "gpu")]
+fn probe_gpu(device: &Device) -> crate::Result<()> {
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let d = device.clone();
+    let result = std::panic::catch_unwind(move || burn::tensor::Tensor::<1>::zeros([1], &d).into_data());
+    std::panic::set_hook(previous);
+    result.map(|_| ()).map_err(|_| {
+        crate::Error::Other(
+            "no usable GPU: burn's wgpu backend found no Vulkan adapter (install a Vulkan driver and loader, \
+             or use --device cpu)"
+                .into(),
+        )
+    })
 }
 
 /// The default device: the Flex CPU backend.
