@@ -26,7 +26,7 @@ check-experiments:
 
 # Build the GPU (wgpu/Vulkan) binary.
 build-gpu:
-    cargo build --release -p dgstereo --features gpu
+    cargo build --release -p dgstereo --features gpu --target-dir target/gpu
 
 # Lints.
 lint:
