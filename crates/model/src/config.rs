@@ -89,6 +89,12 @@ impl ModelConfig {
         1 << self.updater.n_downsample
     }
 
+    /// Inputs are padded to a multiple of this: 32 as the reference's evaluation padder, more
+    /// when the coarsest GRU level (`2^(n_downsample + 3)`) needs it.
+    pub fn pad_divisor(&self) -> usize {
+        32usize.max(1 << (self.updater.n_downsample + 3))
+    }
+
     /// Builds the network with fresh weights.
     pub fn init(&self, device: &Device) -> dgstereo_core::Result<RaftStereo> {
         self.validate()?;

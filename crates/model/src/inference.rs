@@ -77,21 +77,44 @@ impl StereoModel {
                 "this model uses a depth prior (fusion or guidance) but none was given: set [prior] in the experiment or pass --prior".into(),
             ));
         }
-        let divisor = 32usize.max(1 << (self.config.updater.n_downsample + 3));
-        let padder = InputPadder::new(h, w, divisor);
-        let padded_prior =
-            prior.map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
-        let out = self.network.forward_flow(
-            padder.pad(left),
-            padder.pad(right),
-            padded_prior.as_ref(),
-            iters,
-            None,
-            implementation,
-            all_iterations,
-            None,
-        );
-        let disparities = out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect();
+        let disparities =
+            padded_disparities(&self.network, &self.config, left, right, prior, iters, implementation, all_iterations);
         Ok(Prediction { disparities })
     }
+}
+
+/// Runs `network` on inputs of any size: pads them (and the prior) by replicating the border to
+/// a multiple of [`ModelConfig::pad_divisor`], and returns positive disparity, cropped back, for
+/// every iteration kept. Inputs are not checked: [`StereoModel::predict`] is the checked entry
+/// point; training calls this directly on batches it built itself.
+///
+/// # Shapes
+/// - `left`, `right`: `[N, 3, H, W]`, RGB 0..255; prior maps `[N, 1, H, W]`
+/// - each output: `[N, 1, H, W]`
+#[allow(clippy::too_many_arguments)]
+pub fn padded_disparities(
+    network: &RaftStereo,
+    config: &ModelConfig,
+    left: Tensor<4>,
+    right: Tensor<4>,
+    prior: Option<&DepthPrior>,
+    iters: usize,
+    implementation: Option<CorrelationImplementation>,
+    all_iterations: bool,
+) -> Vec<Tensor<4>> {
+    let [_, _, h, w] = left.dims();
+    let padder = InputPadder::new(h, w, config.pad_divisor());
+    let padded_prior =
+        prior.map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
+    let out = network.forward_flow(
+        padder.pad(left),
+        padder.pad(right),
+        padded_prior.as_ref(),
+        iters,
+        None,
+        implementation,
+        all_iterations,
+        None,
+    );
+    out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect()
 }

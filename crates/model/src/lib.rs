@@ -17,7 +17,7 @@ pub mod profile;
 pub mod verify;
 
 pub use config::{EncoderConfig, ModelConfig};
-pub use inference::StereoModel;
+pub use inference::{StereoModel, padded_disparities};
 pub use network::{FlowOutput, RaftStereo, Trace};
 /// The stage crates, re-exported so benchmarks and tools can drive single stages of a model
 /// (their traits included) through this crate alone.

@@ -3,7 +3,7 @@
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::{DepthPrior, Error, InputPadder, Result};
+use dgstereo_core::{DepthPrior, Error, Result};
 use dgstereo_data::DisparityMap;
 use dgstereo_eval::{MetricSums, ValidOptions, accumulate};
 use dgstereo_loss::{DisparityLoss, LossConfig};
@@ -112,7 +112,8 @@ pub fn batch_prior(prior: &Prior, needs: bool, batch: &TensorBatch) -> Result<Op
     prior.provide(&input)?.map(Some).ok_or_else(|| Error::Config("the prior provider gave no prior".into()))
 }
 
-/// Runs `model` on padded inputs and returns positive disparity after every iteration kept.
+/// Runs `model` on a batch of any size and returns positive disparity after every iteration kept
+/// ([`dgstereo_model::padded_disparities`] with the configured cost volume).
 ///
 /// # Shapes
 /// - `left`, `right`: `[N, 3, H, W]`; prior maps `[N, 1, H, W]`
@@ -126,21 +127,7 @@ pub fn forward_disparities(
     iters: usize,
     all_iterations: bool,
 ) -> Vec<Tensor<4>> {
-    let [_, _, h, w] = left.dims();
-    let divisor = 32usize.max(1 << (config.updater.n_downsample + 3));
-    let padder = InputPadder::new(h, w, divisor);
-    let prior = prior.map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
-    let out = model.forward_flow(
-        padder.pad(left),
-        padder.pad(right),
-        prior.as_ref(),
-        iters,
-        None,
-        None,
-        all_iterations,
-        None,
-    );
-    out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect()
+    dgstereo_model::padded_disparities(model, config, left, right, prior, iters, None, all_iterations)
 }
 
 /// Metric sums of a `[N, 1, H, W]` prediction against ground truth and a 0/1 validity map.

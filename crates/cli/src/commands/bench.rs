@@ -121,7 +121,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         left: Tensor::random([1, 1, h, w], Distribution::Uniform(0.1, 1.0), &device),
         right: Tensor::random([1, 1, h, w], Distribution::Uniform(0.1, 1.0), &device),
     });
-    let padder = InputPadder::new(h, w, 32usize.max(1 << (config.updater.n_downsample + 3)));
+    let padder = InputPadder::new(h, w, config.pad_divisor());
     let padded = padder.padded();
     let macs = StageMacs::new(&config, padded).forward(a.iters, 1);
 
