@@ -1,5 +1,6 @@
 //! Pictures of disparity maps: the turbo colour map with a legend, and side-by-side panels.
 
+use dgstereo_data::text::{GLYPH_HEIGHT, format_value, text_width};
 use dgstereo_data::{DisparityMap, RgbImage};
 
 /// Google's Turbo colour map (polynomial fit by its authors), `t` in 0..1, RGB 0..255.
@@ -58,7 +59,7 @@ pub fn colorize(d: &DisparityMap, range: (f32, f32), legend: bool) -> RgbImage {
     let y0 = d.height + bar + scale;
     let labels = [(lo, 0usize), ((lo + hi) / 2.0, 1), (hi, 2)];
     for (value, align) in labels {
-        let label = format_value(value);
+        let label = format_value(f64::from(value));
         let w = text_width(&label, scale);
         let anchor = tick_x(2 * align);
         let x0 = match align {
@@ -71,56 +72,14 @@ pub fn colorize(d: &DisparityMap, range: (f32, f32), legend: bool) -> RgbImage {
     img
 }
 
-fn format_value(v: f32) -> String {
-    if v.abs() >= 100.0 { format!("{v:.0}") } else { format!("{v:.1}") }
-}
-
-const GLYPH_HEIGHT: usize = 5;
-
-/// A 3x5 pixel glyph: five rows of three bits (most significant = left).
-fn glyph(c: char) -> [u8; 5] {
-    match c {
-        '0' => [7, 5, 5, 5, 7],
-        '1' => [2, 6, 2, 2, 7],
-        '2' => [7, 1, 7, 4, 7],
-        '3' => [7, 1, 7, 1, 7],
-        '4' => [5, 5, 7, 1, 1],
-        '5' => [7, 4, 7, 1, 7],
-        '6' => [7, 4, 7, 5, 7],
-        '7' => [7, 1, 1, 1, 1],
-        '8' => [7, 5, 7, 5, 7],
-        '9' => [7, 5, 7, 1, 7],
-        '.' => [0, 0, 0, 0, 2],
-        '-' => [0, 0, 7, 0, 0],
-        _ => [0; 5],
-    }
-}
-
-fn text_width(s: &str, scale: usize) -> usize {
-    (s.chars().count() * 4).saturating_sub(1) * scale
-}
-
-/// Draws `s` in white with its top-left corner at `(x0, y0)`, each glyph pixel `scale` wide;
+/// Draws `s` in white with its top-left corner at `(x0, y0)` (see [`dgstereo_data::text`]);
 /// what falls outside the image is clipped.
 fn draw_text(img: &mut RgbImage, s: &str, x0: usize, y0: usize, scale: usize) {
-    for (i, c) in s.chars().enumerate() {
-        let rows = glyph(c);
-        for (gy, row) in rows.iter().enumerate() {
-            for gx in 0..3 {
-                if row & (4 >> gx) == 0 {
-                    continue;
-                }
-                for dy in 0..scale {
-                    for dx in 0..scale {
-                        let (x, y) = (x0 + (i * 4 + gx) * scale + dx, y0 + gy * scale + dy);
-                        if x < img.width && y < img.height {
-                            img.set(x, y, [255.0; 3]);
-                        }
-                    }
-                }
-            }
+    dgstereo_data::text::draw_text(s, x0, y0, scale, |x, y| {
+        if x < img.width && y < img.height {
+            img.set(x, y, [255.0; 3]);
         }
-    }
+    });
 }
 
 /// Absolute error against ground truth as a picture (0 = black, `max` px or more = white);

@@ -21,6 +21,7 @@ pub mod npy;
 pub mod pfm;
 pub mod resize;
 pub mod synthetic;
+pub mod text;
 
 pub use augment::{AugmentConfig, AugmentedSample, augment};
 pub use datasets::{Dataset, FileDataset, Sample, SampleFiles, SyntheticDataset, ValidRule};

@@ -21,10 +21,10 @@ pub struct ContextHead {
 }
 
 impl ContextHead {
-    fn new(dim: usize, norm: NormKind, device: &Device) -> Self {
+    fn new(trunk_dim: usize, dim: usize, norm: NormKind, device: &Device) -> Self {
         Self {
-            block: ResidualBlock::new(128, 128, norm, 1, device),
-            conv: conv2d([128, dim], 3, 1, 1, ConvInit::KaimingFanOut, device),
+            block: ResidualBlock::new(trunk_dim, trunk_dim, norm, 1, device),
+            conv: conv2d([trunk_dim, dim], 3, 1, 1, ConvInit::KaimingFanOut, device),
         }
     }
 
@@ -47,15 +47,15 @@ pub struct ContextEncoder {
     pub conv1: Conv2d,
     /// Norm of the stem.
     pub norm1: Norm,
-    /// 64 channels.
+    /// `trunk[0]` channels (64).
     pub layer1: Vec<ResidualBlock>,
-    /// 96 channels.
+    /// `trunk[1]` channels (96).
     pub layer2: Vec<ResidualBlock>,
-    /// 128 channels, resolution 1/f.
+    /// `trunk[2]` channels (128), resolution 1/f.
     pub layer3: Vec<ResidualBlock>,
-    /// 128 channels, 1/(2f).
+    /// `trunk[2]` channels, 1/(2f).
     pub layer4: Vec<ResidualBlock>,
-    /// 128 channels, 1/(4f).
+    /// `trunk[2]` channels, 1/(4f).
     pub layer5: Vec<ResidualBlock>,
     /// Heads at 1/f.
     pub outputs08: Vec<ContextHead>,
@@ -67,24 +67,26 @@ pub struct ContextEncoder {
 
 impl ContextEncoder {
     /// `dims` are the reference's `hidden_dims` (`[1/16, 1/8, 1/4]` order), used for both the
-    /// hidden and the context heads (`context_dims = hidden_dims`).
-    pub fn new(dims: [usize; 3], norm: NormKind, n_downsample: usize, device: &Device) -> Self {
+    /// hidden and the context heads (`context_dims = hidden_dims`); `trunk` the widths of
+    /// layer1..3 (`[64, 96, 128]` in the reference; layer4/5 keep the last).
+    pub fn new(dims: [usize; 3], trunk: [usize; 3], norm: NormKind, n_downsample: usize, device: &Device) -> Self {
         let [s1, s2, s3] = trunk_strides(n_downsample);
+        let [c1, c2, c3] = trunk;
         Self {
-            conv1: conv2d([3, 64], 7, s1, 3, ConvInit::KaimingFanOut, device),
-            norm1: norm.init(64, device),
-            layer1: make_layer(64, 64, norm, 1, device),
-            layer2: make_layer(64, 96, norm, s2, device),
-            layer3: make_layer(96, 128, norm, s3, device),
-            layer4: make_layer(128, 128, norm, 2, device),
-            layer5: make_layer(128, 128, norm, 2, device),
-            outputs08: (0..2).map(|_| ContextHead::new(dims[2], norm, device)).collect(),
-            outputs16: (0..2).map(|_| ContextHead::new(dims[1], norm, device)).collect(),
-            outputs32: (0..2).map(|_| conv2d([128, dims[0]], 3, 1, 1, ConvInit::KaimingFanOut, device)).collect(),
+            conv1: conv2d([3, c1], 7, s1, 3, ConvInit::KaimingFanOut, device),
+            norm1: norm.init(c1, device),
+            layer1: make_layer(c1, c1, norm, 1, device),
+            layer2: make_layer(c1, c2, norm, s2, device),
+            layer3: make_layer(c2, c3, norm, s3, device),
+            layer4: make_layer(c3, c3, norm, 2, device),
+            layer5: make_layer(c3, c3, norm, 2, device),
+            outputs08: (0..2).map(|_| ContextHead::new(c3, dims[2], norm, device)).collect(),
+            outputs16: (0..2).map(|_| ContextHead::new(c3, dims[1], norm, device)).collect(),
+            outputs32: (0..2).map(|_| conv2d([c3, dims[0]], 3, 1, 1, ConvInit::KaimingFanOut, device)).collect(),
         }
     }
 
-    /// The trunk output at 1/f (`[N, 128, H/f, W/f]`).
+    /// The trunk output at 1/f (`[N, trunk[2], H/f, W/f]`).
     pub fn trunk(&self, image: Tensor<4>) -> Tensor<4> {
         let x = relu(self.norm1.forward(self.conv1.forward(image)));
         let x = forward_layer(&self.layer1, x);

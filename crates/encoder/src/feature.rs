@@ -25,28 +25,30 @@ pub struct FeatureEncoder {
     pub conv1: Conv2d,
     /// Norm of the stem.
     pub norm1: Norm,
-    /// 64 channels, full stem resolution.
+    /// `trunk[0]` channels (64), full stem resolution.
     pub layer1: Vec<ResidualBlock>,
-    /// 96 channels.
+    /// `trunk[1]` channels (96).
     pub layer2: Vec<ResidualBlock>,
-    /// 128 channels.
+    /// `trunk[2]` channels (128).
     pub layer3: Vec<ResidualBlock>,
     /// 1x1 projection to `output_dim`.
     pub conv2: Conv2d,
 }
 
 impl FeatureEncoder {
-    /// The encoder with `output_dim` channels (256 in RAFT-Stereo) and `norm` (instance).
-    pub fn new(output_dim: usize, norm: NormKind, n_downsample: usize, device: &Device) -> Self {
+    /// The encoder with `output_dim` channels (256 in RAFT-Stereo), trunk widths `trunk`
+    /// (`[64, 96, 128]` in RAFT-Stereo) and `norm` (instance).
+    pub fn new(output_dim: usize, trunk: [usize; 3], norm: NormKind, n_downsample: usize, device: &Device) -> Self {
         let [s1, s2, s3] = trunk_strides(n_downsample);
+        let [c1, c2, c3] = trunk;
         let init = ConvInit::KaimingFanOut;
         Self {
-            conv1: conv2d([3, 64], 7, s1, 3, init, device),
-            norm1: norm.init(64, device),
-            layer1: make_layer(64, 64, norm, 1, device),
-            layer2: make_layer(64, 96, norm, s2, device),
-            layer3: make_layer(96, 128, norm, s3, device),
-            conv2: conv2d([128, output_dim], 1, 1, 0, init, device),
+            conv1: conv2d([3, c1], 7, s1, 3, init, device),
+            norm1: norm.init(c1, device),
+            layer1: make_layer(c1, c1, norm, 1, device),
+            layer2: make_layer(c1, c2, norm, s2, device),
+            layer3: make_layer(c2, c3, norm, s3, device),
+            conv2: conv2d([c3, output_dim], 1, 1, 0, init, device),
         }
     }
 }
@@ -73,11 +75,11 @@ pub struct SharedFeatureHead {
 }
 
 impl SharedFeatureHead {
-    /// The head from 128 trunk channels to `output_dim`.
-    pub fn new(output_dim: usize, device: &Device) -> Self {
+    /// The head from `trunk_dim` trunk channels (128) to `output_dim`.
+    pub fn new(trunk_dim: usize, output_dim: usize, device: &Device) -> Self {
         Self {
-            block: ResidualBlock::new(128, 128, NormKind::Instance, 1, device),
-            conv: conv2d([128, output_dim], 3, 1, 1, ConvInit::TorchDefault, device),
+            block: ResidualBlock::new(trunk_dim, trunk_dim, NormKind::Instance, 1, device),
+            conv: conv2d([trunk_dim, output_dim], 3, 1, 1, ConvInit::TorchDefault, device),
         }
     }
 

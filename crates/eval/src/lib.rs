@@ -6,15 +6,18 @@
 //! images are aggregated (pooled or mean of per-image rates), following RAFT-Stereo's evaluation.
 //! [`table`] collects per-image rows into an [`EvalTable`] with aggregate rows, written as CSV,
 //! JSON or text. [`files`] is the file-level entry point behind `dgstereo metrics`, and
-//! [`driver`] scores a predictor over a whole data set (behind `dgstereo eval`).
+//! [`driver`] scores a predictor over a whole data set (behind `dgstereo eval`); [`benchmark`]
+//! names the data sets and their protocols for the eval command and experiment files.
 #![deny(missing_docs)]
 
+pub mod benchmark;
 pub mod driver;
 pub mod files;
 pub mod metrics;
 pub mod protocol;
 pub mod table;
 
+pub use benchmark::{BenchmarkConfig, DatasetKind};
 pub use driver::{DatasetEvaluation, SampleFailure, evaluate_dataset, score_sample};
 pub use files::{metrics_for_files, metrics_json};
 pub use metrics::{BAD_THRESHOLDS, METRIC_NAMES, MetricSums, Metrics, ValidOptions, accumulate, evaluate};

@@ -2,6 +2,7 @@
 
 use std::fmt;
 
+use dgstereo_eval::BenchmarkConfig;
 use dgstereo_fusion::FusionConfig;
 use dgstereo_loss::LossConfig;
 use dgstereo_model::ModelConfig;
@@ -38,6 +39,10 @@ pub struct ExperimentConfig {
     /// The training data (`[data]`).
     #[serde(default)]
     pub data: TrainingDataConfig,
+    /// The benchmarks `dgstereo ablate` scores each run on (`[[benchmarks]]`), beside the run's
+    /// held-out synthetic set. Their folders need to exist only when a run is evaluated.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub benchmarks: Vec<BenchmarkConfig>,
 }
 
 /// One thing wrong with a configuration: the key at fault and what is wrong.
@@ -91,6 +96,7 @@ impl ExperimentConfig {
         check_prior(&self.prior, "prior", &mut add);
         check_combination(self, &mut add);
         check_loss(&self.loss, &mut add);
+        check_benchmarks(&self.benchmarks, &mut add);
         for result in [self.train.validate(), self.data.validate()] {
             if let Err(e) = result {
                 let message = match e {
@@ -114,6 +120,18 @@ fn leading_key(message: &str) -> String {
         .next()
         .unwrap_or_default()
         .to_string()
+}
+
+/// Benchmark labels name table columns: each once; at least one iteration.
+fn check_benchmarks(benchmarks: &[BenchmarkConfig], add: &mut impl FnMut(&str, String)) {
+    for (i, b) in benchmarks.iter().enumerate() {
+        if b.iters == 0 {
+            add(&format!("benchmarks[{i}].iters"), "must be at least 1".into());
+        }
+        if benchmarks[..i].iter().any(|o| o.label() == b.label()) {
+            add(&format!("benchmarks[{i}].name"), format!("'{}' is used twice: give each benchmark a name", b.label()));
+        }
+    }
 }
 
 /// Run names become folder names of outputs: printable, no whitespace, no `..`, relative.

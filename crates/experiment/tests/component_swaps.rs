@@ -90,6 +90,7 @@ fn experiment(c: &Combination) -> ExperimentConfig {
         loss: c.loss.clone(),
         train: Default::default(),
         data: Default::default(),
+        benchmarks: Vec::new(),
     }
 }
 

@@ -22,15 +22,28 @@ pub struct EncoderConfig {
     /// Channels of the matching features (256).
     #[serde(default = "default_feature_dim")]
     pub feature_dim: usize,
+    /// Widths of the residual trunk's three stages in both encoders (`[64, 96, 128]`); smaller
+    /// widths make a CPU-trainable model, but official checkpoints need the reference's.
+    #[serde(default = "default_trunk_dims")]
+    pub trunk_dims: [usize; 3],
 }
 
 fn default_feature_dim() -> usize {
     256
 }
 
+fn default_trunk_dims() -> [usize; 3] {
+    [64, 96, 128]
+}
+
 impl Default for EncoderConfig {
     fn default() -> Self {
-        Self { context_norm: NormKind::Batch, shared_backbone: false, feature_dim: 256 }
+        Self {
+            context_norm: NormKind::Batch,
+            shared_backbone: false,
+            feature_dim: 256,
+            trunk_dims: default_trunk_dims(),
+        }
     }
 }
 
@@ -73,6 +86,9 @@ impl ModelConfig {
         }
         if self.encoder.feature_dim == 0 {
             return err("encoder.feature_dim must be positive".into());
+        }
+        if self.encoder.trunk_dims.contains(&0) {
+            return err("encoder.trunk_dims must be positive".into());
         }
         // `init` would panic on an invalid fusion (fewer than 3 feature channels).
         self.fusion.validate()?;

@@ -69,15 +69,15 @@ fn layer(c_in: usize, c_out: usize, stride: usize, size: [usize; 2]) -> (u64, [u
 }
 
 /// The shared trunk (conv1, layer1..3) of both encoders; returns MACs and the 1/f size.
-fn trunk(n_downsample: usize, [h, w]: [usize; 2]) -> (u64, [usize; 2]) {
+fn trunk(n_downsample: usize, [c1, c2, c3]: [usize; 3], [h, w]: [usize; 2]) -> (u64, [usize; 2]) {
     let s1 = 1 + (n_downsample > 2) as usize;
     let s2 = 1 + (n_downsample > 1) as usize;
     let s3 = 1 + (n_downsample > 0) as usize;
     let size = [out_size(h, 7, s1), out_size(w, 7, s1)];
-    let mut macs = conv_macs(3, 64, 7, size[0], size[1]);
-    let (m1, size) = layer(64, 64, 1, size);
-    let (m2, size) = layer(64, 96, s2, size);
-    let (m3, size) = layer(96, 128, s3, size);
+    let mut macs = conv_macs(3, c1, 7, size[0], size[1]);
+    let (m1, size) = layer(c1, c1, 1, size);
+    let (m2, size) = layer(c1, c2, s2, size);
+    let (m3, size) = layer(c2, c3, s3, size);
     macs += m1 + m2 + m3;
     (macs, size)
 }
@@ -88,28 +88,29 @@ impl StageMacs {
         let u = &config.updater;
         let [d32, d16, d08] = u.hidden_dims;
         let n = u.n_gru_layers;
-        let (trunk_macs, [h4, w4]) = trunk(u.n_downsample, [h, w]);
+        let (trunk_macs, [h4, w4]) = trunk(u.n_downsample, config.encoder.trunk_dims, [h, w]);
+        let tc = config.encoder.trunk_dims[2];
         let (h8, w8) = (out_size(h4, 3, 2), out_size(w4, 3, 2));
         let (h16, w16) = (out_size(h8, 3, 2), out_size(w8, 3, 2));
         let fdim = config.encoder.feature_dim;
 
         let (feature_encoder, mut context_encoder) = if config.encoder.shared_backbone {
             // One trunk on both images; the feature head (block + 3x3) on both.
-            let head = residual_block(128, 128, 1, [h4, w4]).0 + conv_macs(128, fdim, 3, h4, w4);
+            let head = residual_block(tc, tc, 1, [h4, w4]).0 + conv_macs(tc, fdim, 3, h4, w4);
             (2 * head, 2 * trunk_macs)
         } else {
-            (2 * (trunk_macs + conv_macs(128, fdim, 1, h4, w4)), trunk_macs)
+            (2 * (trunk_macs + conv_macs(tc, fdim, 1, h4, w4)), trunk_macs)
         };
         // Heads: per level two (block + 3x3), the coarsest two plain 3x3 convolutions.
         let head =
-            |dim: usize, [hh, ww]: [usize; 2]| residual_block(128, 128, 1, [hh, ww]).0 + conv_macs(128, dim, 3, hh, ww);
+            |dim: usize, [hh, ww]: [usize; 2]| residual_block(tc, tc, 1, [hh, ww]).0 + conv_macs(tc, dim, 3, hh, ww);
         context_encoder += 2 * head(d08, [h4, w4]) + conv_macs(d08, 3 * d08, 3, h4, w4);
         if n >= 2 {
-            context_encoder += layer(128, 128, 2, [h4, w4]).0 + 2 * head(d16, [h8, w8]);
+            context_encoder += layer(tc, tc, 2, [h4, w4]).0 + 2 * head(d16, [h8, w8]);
             context_encoder += conv_macs(d16, 3 * d16, 3, h8, w8);
         }
         if n >= 3 {
-            context_encoder += layer(128, 128, 2, [h8, w8]).0 + 2 * conv_macs(128, d32, 3, h16, w16);
+            context_encoder += layer(tc, tc, 2, [h8, w8]).0 + 2 * conv_macs(tc, d32, 3, h16, w16);
             context_encoder += conv_macs(d32, 3 * d32, 3, h16, w16);
         }
 

@@ -70,12 +70,14 @@ impl RaftStereo {
         let u = &config.updater;
         let dims = u.hidden_dims;
         let shared = config.encoder.shared_backbone;
+        let trunk = config.encoder.trunk_dims;
         Self {
             fusion: config.fusion.init(device),
-            fnet: (!shared)
-                .then(|| FeatureEncoder::new(config.encoder.feature_dim, NormKind::Instance, u.n_downsample, device)),
-            cnet: ContextEncoder::new(dims, config.encoder.context_norm, u.n_downsample, device),
-            conv2: shared.then(|| SharedFeatureHead::new(config.encoder.feature_dim, device)),
+            fnet: (!shared).then(|| {
+                FeatureEncoder::new(config.encoder.feature_dim, trunk, NormKind::Instance, u.n_downsample, device)
+            }),
+            cnet: ContextEncoder::new(dims, trunk, config.encoder.context_norm, u.n_downsample, device),
+            conv2: shared.then(|| SharedFeatureHead::new(trunk[2], config.encoder.feature_dim, device)),
             context_zqr_convs: (0..u.n_gru_layers)
                 .map(|i| conv2d([dims[i], dims[i] * 3], 3, 1, 1, ConvInit::TorchDefault, device))
                 .collect(),

@@ -3,17 +3,23 @@
 //! Every metric here is an error (EPE, bad-T), so lower is better: in the Markdown table the best
 //! value of each column is **bold** and the second best <u>underlined</u>. CSV and JSON hold the
 //! same numbers unformatted. [`evaluate_finished_run`] scores a finished run folder's final model
-//! on the run's held-out synthetic validation set.
+//! on the run's held-out synthetic validation set, [`evaluate_benchmark`] on a configured
+//! benchmark through the eval crate's driver and the benchmark's protocol.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use burn::tensor::Device;
 use dgstereo_core::{Error, Result};
-use dgstereo_eval::Metrics;
+use dgstereo_data::{Dataset, DisparityMap, Mask, Sample};
+use dgstereo_eval::{BenchmarkConfig, Metrics, evaluate_dataset};
+use dgstereo_model::RaftStereo;
+use dgstereo_prior::Prior;
 use serde_json::json;
 
+use crate::batch::TrainingPair;
 use crate::trainer::TrainParts;
-use crate::validate::ValidationSet;
+use crate::validate::{ValidationSet, predict_pair};
 
 /// The metrics of the table (names of `dgstereo_eval::METRIC_NAMES`).
 pub const TABLE_METRICS: [&str; 3] = ["epe", "bad-1", "bad-3"];
@@ -148,4 +154,63 @@ pub fn evaluate_finished_run(parts: &TrainParts, out: &Path, device: &Device) ->
     let model = dgstereo_model::checkpoint::load_safetensors(parts.model.init(device)?, &weights)?;
     let prior = parts.prior.init(device)?;
     set.evaluate(&model, &parts.model, &prior, device)
+}
+
+/// Scores the final model of the finished run in `out` on `benchmark` under its protocol.
+///
+/// The prior comes from the run's own provider; a simulated prior is simulated from the sample's
+/// ground truth, as in training (an ablation device, not a deployable prior). Returns the
+/// protocol's aggregate over all valid pixels; a sample that fails to load or run is an error
+/// naming it (a table with silently missing samples would mislead).
+pub fn evaluate_benchmark(
+    parts: &TrainParts,
+    out: &Path,
+    benchmark: &BenchmarkConfig,
+    device: &Device,
+) -> Result<Metrics> {
+    let (dataset, indices) = benchmark.dataset()?;
+    let model =
+        dgstereo_model::checkpoint::load_safetensors(parts.model.init(device)?, &out.join("model.safetensors"))?;
+    let prior = parts.prior.init(device)?;
+    let result = evaluate_dataset(
+        Arc::new(dataset) as Arc<dyn Dataset>,
+        indices,
+        benchmark.dataset.protocol(),
+        |sample| predict_sample(&model, parts, &prior, sample, benchmark.iters, device),
+        |_| {},
+    );
+    if let Some(f) = result.failures.first() {
+        return Err(Error::Other(format!(
+            "benchmark '{}': {} of {} sample(s) failed; first: {}: {}",
+            benchmark.label(),
+            result.failures.len(),
+            result.failures.len() + result.table.rows.len(),
+            f.name,
+            f.message
+        )));
+    }
+    Ok(result.table.aggregates().remove(0).all)
+}
+
+/// The disparity of one benchmark sample at its own size.
+fn predict_sample(
+    model: &RaftStereo,
+    parts: &TrainParts,
+    prior: &Prior,
+    sample: &Sample,
+    iters: usize,
+    device: &Device,
+) -> Result<DisparityMap> {
+    let (w, h) = (sample.left.width, sample.left.height);
+    // Without ground truth (only possible for a prior that does not need it) zeros stand in.
+    let disparity = sample.disparity.clone().unwrap_or_else(|| DisparityMap::filled(w, h, 0.0));
+    let pair = TrainingPair {
+        name: sample.name.clone(),
+        left: sample.left.clone(),
+        right: sample.right.clone(),
+        disparity_nearest: disparity.clone(),
+        disparity,
+        valid: sample.valid.clone().unwrap_or_else(|| Mask::filled(w, h, false)),
+    };
+    predict_pair(model, &parts.model, prior, &pair, iters, device)
 }

@@ -54,13 +54,26 @@ impl ValidationSet {
     ) -> Result<Metrics> {
         let mut sums = MetricSums::default();
         for pair in &self.pairs {
-            let batch = to_tensors(std::slice::from_ref(pair), device)?;
-            let p = batch_prior(prior, config.needs_prior(), &batch)?;
-            let out = forward_disparities(model, config, batch.left, batch.right, p.as_ref(), self.iters, false);
-            let pred = dgstereo_core::tensor::to_vec(out.last().expect("one iteration").clone());
-            let pred = DisparityMap::from_vec(pair.disparity.width, pair.disparity.height, pred)?;
+            let pred = predict_pair(model, config, prior, pair, self.iters, device)?;
             sums.merge(&accumulate(&pred, &pair.disparity, Some(&pair.valid), ValidOptions::default())?);
         }
         Ok(sums.metrics())
     }
+}
+
+/// The disparity of one pair at its own size, the prior given the pair's ground truth (which
+/// only a simulated prior reads).
+pub(crate) fn predict_pair(
+    model: &RaftStereo,
+    config: &ModelConfig,
+    prior: &Prior,
+    pair: &TrainingPair,
+    iters: usize,
+    device: &Device,
+) -> Result<DisparityMap> {
+    let batch = to_tensors(std::slice::from_ref(pair), device)?;
+    let p = batch_prior(prior, config.needs_prior(), &batch)?;
+    let out = forward_disparities(model, config, batch.left, batch.right, p.as_ref(), iters, false);
+    let pred = dgstereo_core::tensor::to_vec(out.last().expect("one iteration").clone());
+    DisparityMap::from_vec(pair.left.width, pair.left.height, pred)
 }

@@ -2,15 +2,18 @@
 //! final model and writes the ablation table (Markdown, CSV, JSON) into `--out`.
 //!
 //! Each run trains into `--out/<run name>`. A run folder holding a finished run (`summary.json`
-//! and `model.safetensors`) is reused as is; one holding checkpoints only is resumed. The
-//! benchmark is each run's held-out synthetic validation set (`[data.validation]`).
+//! and `model.safetensors`) is reused as is; one holding checkpoints only is resumed. Every run is
+//! scored on its held-out synthetic validation set (`[data.validation]`, column `synthetic`) and
+//! on each of its `[[benchmarks]]` (a real data set under its protocol: EPE and the protocol's
+//! headline rate); the table's columns are the union over the runs, NaN where a run lacks one.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use anyhow::Context;
 use clap::Args;
 use dgstereo_core::DeviceChoice;
-use dgstereo_train::ablation::{AblationTable, TABLE_METRICS, evaluate_finished_run};
+use dgstereo_train::ablation::{AblationTable, TABLE_METRICS, evaluate_benchmark, evaluate_finished_run};
 use dgstereo_train::run::{checkpoint_dir, is_finished};
 
 use super::train::{folder_name, parts_of, train_one};
@@ -39,11 +42,21 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
     let runs = dgstereo_experiment::load_all(&a.files)?;
     let device = a.device.device()?;
     std::fs::create_dir_all(&a.out).map_err(|e| dgstereo_core::Error::io(&a.out, e))?;
-    let bench = "synthetic".to_string();
-    let mut table = AblationTable::new(TABLE_METRICS.iter().map(|m| (bench.clone(), m.to_string())).collect());
+    let synthetic = "synthetic".to_string();
+    let mut columns: Vec<(String, String)> = TABLE_METRICS.iter().map(|m| (synthetic.clone(), m.to_string())).collect();
+    for b in runs.iter().flat_map(|r| &r.config.benchmarks) {
+        for m in b.table_metrics() {
+            let column = (b.label().to_string(), m.to_string());
+            if !columns.contains(&column) {
+                columns.push(column);
+            }
+        }
+    }
+    let mut table = AblationTable::new(columns);
     for run in runs {
         let name = run.name.clone();
         let out = a.out.join(folder_name(&name));
+        let benchmarks = run.config.benchmarks.clone();
         let parts = parts_of(run.config, a.steps);
         if is_finished(&out) {
             let stored = std::fs::read_to_string(out.join("config.toml")).unwrap_or_default();
@@ -61,10 +74,19 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
         }
         let metrics = evaluate_finished_run(&parts, &out, &device)?;
         println!(
-            "{name}: {bench} EPE {:.3} px, bad-1 {:.2} %, bad-3 {:.2} %",
+            "{name}: {synthetic} EPE {:.3} px, bad-1 {:.2} %, bad-3 {:.2} %",
             metrics.epe, metrics.bad_1, metrics.bad_3
         );
-        table.push(&name, &[(bench.clone(), metrics)]);
+        let mut scores = vec![(synthetic.clone(), metrics)];
+        for b in &benchmarks {
+            let m = evaluate_benchmark(&parts, &out, b, &device)
+                .with_context(|| format!("run '{name}': benchmark '{}'", b.label()))?;
+            let shown: Vec<String> =
+                b.table_metrics().iter().map(|k| format!("{k} {:.3}", m.get(k).unwrap_or(f64::NAN))).collect();
+            println!("{name}: {} ({} iterations) {}", b.label(), b.iters, shown.join(", "));
+            scores.push((b.label().to_string(), m));
+        }
+        table.push(&name, &scores);
         table.write(&a.out)?;
     }
     println!("\n{}", table.to_markdown());

@@ -14,65 +14,20 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::bail;
-use clap::{Args, ValueEnum};
-use dgstereo_data::datasets::{
-    KittiVersion, SceneFlowPass, SceneFlowSubset, drivingstereo, eth3d, folder_pairs, kitti, middlebury2014, sceneflow,
-};
-use dgstereo_data::{Dataset, FileDataset};
-use dgstereo_eval::{Protocol, evaluate_dataset};
+use clap::Args;
+use dgstereo_data::Dataset;
+use dgstereo_eval::{DatasetKind, evaluate_dataset};
 
 use crate::engine::{Engine, ModelArgs, error_line};
-
-/// A data set layout.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum DatasetKind {
-    /// Middlebury 2014 / MiddEval3: scene folders with im0.png, im1.png, disp0GT.pfm.
-    Middlebury,
-    /// ETH3D two-view (two_view_training + two_view_training_gt).
-    Eth3d,
-    /// KITTI 2012 training folder (colored_0, colored_1, disp_occ).
-    Kitti2012,
-    /// KITTI 2015 training folder (image_2, image_3, disp_occ_0).
-    Kitti2015,
-    /// SceneFlow FlyingThings3D finalpass TEST.
-    Sceneflow,
-    /// DrivingStereo weather subsets (sunny, cloudy, foggy, rainy).
-    Drivingstereo,
-    /// A folder of pairs (`*left*`/`*right*` or im0/im1) with `*disp*` or disp0GT ground truth,
-    /// e.g. the bundled Cones pair in assets/cones.
-    Folder,
-}
-
-impl DatasetKind {
-    fn load(self, root: &std::path::Path) -> dgstereo_core::Result<FileDataset> {
-        match self {
-            Self::Middlebury => middlebury2014(root),
-            Self::Eth3d => eth3d(root),
-            Self::Kitti2012 => kitti(root, KittiVersion::K2012),
-            Self::Kitti2015 => kitti(root, KittiVersion::K2015),
-            Self::Sceneflow => sceneflow(root, SceneFlowSubset::FlyingThingsTest, SceneFlowPass::Final),
-            Self::Drivingstereo => drivingstereo(root, &[]),
-            Self::Folder => folder_pairs(root),
-        }
-    }
-
-    fn protocol(self) -> Protocol {
-        match self {
-            Self::Middlebury => Protocol::Middlebury,
-            Self::Eth3d => Protocol::Eth3d,
-            Self::Kitti2012 | Self::Kitti2015 => Protocol::Kitti,
-            Self::Sceneflow => Protocol::FlyingThings,
-            Self::Drivingstereo => Protocol::DrivingStereo,
-            Self::Folder => Protocol::Generic,
-        }
-    }
-}
 
 /// Options of `dgstereo eval`.
 #[derive(Args)]
 pub struct EvalArgs {
-    /// Data set layout.
-    #[arg(long, value_enum)]
+    /// Data set layout: middlebury (MiddEval3 / 2014 scene folders), eth3d (two-view training),
+    /// kitti2012, kitti2015 (training folders), sceneflow (FlyingThings3D finalpass TEST),
+    /// drivingstereo (weather subsets), folder (pairs with `*disp*` or disp0GT ground truth, e.g.
+    /// assets/cones).
+    #[arg(long)]
     dataset: DatasetKind,
     /// Root folder of the data set.
     #[arg(long)]
@@ -98,7 +53,7 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
     }
     let dataset = a.dataset.load(&a.root)?;
     if dataset.files.is_empty() {
-        bail!("{}: no {:?} samples found in this folder", a.root.display(), a.dataset);
+        bail!("{}: no {} samples found in this folder", a.root.display(), a.dataset);
     }
     let without_gt: Vec<&str> =
         dataset.files.iter().filter(|f| f.disparity.is_none()).map(|f| f.name.as_str()).collect();

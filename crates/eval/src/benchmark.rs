@@ -1,0 +1,204 @@
+//! Benchmarks by name: a data set layout, its folder, and the protocol that scores it.
+//!
+//! [`DatasetKind`] ties each layout reader of the data crate to its [`Protocol`]; it is what
+//! `dgstereo eval --dataset` takes and what an experiment's `[[benchmarks]]` entries name, so the
+//! ablation runner and the eval command score a data set the same way.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use dgstereo_core::{Error, Result};
+use dgstereo_data::FileDataset;
+use dgstereo_data::datasets::{
+    KittiVersion, SceneFlowPass, SceneFlowSubset, drivingstereo, eth3d, folder_pairs, kitti, middlebury2014, sceneflow,
+};
+use serde::{Deserialize, Serialize};
+
+use crate::Protocol;
+
+/// A data set layout with ground truth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DatasetKind {
+    /// Middlebury 2014 / MiddEval3: scene folders with im0.png, im1.png, disp0GT.pfm.
+    Middlebury,
+    /// ETH3D two-view (two_view_training + two_view_training_gt).
+    Eth3d,
+    /// KITTI 2012 training folder (colored_0, colored_1, disp_occ).
+    Kitti2012,
+    /// KITTI 2015 training folder (image_2, image_3, disp_occ_0).
+    Kitti2015,
+    /// SceneFlow FlyingThings3D finalpass TEST.
+    Sceneflow,
+    /// DrivingStereo weather subsets (sunny, cloudy, foggy, rainy).
+    Drivingstereo,
+    /// A folder of pairs (`*left*`/`*right*` or im0/im1) with `*disp*` or disp0GT ground truth,
+    /// e.g. the bundled Cones pair in assets/cones.
+    Folder,
+}
+
+impl DatasetKind {
+    /// Every kind, in the order of the documentation.
+    pub const ALL: [Self; 7] = [
+        Self::Middlebury,
+        Self::Eth3d,
+        Self::Kitti2012,
+        Self::Kitti2015,
+        Self::Sceneflow,
+        Self::Drivingstereo,
+        Self::Folder,
+    ];
+
+    /// The kind's name (as in TOML and on the command line).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Middlebury => "middlebury",
+            Self::Eth3d => "eth3d",
+            Self::Kitti2012 => "kitti2012",
+            Self::Kitti2015 => "kitti2015",
+            Self::Sceneflow => "sceneflow",
+            Self::Drivingstereo => "drivingstereo",
+            Self::Folder => "folder",
+        }
+    }
+
+    /// Lists the samples of the data set in `root`.
+    pub fn load(self, root: &Path) -> Result<FileDataset> {
+        match self {
+            Self::Middlebury => middlebury2014(root),
+            Self::Eth3d => eth3d(root),
+            Self::Kitti2012 => kitti(root, KittiVersion::K2012),
+            Self::Kitti2015 => kitti(root, KittiVersion::K2015),
+            Self::Sceneflow => sceneflow(root, SceneFlowSubset::FlyingThingsTest, SceneFlowPass::Final),
+            Self::Drivingstereo => drivingstereo(root, &[]),
+            Self::Folder => folder_pairs(root),
+        }
+    }
+
+    /// The protocol that scores this data set.
+    pub fn protocol(self) -> Protocol {
+        match self {
+            Self::Middlebury => Protocol::Middlebury,
+            Self::Eth3d => Protocol::Eth3d,
+            Self::Kitti2012 | Self::Kitti2015 => Protocol::Kitti,
+            Self::Sceneflow => Protocol::FlyingThings,
+            Self::Drivingstereo => Protocol::DrivingStereo,
+            Self::Folder => Protocol::Generic,
+        }
+    }
+}
+
+impl fmt::Display for DatasetKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for DatasetKind {
+    type Err = Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| {
+            let names: Vec<&str> = Self::ALL.iter().map(|k| k.name()).collect();
+            Error::Config(format!("unknown data set '{s}' (expected one of: {})", names.join(", ")))
+        })
+    }
+}
+
+/// A benchmark of an experiment (`[[benchmarks]]`): which data set, where, and how to run on it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BenchmarkConfig {
+    /// Column label in tables (default: the data set kind's name).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// The layout.
+    pub dataset: DatasetKind,
+    /// The data set's folder (relative paths: to the working directory).
+    pub root: PathBuf,
+    /// Update iterations (32, the papers' evaluation setting).
+    #[serde(default = "default_iters")]
+    pub iters: usize,
+    /// Score only the first N samples.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub limit: Option<usize>,
+}
+
+fn default_iters() -> usize {
+    32
+}
+
+impl BenchmarkConfig {
+    /// The label of the benchmark's columns.
+    pub fn label(&self) -> &str {
+        self.name.as_deref().unwrap_or(self.dataset.name())
+    }
+
+    /// The metrics the ablation table shows for it: EPE and the protocol's headline (bad-2 and
+    /// bad-3 for a plain folder, whose protocol has no headline rate).
+    pub fn table_metrics(&self) -> Vec<&'static str> {
+        let mut m = vec!["epe"];
+        match self.dataset.protocol() {
+            Protocol::Generic => m.extend(["bad-2", "bad-3"]),
+            p => m.extend(p.headline().iter().filter(|h| **h != "epe")),
+        }
+        m
+    }
+
+    /// Lists the samples to score (the first `limit`), with a clear error when the folder is
+    /// missing or holds no sample with ground truth.
+    pub fn dataset(&self) -> Result<(FileDataset, Vec<usize>)> {
+        if !self.root.is_dir() {
+            return Err(Error::Config(format!(
+                "benchmark '{}': root {} is not a folder",
+                self.label(),
+                self.root.display()
+            )));
+        }
+        let dataset = self.dataset.load(&self.root)?;
+        if !dataset.files.iter().any(|f| f.disparity.is_some()) {
+            return Err(Error::Config(format!(
+                "benchmark '{}': no sample in {} has ground truth disparity",
+                self.label(),
+                self.root.display()
+            )));
+        }
+        let n = self.limit.unwrap_or(usize::MAX).min(dataset.files.len());
+        Ok((dataset, (0..n).collect()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_through_str_and_toml() {
+        for k in DatasetKind::ALL {
+            assert_eq!(k.name().parse::<DatasetKind>().unwrap(), k);
+            let b: BenchmarkConfig = toml::from_str(&format!("dataset = '{k}'\nroot = 'x'")).unwrap();
+            assert_eq!(b.dataset, k);
+            assert_eq!(b.iters, 32);
+        }
+        let e = "kitti".parse::<DatasetKind>().unwrap_err().to_string();
+        assert!(e.contains("kitti2015"), "{e}");
+    }
+
+    #[test]
+    fn unknown_keys_and_missing_roots_are_errors() {
+        assert!(toml::from_str::<BenchmarkConfig>("dataset = 'folder'\nroot = 'x'\niter = 3").is_err());
+        let b: BenchmarkConfig = toml::from_str("dataset = 'folder'\nroot = '/nonexistent/cones'").unwrap();
+        let e = b.dataset().unwrap_err().to_string();
+        assert!(e.contains("/nonexistent/cones") && e.contains("folder"), "{e}");
+    }
+
+    #[test]
+    fn table_metrics_follow_the_protocol() {
+        let b = |d| BenchmarkConfig { name: None, dataset: d, root: PathBuf::new(), iters: 32, limit: None };
+        assert_eq!(b(DatasetKind::Middlebury).table_metrics(), vec!["epe", "bad-2"]);
+        assert_eq!(b(DatasetKind::Kitti2015).table_metrics()[0], "epe");
+        assert_eq!(b(DatasetKind::Folder).table_metrics(), vec!["epe", "bad-2", "bad-3"]);
+        assert_eq!(b(DatasetKind::Folder).label(), "folder");
+    }
+}
