@@ -236,7 +236,7 @@ impl Engine {
         };
         let weights = match &a.weights {
             Some(w) => w.clone(),
-            None => default_weights()?,
+            None => default_weights(prior_config.gives_prior() && a.experiment.is_none())?,
         };
         let model = load_model(&weights, config, &device).with_context(|| match &a.experiment {
             Some(e) => format!("weights {} do not fit the model of {}", weights.display(), e.display()),

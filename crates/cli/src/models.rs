@@ -29,18 +29,29 @@ pub fn asset(relative: &str) -> anyhow::Result<PathBuf> {
     })
 }
 
-/// The weights used when none are given: the project's default model if it is bundled, else
-/// the reference checkpoint of `../shared/golden` (random weights: a placeholder until trained
-/// defaults exist).
-pub fn default_weights() -> anyhow::Result<PathBuf> {
-    if let Ok(p) = asset("weights/raft-stereo-default.safetensors") {
+/// The bundled default without a prior (RAFT-Stereo, CPU-sized; `experiments/default/raft-stereo.toml`).
+pub const DEFAULT_PLAIN: &str = "weights/raft-stereo-default.safetensors";
+/// The bundled default of the paper's model, for runs with a prior
+/// (`experiments/default/paper-simulated.toml`).
+pub const DEFAULT_WITH_PRIOR: &str = "weights/paper-default.safetensors";
+
+/// The weights used when none are given: the bundled default without a prior, or with
+/// `with_prior` (the user gave a prior) the bundled paper model. Without bundled weights, the
+/// reference checkpoint of `../shared/golden` (random weights) stands in for the plain model.
+pub fn default_weights(with_prior: bool) -> anyhow::Result<PathBuf> {
+    if with_prior {
+        return asset(DEFAULT_WITH_PRIOR).context(
+            "no bundled default for a model with a depth prior: pass --weights FILE (trained with a prior), or drop --prior",
+        );
+    }
+    if let Ok(p) = asset(DEFAULT_PLAIN) {
         return Ok(p);
     }
     if let Some(shared) = dgstereo_core::shared::shared_dir() {
         let p = shared.join("golden/raft_stereo_random.pth");
         if p.is_file() {
             eprintln!(
-                "note: no trained default weights are bundled yet; using the reference checkpoint {} (random weights)",
+                "note: no trained default weights are bundled; using the reference checkpoint {} (random weights)",
                 p.display()
             );
             return Ok(p);

@@ -243,7 +243,9 @@ fn whole_run_problems_fail_before_any_pair() {
     std::fs::write(&experiment, "[model.updater]\nhidden_dims = [32, 32, 32]\n").unwrap();
     let out = tmp.path().join("out");
     let base = ["infer", "-l", l.to_str().unwrap(), "-r", r.to_str().unwrap(), "--out", out.to_str().unwrap()];
-    let cases: [(Vec<&str>, &str); 3] = [
+    let cases: [(Vec<&str>, &str); 4] = [
+        // No calibration for depth output: refused before the model loads, naming the pair.
+        (vec!["--save", "depth", "--weights", "/nonexistent/weights.pth"], "left_rgb.png"),
         (
             vec!["--save", "depth", "--calib", bad_calib.to_str().unwrap(), "--weights", w.to_str().unwrap()],
             "broken.json",

@@ -118,15 +118,21 @@ pub fn load_safetensors(mut model: RaftStereo, path: &Path) -> Result<RaftStereo
             result.missing.len()
         ));
     }
-    if let Some(k) = result.unused.first() {
+    // A training checkpoint also holds the optimiser state under `__train__.`: the model part
+    // loads as weights.
+    let unused: Vec<&String> = result.unused.iter().filter(|k| !k.starts_with(TRAINING_STATE_PREFIX)).collect();
+    if let Some(k) = unused.first() {
         return fail(format!(
             "unknown key '{k}' ({} in all): the checkpoint was saved from another model configuration",
-            result.unused.len()
+            unused.len()
         ));
     }
     check_finite(&model, path)?;
     Ok(model)
 }
+
+/// Keys under this prefix in our safetensors files hold training state, not weights.
+pub const TRAINING_STATE_PREFIX: &str = "__train__.";
 
 /// Reads a metadata entry of a safetensors file (e.g. `config`).
 pub fn safetensors_metadata(path: &Path, key: &str) -> Result<Option<String>> {

@@ -190,3 +190,11 @@ pub fn load_checkpoint(parts: TrainParts, path: &Path, device: &burn::tensor::De
     }
     Trainer::with_model(parts, model, device, optimizer, step)
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn optimizer_state_is_under_the_prefix_weight_loading_skips() {
+        assert!(super::OPTIMIZER_KEY.starts_with(dgstereo_model::checkpoint::TRAINING_STATE_PREFIX));
+    }
+}

@@ -65,6 +65,10 @@ fn stopped_and_resumed_run_equals_uninterrupted_run() {
     let diff = max_diff(&weights(&a.inference_model()), &weights(&b.inference_model()));
     eprintln!("max |w_resumed - w_uninterrupted| = {diff:e}");
     assert!(diff <= 1e-6, "resumed weights differ by {diff}");
+    // A training checkpoint also loads as plain weights (its optimiser state is skipped).
+    let (_, newest) = list_checkpoints(&checkpoint_dir(&full)).unwrap().pop().unwrap();
+    let as_weights = dgstereo_model::checkpoint::load_safetensors(parts.model.init(&device).unwrap(), &newest).unwrap();
+    assert_eq!(max_diff(&weights(&as_weights), &weights(&a.inference_model())), 0.0);
     // The weights did change over training, so equality is not trivial.
     let fresh = Trainer::new(parts.clone(), &device).unwrap();
     assert!(max_diff(&weights(&fresh.inference_model()), &weights(&a.inference_model())) > 1e-4);

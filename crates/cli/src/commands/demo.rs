@@ -37,7 +37,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     let visible = load_mask(dir.join("occlusion.png"))?;
     let weights = match a.weights {
         Some(w) => w,
-        None => default_weights()?,
+        None => default_weights(false)?,
     };
     println!("weights: {}", weights.display());
     let model = load_model(&weights, None, &device)?;

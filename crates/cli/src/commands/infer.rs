@@ -96,9 +96,28 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
     {
         bail!("--max-depth must be a positive number of metres");
     }
+    let kinds = dedup(&a.save);
+    if global_calib.is_none() && kinds.iter().any(|k| k.needs_calibration()) {
+        // A whole-run problem: found before the model loads, not once per pair.
+        let missing: Vec<String> = list
+            .pairs
+            .iter()
+            .filter(|p| calibration_beside(&p.left).is_none())
+            .map(|p| p.left.display().to_string())
+            .collect();
+        if !missing.is_empty() {
+            bail!(
+                "depth and ply outputs need a calibration, and {} of {} pair(s) have none beside the left image ({}{}): pass --calib FILE, or put calib.txt or K.txt beside the images",
+                missing.len(),
+                list.pairs.len(),
+                missing.iter().take(3).cloned().collect::<Vec<_>>().join(", "),
+                if missing.len() > 3 { ", ..." } else { "" }
+            );
+        }
+    }
     let engine = Engine::new(&a.model)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the output folder", a.out.display()))?;
-    let opts = OutputOptions { dir: a.out.clone(), kinds: dedup(&a.save), max_depth: a.max_depth, ply: a.ply_encoding };
+    let opts = OutputOptions { dir: a.out.clone(), kinds, max_depth: a.max_depth, ply: a.ply_encoding };
 
     let mut failures: Vec<Failure> =
         list.problems.iter().map(|p| Failure { what: p.path.clone(), message: p.message.clone() }).collect();
