@@ -19,7 +19,9 @@ use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Distribution, Int, Tensor};
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use dgstereo_core::default_device;
-use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, LookupKernel};
+use dgstereo_costvolume::{
+    CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, LookupKernel, OnTheFlyCorrelation,
+};
 use dgstereo_model::encoder::{ContextExtractor, FeatureExtractor};
 use dgstereo_model::fusion::{FusionConfig, ImageFusion};
 use dgstereo_model::updater::{GateContext, Updater, convex_upsample};
@@ -83,8 +85,12 @@ fn correlation(c: &mut Criterion) {
                 b.iter(|| black_box(pyramid.lookup(x.clone())))
             });
         }
-        let alt = config.build_with(CorrelationImplementation::Alt, f1.clone(), f2.clone());
-        group.bench_function(BenchmarkId::new("lookup alt", name), |b| b.iter(|| black_box(alt.lookup(x.clone()))));
+        for kernel in [LookupKernel::Host, LookupKernel::Stock] {
+            let alt = OnTheFlyCorrelation::with_kernel(f1.clone(), f2.clone(), config.levels, config.radius, kernel);
+            group.bench_function(BenchmarkId::new(format!("lookup alt {kernel:?}"), name), |b| {
+                b.iter(|| black_box(alt.lookup(x.clone())))
+            });
+        }
     }
     group.finish();
 }

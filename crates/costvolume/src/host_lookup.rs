@@ -73,9 +73,19 @@ pub fn lookup(levels: &[HostLevel], coords: &[f32], [n, h, w1]: [usize; 3], radi
             }
         }
     });
-    // [N, H·W1, C] -> [N, C, H·W1]
+    pixels_to_planes(&by_pixel, n, plane, channels)
+}
+
+/// Transposes pixel-major lookups into channel planes.
+///
+/// # Shapes
+/// - `by_pixel`: `[N, plane, channels]` row-major; output `[N, channels, plane]`
+pub(crate) fn pixels_to_planes(by_pixel: &[f32], n: usize, plane: usize, channels: usize) -> Vec<f32> {
     let mut out = vec![0f32; n * channels * plane];
-    out.par_chunks_mut(plane.max(1)).enumerate().for_each(|(p, dst)| {
+    if plane == 0 || channels == 0 {
+        return out;
+    }
+    out.par_chunks_mut(plane).enumerate().for_each(|(p, dst)| {
         let (b, c) = (p / channels, p % channels);
         let src = &by_pixel[b * plane * channels..(b + 1) * plane * channels];
         for (j, d) in dst.iter_mut().enumerate() {

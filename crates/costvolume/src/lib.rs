@@ -7,21 +7,39 @@
 //! the `W x W` volume per row once (fast lookups; "reg" in the reference) and
 //! [`OnTheFlyCorrelation`] stores only the pooled features and takes the dot products at the
 //! sampled positions (memory linear in `W`; "alt"). They agree to float rounding. For CPU
-//! inference the pyramid keeps its levels on the host and looks them up with one hand-written
-//! loop ([`host_lookup`], [`LookupKernel::Host`]); the tensor-op lookup stays the reference and
-//! the differentiable path, and both are tested to agree.
+//! inference both keep their data on the host and look it up with one hand-written loop
+//! ([`host_lookup`], [`host_on_the_fly`], [`LookupKernel::Host`]); the tensor-op lookups stay
+//! the reference and the differentiable path, and each host kernel is tested against them.
 #![deny(missing_docs)]
 
 pub mod host_lookup;
+pub mod host_on_the_fly;
 mod lookup;
 mod on_the_fly;
 mod pyramid;
 
-use burn::tensor::Tensor;
+use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 pub use on_the_fly::OnTheFlyCorrelation;
-pub use pyramid::{CorrelationPyramid, LookupKernel};
+pub use pyramid::CorrelationPyramid;
+
+/// How a volume is stored and looked up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LookupKernel {
+    /// burn tensor operations (differentiable, any device): the reference path.
+    Stock,
+    /// A hand-written host loop ([`host_lookup`] for the pyramid, [`host_on_the_fly`] for the
+    /// on-the-fly volume): CPU inference, no gradient.
+    Host,
+}
+
+impl LookupKernel {
+    /// The fast kernel where it applies: the CPU backend without autodiff; else the stock one.
+    pub fn for_device(device: &Device) -> Self {
+        if *device == Device::flex() && !device.is_autodiff() { Self::Host } else { Self::Stock }
+    }
+}
 
 /// The stage trait: correlation features around the current match positions.
 ///

@@ -1,55 +1,113 @@
 //! Correlation computed at the sampled positions only ("alt").
 
-use burn::tensor::Tensor;
 use burn::tensor::module::avg_pool2d;
 use burn::tensor::ops::AvgPoolOptions;
+use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::CostVolume;
+use crate::host_on_the_fly::{self, ChannelLastFeatures};
 use crate::lookup::{interpolate_taps, taps};
+use crate::{CostVolume, LookupKernel};
+
+#[derive(Debug, Clone)]
+enum Storage {
+    /// `fmap1` `[N, C, H, W1]`, `pooled[i]` `[N, C, H, W2 / 2^i]`.
+    Tensors { fmap1: Tensor<4>, pooled: Vec<Tensor<4>> },
+    /// The same, channel-last on the host (`[N, H, W, C]`).
+    Host { fmap1: ChannelLastFeatures, pooled: Vec<ChannelLastFeatures>, device: Device },
+}
 
 /// Stores the left features and the pooled right features; each lookup takes the dot products
 /// at the `2r + 2` integer positions around the match and interpolates between them.
 ///
 /// Pooling the volume along `x2` equals correlating with right features pooled along `x`
 /// (the dot product is linear), so the pyramid levels come from pooled `f2`. Memory is
-/// `O(C·H·W)` instead of `O(H·W²)`; each lookup costs `O(levels·r·C·H·W)`.
+/// `O(C·H·W)` instead of `O(H·W²)`; each lookup costs `O(levels·r·C·H·W)`. On the CPU without
+/// autodiff the features live on the host and [`crate::host_on_the_fly`] looks them up
+/// ([`LookupKernel::Host`]); elsewhere the tensor-op lookup below runs ([`LookupKernel::Stock`]).
 ///
 /// # Shapes
 /// - `fmap1`: `[N, C, H, W1]`, `pooled[i]`: `[N, C, H, W2 / 2^i]`
 #[derive(Debug, Clone)]
 pub struct OnTheFlyCorrelation {
-    fmap1: Tensor<4>,
-    pooled: Vec<Tensor<4>>,
+    storage: Storage,
+    /// `[N, C, H, W1]` of `fmap1`.
+    dims: [usize; 4],
     levels: usize,
     radius: usize,
 }
 
 impl OnTheFlyCorrelation {
-    /// Prepares the lookup of `fmap1` against `fmap2`.
+    /// Prepares the lookup of `fmap1` (`[N, C, H, W1]`) against `fmap2` (`[N, C, H, W2]`), with
+    /// the lookup kernel suited to their device ([`LookupKernel::for_device`]).
     pub fn new(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize) -> Self {
-        let mut pooled = vec![fmap2];
-        for _ in 1..levels {
-            let last = pooled.last().expect("level 0").clone();
-            let w = last.dims()[3];
-            pooled.push(if w >= 2 {
-                avg_pool2d(last, AvgPoolOptions::new([1, 2]))
-            } else {
-                let [n, c, h, _] = last.dims();
-                Tensor::zeros([n, c, h, 0], &last.device())
-            });
-        }
-        Self { fmap1, pooled, levels, radius }
+        let kernel = LookupKernel::for_device(&fmap1.device());
+        Self::with_kernel(fmap1, fmap2, levels, radius, kernel)
     }
+
+    /// Prepares the lookup for an explicit kernel.
+    pub fn with_kernel(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize, kernel: LookupKernel) -> Self {
+        let dims = fmap1.dims();
+        let storage = match kernel {
+            LookupKernel::Stock => {
+                let mut pooled = vec![fmap2];
+                for _ in 1..levels {
+                    let last = pooled.last().expect("level 0").clone();
+                    let w = last.dims()[3];
+                    pooled.push(if w >= 2 {
+                        avg_pool2d(last, AvgPoolOptions::new([1, 2]))
+                    } else {
+                        let [n, c, h, _] = last.dims();
+                        Tensor::zeros([n, c, h, 0], &last.device())
+                    });
+                }
+                Storage::Tensors { fmap1, pooled }
+            }
+            LookupKernel::Host => {
+                let device = fmap1.device();
+                let fmap2_dims = fmap2.dims();
+                let mut pooled = vec![ChannelLastFeatures::from_channel_first(&host_values(fmap2), fmap2_dims)];
+                for _ in 1..levels {
+                    let next = pooled.last().expect("level 0").pool_columns();
+                    pooled.push(next);
+                }
+                let fmap1 = ChannelLastFeatures::from_channel_first(&host_values(fmap1), dims);
+                Storage::Host { fmap1, pooled, device }
+            }
+        };
+        Self { storage, dims, levels, radius }
+    }
+
+    /// The kernel this volume looks up with.
+    pub fn kernel(&self) -> LookupKernel {
+        match self.storage {
+            Storage::Tensors { .. } => LookupKernel::Stock,
+            Storage::Host { .. } => LookupKernel::Host,
+        }
+    }
+}
+
+/// A float tensor's values on the host, row-major.
+fn host_values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data().convert::<f32>().try_into_vec::<f32>().expect("float tensor")
 }
 
 impl CostVolume for OnTheFlyCorrelation {
     fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
-        let [n, c, h, w1] = self.fmap1.dims();
+        let [n, c, h, w1] = self.dims;
+        let k = 2 * self.radius + 1;
+        let (fmap1, pooled) = match &self.storage {
+            Storage::Tensors { fmap1, pooled } => (fmap1, pooled),
+            Storage::Host { fmap1, pooled, device } => {
+                assert_eq!(coords_x.dims(), [n, 1, h, w1], "coordinates must be [N, 1, H, W1] of the left features");
+                let out = host_on_the_fly::lookup(fmap1, &pooled[..self.levels], &host_values(coords_x), self.radius);
+                return Tensor::from_data(TensorData::new(out, [n, self.levels * k, h, w1]), device);
+            }
+        };
         let m = n * h * w1;
         let taps_n = 2 * self.radius + 2;
         let x = coords_x.reshape([m, 1]);
         let mut out = Vec::with_capacity(self.levels);
-        for (i, f2) in self.pooled.iter().enumerate() {
+        for (i, f2) in pooled.iter().enumerate() {
             let width = f2.dims()[3];
             let xi = x.clone().div_scalar((1u64 << i) as f64);
             let (idx, inside, w) = taps(xi, self.radius, width.max(1));
@@ -61,14 +119,13 @@ impl CostVolume for OnTheFlyCorrelation {
                 }
                 let index = idx.clone().slice([0..m, t..t + 1]).reshape([n, 1, h, w1]).expand([n, c, h, w1]);
                 let sampled = f2.clone().gather(3, index);
-                dots.push((sampled * self.fmap1.clone()).sum_dim(1));
+                dots.push((sampled * fmap1.clone()).sum_dim(1));
             }
             // [N, T, H, W1] -> [M, T]
             let values =
                 Tensor::cat(dots, 1).permute([0, 2, 3, 1]).reshape([m, taps_n]).div_scalar((c as f64).sqrt()) * inside;
             out.push(interpolate_taps(values, w, self.radius));
         }
-        let k = 2 * self.radius + 1;
         Tensor::cat(out, 1).reshape([n, h, w1, self.levels * k]).permute([0, 3, 1, 2])
     }
 }

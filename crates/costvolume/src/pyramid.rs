@@ -2,25 +2,9 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::CostVolume;
 use crate::host_lookup::{self, HostLevel};
 use crate::lookup::{interpolate_taps, taps};
-
-/// How a pyramid is stored and looked up.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LookupKernel {
-    /// burn tensor operations (differentiable, any device): the reference path.
-    Stock,
-    /// The hand-written host loop of [`crate::host_lookup`] (CPU inference; no gradient).
-    Host,
-}
-
-impl LookupKernel {
-    /// The fast kernel where it applies: the CPU backend without autodiff; else the stock one.
-    pub fn for_device(device: &Device) -> Self {
-        if *device == Device::flex() && !device.is_autodiff() { Self::Host } else { Self::Stock }
-    }
-}
+use crate::{CostVolume, LookupKernel};
 
 #[derive(Debug, Clone)]
 enum Storage {

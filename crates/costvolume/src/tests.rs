@@ -5,7 +5,10 @@ use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, max_abs_diff, to_vec};
 use proptest::prelude::*;
 
-use crate::{CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, LookupKernel};
+use crate::{
+    Correlation, CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, LookupKernel,
+    OnTheFlyCorrelation,
+};
 
 fn features(n: usize, c: usize, h: usize, w: usize, seed: u64) -> Tensor<4> {
     let device = default_device();
@@ -15,8 +18,55 @@ fn features(n: usize, c: usize, h: usize, w: usize, seed: u64) -> Tensor<4> {
     from_vec(v, [n, c, h, w], &device)
 }
 
+/// `[N, 1, H, W]` match positions: each pixel's column plus `shift` times a fraction in
+/// `[0, 1)`, so fractional and (for large `shift`) outside the row.
+fn coords(n: usize, h: usize, w: usize, shift: f32) -> Tensor<4> {
+    let x: Vec<f32> = (0..n * h * w).map(|i| (i % w) as f32 + shift * ((i * 7 % 11) as f32 / 11.0)).collect();
+    from_vec(x, [n, 1, h, w], &default_device())
+}
+
+fn max_abs(t: Tensor<4>) -> f32 {
+    to_vec(t).iter().fold(0f32, |m, v| m.max(v.abs()))
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(12))]
+
+    /// The host on-the-fly kernel and the stock tensor-op one agree within 1e-5 of the largest
+    /// correlation: batches, odd widths and channel counts (the dot product's remainder),
+    /// different left and right widths, fractional positions in and out of the row, and levels
+    /// pooled down to width 1 or 0.
+    #[test]
+    fn host_and_stock_on_the_fly_agree(w1 in 1usize..40, w2 in 1usize..40, h in 1usize..4, n in 1usize..3, c in 1usize..40, levels in 1usize..7, radius in 0usize..5, seed in 0u64..1000, shift in -50f32..50.0) {
+        let (f1, f2) = (features(n, c, h, w1, seed), features(n, c, h, w2, seed + 1));
+        let stock = OnTheFlyCorrelation::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Stock);
+        let host = OnTheFlyCorrelation::with_kernel(f1, f2, levels, radius, LookupKernel::Host);
+        prop_assert_eq!(stock.kernel(), LookupKernel::Stock);
+        prop_assert_eq!(host.kernel(), LookupKernel::Host);
+        let x = coords(n, h, w1, shift);
+        let (a, b) = (stock.lookup(x.clone()), host.lookup(x));
+        prop_assert_eq!(a.dims(), [n, levels * (2 * radius + 1), h, w1]);
+        prop_assert_eq!(a.dims(), b.dims());
+        let (diff, scale) = (max_abs_diff(a.clone(), b), max_abs(a));
+        prop_assert!(diff <= 1e-5 * scale, "differ by {} (largest correlation {})", diff, scale);
+    }
+
+    /// The host on-the-fly kernel agrees with the materialised pyramid, with either of its kernels.
+    #[test]
+    fn host_on_the_fly_and_pyramid_agree(w in 1usize..40, h in 1usize..3, n in 1usize..3, levels in 1usize..6, radius in 0usize..5, seed in 0u64..1000, shift in -50f32..50.0) {
+        let c = 16;
+        let (f1, f2) = (features(n, c, h, w, seed), features(n, c, h, w, seed + 1));
+        let alt = OnTheFlyCorrelation::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Host);
+        let x = coords(n, h, w, shift);
+        let b = alt.lookup(x.clone());
+        for kernel in [LookupKernel::Stock, LookupKernel::Host] {
+            let reg = CorrelationPyramid::with_kernel(f1.clone(), f2.clone(), levels, radius, kernel);
+            let a = reg.lookup(x.clone());
+            prop_assert_eq!(a.dims(), b.dims());
+            let (diff, scale) = (max_abs_diff(a.clone(), b.clone()), max_abs(a));
+            prop_assert!(diff <= 1e-5 * scale, "{:?} pyramid: differ by {} (largest {})", kernel, diff, scale);
+        }
+    }
 
     /// Both implementations agree to 1e-5 (unit-scale features) anywhere, in and out of the row.
     #[test]
@@ -67,6 +117,54 @@ fn kernel_follows_the_device() {
     let device = default_device();
     assert_eq!(LookupKernel::for_device(&device), LookupKernel::Host);
     assert_eq!(LookupKernel::for_device(&device.clone().autodiff()), LookupKernel::Stock);
+}
+
+/// The on-the-fly volume picks its host kernel on the CPU and keeps the differentiable stock
+/// one under autodiff, where gradients still reach both feature maps.
+#[test]
+fn on_the_fly_kernel_follows_the_device() {
+    let (n, c, h, w) = (1, 4, 2, 6);
+    let alt = CorrelationConfig { implementation: CorrelationImplementation::Alt, levels: 2, radius: 1 }
+        .build(features(n, c, h, w, 1), features(n, c, h, w, 2));
+    let Correlation::Alt(alt) = alt else { panic!("an Alt config builds the on-the-fly volume") };
+    assert_eq!(alt.kernel(), LookupKernel::Host);
+
+    let ad = default_device().autodiff();
+    let f1 = from_vec(to_vec(features(n, c, h, w, 1)), [n, c, h, w], &ad).require_grad();
+    let f2 = from_vec(to_vec(features(n, c, h, w, 2)), [n, c, h, w], &ad).require_grad();
+    let alt = OnTheFlyCorrelation::new(f1.clone(), f2.clone(), 2, 1);
+    assert_eq!(alt.kernel(), LookupKernel::Stock);
+    let x: Vec<f32> = (0..n * h * w).map(|i| (i % w) as f32 - 0.5).collect();
+    let grads = alt.lookup(from_vec(x, [n, 1, h, w], &ad)).sum().backward();
+    for (name, f) in [("fmap1", f1), ("fmap2", f2)] {
+        let grad = f.grad(&grads).unwrap_or_else(|| panic!("{name} gets a gradient"));
+        assert!(to_vec(grad).iter().any(|g| *g != 0.0), "{name}'s gradient is not all zero");
+    }
+}
+
+/// Levels pooled to width 1 (still sampled) and 0 (all zero) match the stock path, in a batch
+/// of two with coordinates on, between, left and right of the columns.
+#[test]
+fn on_the_fly_host_kernel_on_exhausted_levels() {
+    let (n, c, h, w, levels, radius) = (2, 8, 2, 5, 4, 2); // widths 5, 2, 1, 0
+    let (f1, f2) = (features(n, c, h, w, 3), features(n, c, h, w, 4));
+    let stock = OnTheFlyCorrelation::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Stock);
+    let host = OnTheFlyCorrelation::with_kernel(f1, f2, levels, radius, LookupKernel::Host);
+    let pattern = [0.0, 0.5, -0.5, 4.75, 1e3, -7.25, 2.0, 3.5, -1e3, 1.25];
+    let x: Vec<f32> = (0..n * h * w).map(|i| pattern[i % pattern.len()]).collect();
+    let x = from_vec(x, [n, 1, h, w], &default_device());
+    let (a, b) = (stock.lookup(x.clone()), host.lookup(x));
+    let (diff, scale) = (max_abs_diff(a.clone(), b.clone()), max_abs(a));
+    assert!(diff <= 1e-5 * scale, "differ by {diff} (largest {scale})");
+    let k = 2 * radius + 1;
+    let out = to_vec(b);
+    let plane = h * w;
+    let level =
+        |b: usize, l: usize| out[(b * levels * k + l * k) * plane..(b * levels * k + (l + 1) * k) * plane].to_vec();
+    for b in 0..n {
+        assert!(level(b, 2).iter().any(|v| *v != 0.0), "the width-1 level is sampled (batch {b})");
+        assert!(level(b, 3).iter().all(|v| *v == 0.0), "the width-0 level is zero (batch {b})");
+    }
 }
 
 /// At integer positions, level 0 of the lookup is the plain dot product of the features.

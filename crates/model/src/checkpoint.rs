@@ -34,7 +34,13 @@ fn ignorable(key: &str) -> bool {
 }
 
 /// Loads an official RAFT-Stereo `.pth` checkpoint into `model` (built with the matching config).
-pub fn load_pytorch(mut model: RaftStereo, path: &Path) -> Result<RaftStereo> {
+pub fn load_pytorch(model: RaftStereo, path: &Path) -> Result<RaftStereo> {
+    load_pytorch_keys(model, path, true).map(|(m, _)| m)
+}
+
+/// [`load_pytorch`], or with `strict = false` leaving parameters the file lacks as they are;
+/// returns their names.
+fn load_pytorch_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Result<(RaftStereo, Vec<String>)> {
     if !path.is_file() {
         return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
     }
@@ -49,7 +55,7 @@ pub fn load_pytorch(mut model: RaftStereo, path: &Path) -> Result<RaftStereo> {
     if let Some(e) = result.errors.first() {
         return fail(format!("{e} ({} errors in all)", result.errors.len()));
     }
-    if !result.missing.is_empty() {
+    if strict && !result.missing.is_empty() {
         let keys: Vec<&str> = result.missing.iter().map(|(k, _)| k.as_str()).take(8).collect();
         return fail(format!(
             "missing key(s) for this model configuration: {} ({} in all; is the experiment's model config the checkpoint's?)",
@@ -66,7 +72,7 @@ pub fn load_pytorch(mut model: RaftStereo, path: &Path) -> Result<RaftStereo> {
         ));
     }
     check_finite(&model, path)?;
-    Ok(model)
+    Ok((model, result.missing.into_iter().map(|(k, _)| k).collect()))
 }
 
 /// Fails with the parameter's name when any weight is NaN or infinite.
@@ -100,7 +106,13 @@ pub fn save_safetensors(model: &RaftStereo, path: &Path, metadata: &[(&str, &str
 }
 
 /// Loads our own safetensors checkpoint into `model` (built with the config it was saved with).
-pub fn load_safetensors(mut model: RaftStereo, path: &Path) -> Result<RaftStereo> {
+pub fn load_safetensors(model: RaftStereo, path: &Path) -> Result<RaftStereo> {
+    load_safetensors_keys(model, path, true).map(|(m, _)| m)
+}
+
+/// [`load_safetensors`], or with `strict = false` leaving parameters the file lacks as they are;
+/// returns their names.
+fn load_safetensors_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Result<(RaftStereo, Vec<String>)> {
     if !path.is_file() {
         return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
     }
@@ -112,7 +124,7 @@ pub fn load_safetensors(mut model: RaftStereo, path: &Path) -> Result<RaftStereo
     if let Some(e) = result.errors.first() {
         return fail(e.to_string());
     }
-    if let Some((k, _)) = result.missing.first() {
+    if let Some((k, _)) = result.missing.first().filter(|_| strict) {
         return fail(format!(
             "missing key '{k}' ({} in all): the checkpoint was saved from another model configuration",
             result.missing.len()
@@ -128,7 +140,23 @@ pub fn load_safetensors(mut model: RaftStereo, path: &Path) -> Result<RaftStereo
         ));
     }
     check_finite(&model, path)?;
-    Ok(model)
+    Ok((model, result.missing.into_iter().map(|(k, _)| k).collect()))
+}
+
+/// Loads weights by extension (`.pth`/`.pt`: official layout, `.safetensors`: ours, training
+/// checkpoints included) into `model`. With `strict`, every parameter must be in the file;
+/// otherwise parameters it lacks keep their values and are returned by name. Keys the model
+/// lacks, wrong shapes and non-finite weights are errors either way.
+pub fn load_weights(model: RaftStereo, path: &Path, strict: bool) -> Result<(RaftStereo, Vec<String>)> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    match ext.as_str() {
+        "pth" | "pt" => load_pytorch_keys(model, path, strict),
+        "safetensors" => load_safetensors_keys(model, path, strict),
+        _ => Err(Error::Checkpoint {
+            path: path.into(),
+            message: "unknown weights format (expected .pth, .pt or .safetensors)".into(),
+        }),
+    }
 }
 
 /// Keys under this prefix in our safetensors files hold training state, not weights.

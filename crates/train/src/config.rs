@@ -44,6 +44,16 @@ pub struct TrainingConfig {
     pub keep_checkpoints: usize,
     /// Steps between two validations (also run at the end); 0: never.
     pub validate_every: usize,
+    /// Weights to start from instead of a random initialisation (RAFT-Stereo's `restore_ckpt`):
+    /// an official `.pth`, a dgstereo `.safetensors` model or training checkpoint. Only the
+    /// weights are taken; the optimiser, schedule and step start afresh (use `--resume` to
+    /// continue a run).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub init: Option<PathBuf>,
+    /// With `init`: every parameter must be in the file (`true`), or parameters it lacks keep
+    /// their random initialisation (`false`: e.g. the fusion and guidance modules when the
+    /// paper's model starts from RAFT-Stereo weights). Keys the model lacks are always an error.
+    pub init_strict: bool,
 }
 
 impl Default for TrainingConfig {
@@ -65,6 +75,8 @@ impl Default for TrainingConfig {
             checkpoint_every: 5000,
             keep_checkpoints: 3,
             validate_every: 5000,
+            init: None,
+            init_strict: true,
         }
     }
 }

@@ -164,6 +164,22 @@ impl Trainer {
             device.seed(parts.train.seed);
             parts.model.init(device)?
         };
+        let model = match &parts.train.init {
+            Some(path) => {
+                let (model, missing) = dgstereo_model::checkpoint::load_weights(model, path, parts.train.init_strict)
+                    .map_err(|e| Error::Config(format!("train.init: {e}")))?;
+                if !missing.is_empty() {
+                    eprintln!(
+                        "train.init: {} parameter(s) not in {} keep their initialisation (e.g. {})",
+                        missing.len(),
+                        path.display(),
+                        missing.iter().take(3).cloned().collect::<Vec<_>>().join(", ")
+                    );
+                }
+                model
+            }
+            None => model,
+        };
         let optimizer = adamw(&parts.train);
         Self::with_model(parts, model, device, optimizer, 0)
     }
