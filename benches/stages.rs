@@ -25,7 +25,7 @@ use dgstereo_costvolume::{
 use dgstereo_model::encoder::{ContextExtractor, FeatureExtractor};
 use dgstereo_model::fusion::{FusionConfig, ImageFusion};
 use dgstereo_model::updater::{GateContext, Updater, convex_upsample};
-use dgstereo_model::{ModelConfig, RaftStereo};
+use dgstereo_model::{ForwardOptions, ModelConfig, RaftStereo};
 
 /// Full-resolution sizes (padded to a multiple of 32) and their names.
 const SIZES: [([usize; 2], &str); 2] = [([320, 736], "320x736"), ([384, 1248], "kitti 384x1248")];
@@ -109,7 +109,7 @@ fn update(c: &mut Criterion) {
         group.bench_function(BenchmarkId::new("one iteration (3 GRU levels, flow head)", name), |b| {
             b.iter(|| {
                 let mut state = hidden.clone();
-                black_box(block.step(&mut state, &gates, corr.clone(), flow.clone(), None))
+                black_box(block.step(&mut state, &gates, corr.clone(), flow.clone(), None, None))
             })
         });
         group.bench_function(BenchmarkId::new("mask head + convex upsample", name), |b| {
@@ -141,7 +141,7 @@ fn forward(c: &mut Criterion) {
     for iters in [12usize, 32] {
         group.bench_function(BenchmarkId::new("forward 320x736", format!("{iters} iterations")), |b| {
             b.iter(|| {
-                let out = model.forward_flow(left.clone(), right.clone(), None, iters, None, None, false, None);
+                let out = model.forward_flow(left.clone(), right.clone(), None, iters, ForwardOptions::default());
                 black_box(out.flow_up.last().cloned().map(|t| t.into_data()))
             })
         });
@@ -164,7 +164,13 @@ fn training_step(c: &mut Criterion) {
         let mut optim = AdamWConfig::new().with_weight_decay(1e-5).init();
         b.iter(|| {
             let m = model.take().expect("model");
-            let out = m.forward_flow(left.clone(), right.clone(), None, iters, None, None, true, None);
+            let out = m.forward_flow(
+                left.clone(),
+                right.clone(),
+                None,
+                iters,
+                ForwardOptions { all_iterations: true, ..ForwardOptions::default() },
+            );
             let n = out.flow_up.len();
             let loss = out
                 .flow_up

@@ -5,7 +5,7 @@
 //! here is what more than one stage needs: the device choice, the error type, the input padder
 //! that makes any image size a multiple of 32, fixed bilinear resampling expressed as matrix
 //! products (they differentiate on every backend, unlike the GPU backends' resize), a few tensor
-//! helpers and the locator of the shared reference data.
+//! helpers, the locator of the shared reference data and the stage clock of the profiler.
 #![deny(missing_docs)]
 
 pub mod device;
@@ -15,6 +15,7 @@ pub mod padding;
 pub mod resample;
 pub mod shared;
 pub mod tensor;
+pub mod timing;
 
 pub use device::{DeviceChoice, default_device};
 pub use error::{Error, Result};

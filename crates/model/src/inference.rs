@@ -5,7 +5,7 @@ use dgstereo_core::DepthPrior;
 use dgstereo_core::{Error, InputPadder, Result};
 use dgstereo_costvolume::CorrelationImplementation;
 
-use crate::{ModelConfig, RaftStereo};
+use crate::{ForwardOptions, ModelConfig, RaftStereo};
 
 /// A network ready for inference.
 ///
@@ -111,10 +111,7 @@ pub fn padded_disparities(
         padder.pad(right),
         padded_prior.as_ref(),
         iters,
-        None,
-        implementation,
-        all_iterations,
-        None,
+        ForwardOptions { implementation, all_iterations, ..ForwardOptions::default() },
     );
     out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect()
 }

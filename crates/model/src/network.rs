@@ -8,6 +8,7 @@ use burn::tensor::activation::{relu, tanh};
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::DepthPrior;
 use dgstereo_core::layers::{ConvInit, conv2d};
+use dgstereo_core::timing::{StageClock, timed};
 use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CostVolume};
 use dgstereo_encoder::{
     ContextEncoder, ContextExtractor, FeatureEncoder, FeatureExtractor, NormKind, SharedFeatureHead,
@@ -55,6 +56,23 @@ pub struct RaftStereo {
 /// Named intermediate tensors of one forward pass, for conformance checks.
 pub type Trace = BTreeMap<String, Tensor<4>>;
 
+/// Options of [`RaftStereo::forward_flow`] beyond the images, the prior and the iteration count;
+/// `ForwardOptions::default()` is inference (last iteration only, configured cost volume).
+#[derive(Debug, Default)]
+pub struct ForwardOptions<'a> {
+    /// Initial x flow at the update grid `[N, 1, H/f, W/f]` (zeros when absent).
+    pub flow_init: Option<Tensor<4>>,
+    /// Cost volume to use instead of the configured one.
+    pub implementation: Option<CorrelationImplementation>,
+    /// Upsample and return the flow after every iteration (training), not the last one only.
+    pub all_iterations: bool,
+    /// Records intermediate tensors under the names of the reference activations
+    /// (`fnet.left`, `context.hidden.0`, `iter.3.flow_up`, ...).
+    pub trace: Option<&'a mut Trace>,
+    /// Times every stage (`feature encoder`, `correlation lookup`, `GRU 1/4`, ...).
+    pub clock: Option<&'a mut StageClock>,
+}
+
 /// The result of [`RaftStereo::forward_flow`].
 #[derive(Debug, Clone)]
 pub struct FlowOutput {
@@ -94,25 +112,21 @@ impl RaftStereo {
     /// Runs the network on images already padded to a multiple of `2^(n_downsample+3)`.
     ///
     /// `left`/`right` are RGB in 0..255. Returns the x flow (RAFT-Stereo's sign: negative
-    /// disparity) after every iteration when `all_iterations`, else after the last one only.
-    /// With `trace`, intermediate tensors are recorded under the names of the reference
-    /// activations (`fnet.left`, `context.hidden.0`, `iter.3.flow_up`, ...).
+    /// disparity) after every iteration with `options.all_iterations`, else after the last one
+    /// only; `options` may also trace intermediate tensors and time the stages.
     ///
     /// # Shapes
     /// - `left`, `right`: `[N, 3, H, W]`; prior maps `[N, 1, H, W]`
     /// - `flow_up[k]`: `[N, 1, H, W]`; `flow_lowres`: `[N, 1, H/f, W/f]`
-    #[allow(clippy::too_many_arguments)]
     pub fn forward_flow(
         &self,
         left: Tensor<4>,
         right: Tensor<4>,
         prior: Option<&DepthPrior>,
         iters: usize,
-        flow_init: Option<Tensor<4>>,
-        implementation: Option<CorrelationImplementation>,
-        all_iterations: bool,
-        mut trace: Option<&mut Trace>,
+        options: ForwardOptions<'_>,
     ) -> FlowOutput {
+        let ForwardOptions { flow_init, implementation, all_iterations, mut trace, mut clock } = options;
         fn rec(trace: &mut Option<&mut Trace>, name: String, t: &Tensor<4>) {
             if let Some(tr) = trace.as_deref_mut() {
                 tr.insert(name, t.clone());
@@ -127,9 +141,9 @@ impl RaftStereo {
             Some(p) => (Some(p.left.clone()), Some(p.right.clone())),
             None => (None, None),
         };
-        let fused_left = self.fusion.fuse(left.clone(), prior_left.clone());
+        let fused_left = timed(&mut clock, "fusion", || self.fusion.fuse(left.clone(), prior_left.clone()));
         let (feat_left, feat_right) = if self.fuse_features {
-            (fused_left.clone(), self.fusion.fuse(right.clone(), prior_right))
+            (fused_left.clone(), timed(&mut clock, "fusion", || self.fusion.fuse(right.clone(), prior_right)))
         } else {
             (left, right)
         };
@@ -138,20 +152,23 @@ impl RaftStereo {
 
         let (context, fmap1, fmap2) = match (&self.fnet, &self.conv2) {
             (Some(fnet), _) => {
-                let context = self.cnet.context(normalise(fused_left), levels);
+                let context = timed(&mut clock, "context encoder", || self.cnet.context(normalise(fused_left), levels));
                 // One image at a time (the reference batches the pair): the result is the same,
                 // as every layer acts per image, and the full-resolution activations of the
                 // stem and layer1, the process's peak memory, are half as large.
-                let f1 = fnet.features(normalise(feat_left));
-                let f2 = fnet.features(normalise(feat_right));
+                let f1 = timed(&mut clock, "feature encoder", || fnet.features(normalise(feat_left)));
+                let f2 = timed(&mut clock, "feature encoder", || fnet.features(normalise(feat_right)));
                 (context, f1, f2)
             }
             (None, Some(head)) => {
                 // Shared backbone: the trunk sees both images; the heads only the left.
                 let n = feat_left.dims()[0];
-                let trunk = self.cnet.trunk(normalise(Tensor::cat(vec![fused_left, feat_right], 0)));
-                let context = self.cnet.heads(trunk.clone().narrow(0, 0, n), levels);
-                let feats = head.forward(trunk);
+                let trunk = timed(&mut clock, "context encoder", || {
+                    self.cnet.trunk(normalise(Tensor::cat(vec![fused_left, feat_right], 0)))
+                });
+                let context =
+                    timed(&mut clock, "context encoder", || self.cnet.heads(trunk.clone().narrow(0, 0, n), levels));
+                let feats = timed(&mut clock, "feature encoder", || head.forward(trunk));
                 (context, feats.clone().narrow(0, 0, n), feats.narrow(0, n, n))
             }
             (None, None) => unreachable!("a network has either fnet or conv2"),
@@ -162,9 +179,9 @@ impl RaftStereo {
         let mut hidden: Vec<Tensor<4>> = Vec::with_capacity(levels);
         let mut gates: Vec<GateContext> = Vec::with_capacity(levels);
         for (i, [h, c]) in context.levels.into_iter().enumerate() {
-            let h = tanh(h);
-            let zqr = self.context_zqr_convs[i].forward(relu(c));
-            let g = GateContext::from_zqr(zqr);
+            let (h, g) = timed(&mut clock, "context encoder", || {
+                (tanh(h), GateContext::from_zqr(self.context_zqr_convs[i].forward(relu(c))))
+            });
             record!(format!("context.hidden.{i}"), &h);
             record!(format!("context.z.{i}"), &g.z);
             record!(format!("context.r.{i}"), &g.r);
@@ -174,7 +191,8 @@ impl RaftStereo {
         }
 
         let implementation = implementation.unwrap_or(self.correlation.implementation);
-        let corr_fn = self.correlation.build_with(implementation, fmap1, fmap2);
+        let corr_fn =
+            timed(&mut clock, "correlation build", || self.correlation.build_with(implementation, fmap1, fmap2));
         if let (Some(tr), dgstereo_costvolume::Correlation::Reg(p)) = (trace.as_deref_mut(), &corr_fn) {
             for (i, level) in p.levels().iter().enumerate() {
                 let [m, w] = level.dims();
@@ -185,7 +203,8 @@ impl RaftStereo {
         let [n, _, h, w] = hidden[0].dims();
         let device = hidden[0].device();
         let grid = [h, w];
-        let guidance = prior.and_then(|p| self.guidance.feature(p.left.clone(), grid));
+        let guidance =
+            timed(&mut clock, "guidance", || prior.and_then(|p| self.guidance.feature(p.left.clone(), grid)));
         let coords0 = Tensor::<1, burn::tensor::Int>::arange(0..w as i64, &device)
             .float()
             .reshape([1, 1, 1, w])
@@ -196,18 +215,18 @@ impl RaftStereo {
         let mut flow_up = Vec::new();
         for k in 0..iters {
             flow_x = flow_x.detach();
-            let corr = corr_fn.lookup(coords0.clone() + flow_x.clone());
+            let corr = timed(&mut clock, "correlation lookup", || corr_fn.lookup(coords0.clone() + flow_x.clone()));
             record!(format!("iter.{k}.corr"), &corr);
             if self.slow_fast_gru {
                 if levels == 3 {
-                    self.update_block.update_coarse(&mut hidden, &gates, true, false);
+                    self.update_block.update_coarse(&mut hidden, &gates, true, false, &mut clock);
                 }
                 if levels >= 2 {
-                    self.update_block.update_coarse(&mut hidden, &gates, levels == 3, true);
+                    self.update_block.update_coarse(&mut hidden, &gates, levels == 3, true, &mut clock);
                 }
             }
             let flow = Tensor::cat(vec![flow_x.clone(), zeros.clone()], 1);
-            let out = self.update_block.step(&mut hidden, &gates, corr, flow, guidance.as_ref());
+            let out = self.update_block.step(&mut hidden, &gates, corr, flow, guidance.as_ref(), clock.as_deref_mut());
             flow_x = flow_x + out.delta_x;
             for (i, hi) in hidden.iter().enumerate() {
                 record!(format!("iter.{k}.hidden.{i}"), hi);
@@ -216,12 +235,12 @@ impl RaftStereo {
             // The mask never feeds back into the state: computed only where it is used.
             let upsampled = all_iterations || k + 1 == iters;
             if upsampled || trace.is_some() {
-                let up_mask = Updater::upsample_mask(&self.update_block, &hidden);
+                let up_mask = timed(&mut clock, "mask head", || Updater::upsample_mask(&self.update_block, &hidden));
                 record!(format!("iter.{k}.up_mask"), &up_mask);
                 if !upsampled {
                     continue;
                 }
-                let up = convex_upsample(flow_x.clone(), up_mask, factor);
+                let up = timed(&mut clock, "convex upsample", || convex_upsample(flow_x.clone(), up_mask, factor));
                 record!(format!("iter.{k}.flow_up"), &up);
                 flow_up.push(up);
             }

@@ -1,26 +1,18 @@
 //! Per-stage timing of one forward pass.
 //!
-//! Design decision: [`profile_forward`] re-runs the forward pass of
-//! [`crate::RaftStereo::forward_flow`] stage by stage through the same public modules, with a
-//! clock around each call, rather than threading timers through the production path. The CPU
-//! backend executes every operation eagerly, so the time between two calls is the time of the
-//! stage between them. Each stage's time is paired with its operation count ([`StageMacs`]) so a
-//! report can show achieved GFLOP/s. The result is checked against `forward_flow` in the tests,
-//! so the profiled sequence cannot drift from the real one unnoticed.
+//! [`profile_forward`] runs [`RaftStereo::forward_flow`] itself with a
+//! [`StageClock`](dgstereo_core::timing::StageClock): the production path times its own stages,
+//! so there is no second copy of the forward sequence to drift from it. The CPU backend executes
+//! every operation eagerly, so the time a stage's closure takes is the time of that stage. Each
+//! stage's time is paired with its operation count ([`StageMacs`], per call times calls) so a
+//! report can show achieved GFLOP/s.
 
-use std::time::Instant;
-
-use burn::tensor::activation::{relu, tanh};
-use burn::tensor::{Int, Tensor};
+use burn::tensor::Tensor;
+use dgstereo_core::timing::StageClock;
 use dgstereo_core::{DepthPrior, Error, Result};
-use dgstereo_costvolume::CostVolume;
-use dgstereo_encoder::{ContextExtractor, FeatureExtractor};
-use dgstereo_fusion::ImageFusion;
-use dgstereo_updater::block::{interp, pool2x};
-use dgstereo_updater::{GateContext, convex_upsample};
 
 use crate::flops::StageMacs;
-use crate::{ModelConfig, RaftStereo};
+use crate::{ForwardOptions, ModelConfig, RaftStereo};
 
 /// The time and work of one stage, summed over the iterations where it repeats.
 #[derive(Debug, Clone, PartialEq)]
@@ -60,27 +52,6 @@ impl Profile {
     }
 }
 
-struct Clock {
-    stages: Vec<StageTime>,
-}
-
-impl Clock {
-    fn time<T>(&mut self, name: &'static str, macs: u64, f: impl FnOnce() -> T) -> T {
-        let start = Instant::now();
-        let out = f();
-        let seconds = start.elapsed().as_secs_f64();
-        match self.stages.iter_mut().find(|s| s.name == name) {
-            Some(s) => {
-                s.seconds += seconds;
-                s.calls += 1;
-                s.macs += macs;
-            }
-            None => self.stages.push(StageTime { name, seconds, calls: 1, macs }),
-        }
-        out
-    }
-}
-
 /// Runs `model` on one padded pair for `iters` iterations and times every stage; only the last
 /// iteration is upsampled, as in inference.
 ///
@@ -108,100 +79,43 @@ pub fn profile_forward(
         return Err(Error::Config("iterations must be at least 1".into()));
     }
     let macs = StageMacs::new(config, [h, w]);
-    let mut clock = Clock { stages: Vec::new() };
-    let levels = model.n_gru_layers;
-    let normalise = |x: Tensor<4>| x.div_scalar(255.0).mul_scalar(2.0).sub_scalar(1.0);
-
-    let fused_left = clock.time("fusion", 0, || model.fusion.fuse(left.clone(), prior.map(|p| p.left.clone())));
-    let (feat_left, feat_right) = if model.fuse_features {
-        let r = clock.time("fusion", 0, || model.fusion.fuse(right.clone(), prior.map(|p| p.right.clone())));
-        (fused_left.clone(), r)
-    } else {
-        (left, right)
+    let mut clock = StageClock::new();
+    let out =
+        model.forward_flow(left, right, prior, iters, ForwardOptions { clock: Some(&mut clock), ..Default::default() });
+    // MACs per call of each counted stage; the encoders and the build run once per pass.
+    let per_call = |name: &str, calls: usize| -> u64 {
+        match name {
+            "feature encoder" => macs.feature_encoder / calls.max(1) as u64,
+            "context encoder" => macs.context_encoder / calls.max(1) as u64,
+            "correlation build" => macs.correlation_build,
+            "motion encoder" => macs.motion_encoder,
+            "GRU 1/4" => macs.gru_fine,
+            "GRU 1/8" => macs.gru_mid,
+            "GRU 1/16" => macs.gru_coarse,
+            "flow head" => macs.flow_head,
+            "mask head" => macs.mask_head,
+            "convex upsample" => macs.convex_upsample,
+            _ => 0,
+        }
     };
-    let (context, fmap1, fmap2) = match (&model.fnet, &model.conv2) {
-        (Some(fnet), _) => {
-            let f1 = clock.time("feature encoder", macs.feature_encoder / 2, || fnet.features(normalise(feat_left)));
-            let f2 = clock.time("feature encoder", macs.feature_encoder / 2, || fnet.features(normalise(feat_right)));
-            let context = clock.time("context encoder", 0, || model.cnet.context(normalise(fused_left), levels));
-            (context, f1, f2)
-        }
-        (None, Some(head)) => {
-            let trunk = clock.time("context encoder", 0, || {
-                model.cnet.trunk(normalise(Tensor::cat(vec![fused_left, feat_right], 0)))
-            });
-            let context = clock.time("context encoder", 0, || model.cnet.heads(trunk.clone().narrow(0, 0, 1), levels));
-            let feats = clock.time("feature encoder", macs.feature_encoder, || head.forward(trunk));
-            (context, feats.clone().narrow(0, 0, 1), feats.narrow(0, 1, 1))
-        }
-        (None, None) => return Err(Error::Config("a network has either fnet or conv2".into())),
-    };
-    let mut hidden = Vec::with_capacity(levels);
-    let mut gates = Vec::with_capacity(levels);
-    clock.time("context encoder", macs.context_encoder, || {
-        for (i, [hh, c]) in context.levels.into_iter().enumerate() {
-            hidden.push(tanh(hh));
-            gates.push(GateContext::from_zqr(model.context_zqr_convs[i].forward(relu(c))));
-        }
-    });
-    let corr = clock.time("correlation build", macs.correlation_build, || model.correlation.build(fmap1, fmap2));
-
-    let [_, _, h4, w4] = hidden[0].dims();
-    let device = hidden[0].device();
-    let guidance = prior.and_then(|p| model.guidance.feature(p.left.clone(), [h4, w4]));
-    let coords0 = Tensor::<1, Int>::arange(0..w4 as i64, &device).float().reshape([1, 1, 1, w4]).expand([1, 1, h4, w4]);
-    let mut flow_x = Tensor::<4>::zeros([1, 1, h4, w4], &device);
-    let zeros = Tensor::<4>::zeros([1, 1, h4, w4], &device);
-    let block = &model.update_block;
-    let mut flow_up = None;
-    for k in 0..iters {
-        let lookup = clock.time("correlation lookup", 0, || corr.lookup(coords0.clone() + flow_x.clone()));
-        if model.slow_fast_gru {
-            clock.time("slow-fast extra GRU", 0, || {
-                if levels == 3 {
-                    block.update_coarse(&mut hidden, &gates, true, false);
-                }
-                if levels >= 2 {
-                    block.update_coarse(&mut hidden, &gates, levels == 3, true);
-                }
-            });
-        }
-        if levels == 3 {
-            let pooled = clock.time("interpolation", 0, || pool2x(hidden[1].clone()));
-            hidden[2] = clock
-                .time("GRU 1/16", macs.gru_coarse, || block.gru32.forward(hidden[2].clone(), &gates[2], vec![pooled]));
-        }
-        if levels >= 2 {
-            let mut inputs = vec![clock.time("interpolation", 0, || pool2x(hidden[0].clone()))];
-            if levels > 2 {
-                inputs.push(
-                    clock.time("interpolation", macs.interpolation / 2, || interp(hidden[2].clone(), &hidden[1])),
-                );
-            }
-            hidden[1] =
-                clock.time("GRU 1/8", macs.gru_mid, || block.gru16.forward(hidden[1].clone(), &gates[1], inputs));
-        }
-        let flow = Tensor::cat(vec![flow_x.clone(), zeros.clone()], 1);
-        let motion = clock
-            .time("motion encoder", macs.motion_encoder, || block.encoder.forward(flow, lookup, guidance.as_ref()));
-        let mut inputs = vec![motion];
-        if levels > 1 {
-            let share = macs.interpolation - macs.interpolation / 2 * (levels > 2) as u64;
-            inputs.push(clock.time("interpolation", share, || interp(hidden[1].clone(), &hidden[0])));
-        }
-        hidden[0] = clock.time("GRU 1/4", macs.gru_fine, || block.gru08.forward(hidden[0].clone(), &gates[0], inputs));
-        let delta = clock.time("flow head", macs.flow_head, || block.delta_x(hidden[0].clone()));
-        flow_x = flow_x + delta;
-        if k + 1 == iters {
-            let mask = clock.time("mask head", macs.mask_head, || block.upsample_mask(hidden[0].clone()));
-            let factor = 1usize << model.n_downsample;
-            flow_up = Some(
-                clock.time("convex upsample", macs.convex_upsample, || convex_upsample(flow_x.clone(), mask, factor)),
-            );
-        }
-    }
-    let flow_up = flow_up.expect("at least one iteration");
-    Ok(Profile { stages: clock.stages, flow_lowres: flow_x, flow_up })
+    let gru_fine_calls = clock.stages().iter().find(|s| s.name == "GRU 1/4").map_or(0, |s| s.calls);
+    let stages = clock
+        .stages()
+        .iter()
+        .map(|s| StageTime {
+            name: s.name,
+            seconds: s.seconds,
+            calls: s.calls,
+            // The interpolations' count is per update iteration (several calls each).
+            macs: if s.name == "interpolation" {
+                macs.interpolation * gru_fine_calls as u64
+            } else {
+                per_call(s.name, s.calls) * s.calls as u64
+            },
+        })
+        .collect();
+    let flow_up = out.flow_up.into_iter().last().expect("at least one iteration");
+    Ok(Profile { stages, flow_lowres: out.flow_lowres, flow_up })
 }
 
 #[cfg(test)]
@@ -211,22 +125,32 @@ mod tests {
     use dgstereo_core::default_device;
     use dgstereo_core::tensor::max_abs_diff;
 
-    /// The profiled sequence computes what `forward_flow` computes (small widths, tiny image).
+    /// The profiled pass computes what `forward_flow` computes and times every stage.
     #[test]
-    fn profile_matches_forward_flow() {
+    fn profile_times_every_stage_of_forward_flow() {
         let device = default_device();
         let mut config = ModelConfig::default();
         config.updater.hidden_dims = [16, 16, 16];
         let model = config.init(&device).unwrap();
         let img = || Tensor::<4>::random([1, 3, 32, 64], Distribution::Uniform(0.0, 255.0), &device);
         let (left, right) = (img(), img());
-        let out = model.forward_flow(left.clone(), right.clone(), None, 3, None, None, false, None);
+        let out = model.forward_flow(left.clone(), right.clone(), None, 3, ForwardOptions::default());
         let profile = profile_forward(&model, &config, left, right, None, 3).unwrap();
-        assert!(max_abs_diff(profile.flow_lowres, out.flow_lowres) < 1e-5);
-        assert!(max_abs_diff(profile.flow_up, out.flow_up[0].clone()) < 1e-4);
+        assert!(max_abs_diff(profile.flow_lowres.clone(), out.flow_lowres) < 1e-5);
+        assert!(max_abs_diff(profile.flow_up.clone(), out.flow_up[0].clone()) < 1e-4);
         let gru = profile.stages.iter().find(|s| s.name == "GRU 1/4").unwrap();
         assert_eq!(gru.calls, 3);
         assert_eq!(profile.stages.iter().find(|s| s.name == "mask head").unwrap().calls, 1);
+        let names: Vec<&str> = profile.stages.iter().map(|s| s.name).collect();
+        for stage in ["feature encoder", "context encoder", "correlation build", "correlation lookup", "GRU 1/8"] {
+            assert!(names.contains(&stage), "{stage} missing from {names:?}");
+        }
+        // The counted work is the model's, stage by stage.
+        let macs = StageMacs::new(&config, [32, 64]);
+        let of = |name: &str| profile.stages.iter().find(|s| s.name == name).unwrap().macs;
+        assert_eq!(of("GRU 1/4"), 3 * macs.gru_fine);
+        assert_eq!(of("feature encoder"), macs.feature_encoder);
+        assert!(profile.total_seconds() > 0.0);
     }
 
     #[test]

@@ -15,7 +15,7 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::{Error, Result, tensor::from_vec, tensor::to_vec};
 use safetensors::SafeTensors;
 
-use crate::{ModelConfig, checkpoint};
+use crate::{ForwardOptions, ModelConfig, checkpoint};
 
 /// Tolerance on flows (absolute, pixels).
 pub const FLOW_TOLERANCE: f32 = 1e-3;
@@ -114,7 +114,8 @@ pub fn verify_raft_stereo(weights: &Path, reference: &Path, device: &Device) -> 
     let right = tensor4(&refs, "input.right", reference, device)?;
     let iters = refs.keys().filter(|k| k.starts_with("iter.") && k.ends_with(".flow_up")).count();
     let mut trace = BTreeMap::new();
-    let _ = model.forward_flow(left, right, None, iters, None, None, true, Some(&mut trace));
+    let options = ForwardOptions { all_iterations: true, trace: Some(&mut trace), ..ForwardOptions::default() };
+    let _ = model.forward_flow(left, right, None, iters, options);
 
     let mut lines = Vec::new();
     let mut unmatched = Vec::new();

@@ -7,6 +7,7 @@ use burn::tensor::ops::AvgPoolOptions;
 use burn::tensor::{Device, Tensor, activation::relu};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::resample::resize_bilinear;
+use dgstereo_core::timing::{StageClock, timed};
 
 use crate::gru::{ConvGru, GateContext};
 use crate::motion::MotionEncoder;
@@ -109,18 +110,27 @@ impl MultiLevelUpdateBlock {
         self.mask.conv2.forward(relu(self.mask.conv1.forward(hidden_fine))).mul_scalar(0.25)
     }
 
-    /// Updates the coarser GRUs only (the slow-fast schedule's extra calls).
-    pub fn update_coarse(&self, hidden: &mut [Tensor<4>], context: &[GateContext], iter32: bool, iter16: bool) {
+    /// Updates the coarser GRUs only (the slow-fast schedule's extra calls), timing them on
+    /// `clock` if given.
+    pub fn update_coarse(
+        &self,
+        hidden: &mut [Tensor<4>],
+        context: &[GateContext],
+        iter32: bool,
+        iter16: bool,
+        clock: &mut Option<&mut StageClock>,
+    ) {
         let n = self.n_gru_layers;
         if iter32 && n == 3 {
-            hidden[2] = self.gru32.forward(hidden[2].clone(), &context[2], vec![pool2x(hidden[1].clone())]);
+            let pooled = timed(clock, "interpolation", || pool2x(hidden[1].clone()));
+            hidden[2] = timed(clock, "GRU 1/16", || self.gru32.forward(hidden[2].clone(), &context[2], vec![pooled]));
         }
         if iter16 && n >= 2 {
-            let mut inputs = vec![pool2x(hidden[0].clone())];
+            let mut inputs = vec![timed(clock, "interpolation", || pool2x(hidden[0].clone()))];
             if n > 2 {
-                inputs.push(interp(hidden[2].clone(), &hidden[1]));
+                inputs.push(timed(clock, "interpolation", || interp(hidden[2].clone(), &hidden[1])));
             }
-            hidden[1] = self.gru16.forward(hidden[1].clone(), &context[1], inputs);
+            hidden[1] = timed(clock, "GRU 1/8", || self.gru16.forward(hidden[1].clone(), &context[1], inputs));
         }
     }
 }
@@ -133,16 +143,18 @@ impl Updater for MultiLevelUpdateBlock {
         corr: Tensor<4>,
         flow: Tensor<4>,
         guidance: Option<&Tensor<4>>,
+        clock: Option<&mut StageClock>,
     ) -> UpdateOutput {
+        let mut clock = clock;
         let n = self.n_gru_layers;
-        self.update_coarse(hidden, context, n == 3, n >= 2);
-        let motion = self.encoder.forward(flow, corr, guidance);
+        self.update_coarse(hidden, context, n == 3, n >= 2, &mut clock);
+        let motion = timed(&mut clock, "motion encoder", || self.encoder.forward(flow, corr, guidance));
         let mut inputs = vec![motion];
         if n > 1 {
-            inputs.push(interp(hidden[1].clone(), &hidden[0]));
+            inputs.push(timed(&mut clock, "interpolation", || interp(hidden[1].clone(), &hidden[0])));
         }
-        hidden[0] = self.gru08.forward(hidden[0].clone(), &context[0], inputs);
-        UpdateOutput { delta_x: self.delta_x(hidden[0].clone()) }
+        hidden[0] = timed(&mut clock, "GRU 1/4", || self.gru08.forward(hidden[0].clone(), &context[0], inputs));
+        UpdateOutput { delta_x: timed(&mut clock, "flow head", || self.delta_x(hidden[0].clone())) }
     }
 
     fn upsample_mask(&self, hidden: &[Tensor<4>]) -> Tensor<4> {

@@ -1,0 +1,80 @@
+//! Wall-clock time per named stage, for profiling a forward pass without a second copy of it.
+//!
+//! Design decision: the production code takes an optional [`StageClock`] and wraps each stage in
+//! [`timed`]; with `None` it runs the stage and nothing else. The CPU backend executes every
+//! operation eagerly, so the time a closure takes is the time of its stage. A stage that runs
+//! several times (the update iterations) accumulates its seconds and counts its calls.
+
+use std::time::Instant;
+
+/// The accumulated time of one named stage.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StageSeconds {
+    /// Stage name.
+    pub name: &'static str,
+    /// Wall-clock seconds, all calls together.
+    pub seconds: f64,
+    /// How many times it ran.
+    pub calls: usize,
+}
+
+/// Stages in order of their first call, with their accumulated times.
+#[derive(Debug, Clone, Default)]
+pub struct StageClock {
+    stages: Vec<StageSeconds>,
+}
+
+impl StageClock {
+    /// An empty clock.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Runs `f`, adding its wall-clock time to stage `name`.
+    pub fn time<T>(&mut self, name: &'static str, f: impl FnOnce() -> T) -> T {
+        let start = Instant::now();
+        let out = f();
+        let seconds = start.elapsed().as_secs_f64();
+        match self.stages.iter_mut().find(|s| s.name == name) {
+            Some(s) => {
+                s.seconds += seconds;
+                s.calls += 1;
+            }
+            None => self.stages.push(StageSeconds { name, seconds, calls: 1 }),
+        }
+        out
+    }
+
+    /// The stages timed so far, in order of their first call.
+    pub fn stages(&self) -> &[StageSeconds] {
+        &self.stages
+    }
+}
+
+/// Runs `f` under `clock` as stage `name` if there is a clock, else just runs it.
+pub fn timed<T>(clock: &mut Option<&mut StageClock>, name: &'static str, f: impl FnOnce() -> T) -> T {
+    match clock.as_deref_mut() {
+        Some(c) => c.time(name, f),
+        None => f(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stages_accumulate_in_order_of_first_call() {
+        let mut clock = StageClock::new();
+        let mut maybe = Some(&mut clock);
+        let a = timed(&mut maybe, "a", || 1);
+        let b = timed(&mut maybe, "b", || std::thread::sleep(std::time::Duration::from_millis(2)));
+        let a2 = timed(&mut maybe, "a", || 2);
+        assert_eq!((a, b, a2), (1, (), 2));
+        let s = clock.stages();
+        assert_eq!(s.iter().map(|s| (s.name, s.calls)).collect::<Vec<_>>(), vec![("a", 2), ("b", 1)]);
+        assert!(s[1].seconds >= 0.002);
+        let mut none: Option<&mut StageClock> = None;
+        assert_eq!(timed(&mut none, "a", || 3), 3);
+    }
+}
