@@ -11,7 +11,7 @@
 
 use std::path::Path;
 
-use burn::store::{ModuleSnapshot, PytorchStore, SafetensorsStore};
+use burn::store::{ApplyError, ModuleSnapshot, PytorchStore, SafetensorsStore};
 use dgstereo_core::{Error, Result};
 
 use crate::RaftStereo;
@@ -52,8 +52,9 @@ fn load_pytorch_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Result
         .load_from(&mut store)
         .map_err(|e| Error::Checkpoint { path: path.into(), message: format!("cannot read checkpoint: {e}") })?;
     let fail = |message: String| Err(Error::Checkpoint { path: path.into(), message });
-    if let Some(e) = result.errors.first() {
-        return fail(format!("{e} ({} errors in all)", result.errors.len()));
+    let (kept, errors) = split_errors(&result.errors, strict);
+    if let Some(e) = errors.first() {
+        return fail(format!("{e} ({} errors in all)", errors.len()));
     }
     if strict && !result.missing.is_empty() {
         let keys: Vec<&str> = result.missing.iter().map(|(k, _)| k.as_str()).take(8).collect();
@@ -72,7 +73,7 @@ fn load_pytorch_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Result
         ));
     }
     check_finite(&model, path)?;
-    Ok((model, result.missing.into_iter().map(|(k, _)| k).collect()))
+    Ok((model, result.missing.into_iter().map(|(k, _)| k).chain(kept).collect()))
 }
 
 /// Fails with the parameter's name when any weight is NaN or infinite.
@@ -121,7 +122,8 @@ fn load_safetensors_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Re
         .load_from(&mut store)
         .map_err(|e| Error::Checkpoint { path: path.into(), message: format!("cannot read checkpoint: {e}") })?;
     let fail = |message: String| Err(Error::Checkpoint { path: path.into(), message });
-    if let Some(e) = result.errors.first() {
+    let (kept, errors) = split_errors(&result.errors, strict);
+    if let Some(e) = errors.first() {
         return fail(e.to_string());
     }
     if let Some((k, _)) = result.missing.first().filter(|_| strict) {
@@ -140,13 +142,14 @@ fn load_safetensors_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Re
         ));
     }
     check_finite(&model, path)?;
-    Ok((model, result.missing.into_iter().map(|(k, _)| k).collect()))
+    Ok((model, result.missing.into_iter().map(|(k, _)| k).chain(kept).collect()))
 }
 
 /// Loads weights by extension (`.pth`/`.pt`: official layout, `.safetensors`: ours, training
-/// checkpoints included) into `model`. With `strict`, every parameter must be in the file;
-/// otherwise parameters it lacks keep their values and are returned by name. Keys the model
-/// lacks, wrong shapes and non-finite weights are errors either way.
+/// checkpoints included) into `model`. With `strict`, every parameter must be in the file with
+/// its shape; otherwise parameters it lacks or holds in another shape (a layer whose input grew,
+/// such as the motion encoder's last convolution under guidance) keep their initialisation and
+/// are returned by name. Keys the model lacks and non-finite weights are errors either way.
 pub fn load_weights(model: RaftStereo, path: &Path, strict: bool) -> Result<(RaftStereo, Vec<String>)> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     match ext.as_str() {
@@ -157,6 +160,20 @@ pub fn load_weights(model: RaftStereo, path: &Path, strict: bool) -> Result<(Raf
             message: "unknown weights format (expected .pth, .pt or .safetensors)".into(),
         }),
     }
+}
+
+/// Splits load errors into the paths of shape mismatches a non-strict load tolerates (the
+/// parameter keeps its initialisation) and the errors that remain.
+fn split_errors(errors: &[ApplyError], strict: bool) -> (Vec<String>, Vec<&ApplyError>) {
+    let mut kept = Vec::new();
+    let mut rest = Vec::new();
+    for e in errors {
+        match e {
+            ApplyError::ShapeMismatch { path, .. } if !strict => kept.push(path.clone()),
+            other => rest.push(other),
+        }
+    }
+    (kept, rest)
 }
 
 /// Keys under this prefix in our safetensors files hold training state, not weights.

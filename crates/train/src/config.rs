@@ -50,9 +50,11 @@ pub struct TrainingConfig {
     /// continue a run).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub init: Option<PathBuf>,
-    /// With `init`: every parameter must be in the file (`true`), or parameters it lacks keep
-    /// their random initialisation (`false`: e.g. the fusion and guidance modules when the
-    /// paper's model starts from RAFT-Stereo weights). Keys the model lacks are always an error.
+    /// With `init`: every parameter must be in the file with its shape (`true`), or parameters
+    /// it lacks or holds in another shape keep their random initialisation (`false`: e.g. the
+    /// fusion and guidance modules, and the motion encoder's last convolution whose input grows
+    /// with guidance, when the paper's model starts from RAFT-Stereo weights). Keys the model
+    /// lacks are always an error.
     pub init_strict: bool,
 }
 
