@@ -20,7 +20,7 @@ use burn::tensor::Device;
 use clap::{Args, ValueEnum};
 use dgstereo_core::DeviceChoice;
 use dgstereo_costvolume::CorrelationImplementation;
-use dgstereo_data::resize::{resize_plane_linear, resize_rgb};
+use dgstereo_data::resize::{disparity_to_size, fit_scale, resize_rgb};
 use dgstereo_data::{DisparityMap, RgbImage};
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
@@ -280,10 +280,7 @@ impl Engine {
             );
         }
         let (w, h) = (left.width, left.height);
-        let scale = match self.max_size {
-            Some(m) if w.max(h) > m => m as f64 / w.max(h) as f64,
-            _ => 1.0,
-        };
+        let scale = fit_scale(w, h, self.max_size);
         let (l, r) = if scale < 1.0 {
             (resize_rgb(left, scale, scale), resize_rgb(right, scale, scale))
         } else {
@@ -303,16 +300,7 @@ impl Engine {
         let pred = self.model.predict(lt, rt, prior.as_ref(), self.iters, false, Some(corr))?;
         let small = disparity_map(pred.last());
         let info = RunInfo { network_size: (l.width, l.height), corr };
-        if scale >= 1.0 {
-            return Ok((small, info));
-        }
-        let (fx, fy) = (w as f64 / small.width as f64, h as f64 / small.height as f64);
-        let (data, ow, oh) = resize_plane_linear(&small.data, small.width, small.height, fx, fy);
-        if (ow, oh) != (w, h) {
-            bail!("internal: disparity resized to {ow}x{oh} instead of {w}x{h}");
-        }
-        let sx = fx as f32;
-        Ok((DisparityMap { width: w, height: h, data: data.into_iter().map(|d| d * sx).collect() }, info))
+        Ok((disparity_to_size(&small, w, h)?, info))
     }
 }
 

@@ -54,6 +54,7 @@ name = "cones"
 dataset = "folder"
 root = '{}'
 iters = 2
+max_size = 96
 {extra}
 "#,
         benchmark_root.display()

@@ -119,9 +119,49 @@ pub fn resize_mask(m: &Mask, fx: f64, fy: f64) -> Mask {
     Mask { width, height, data }
 }
 
+/// The factor that brings the longer side of `width x height` down to `max_size` pixels (1 when
+/// it fits or there is no limit).
+pub fn fit_scale(width: usize, height: usize, max_size: Option<usize>) -> f64 {
+    match max_size {
+        Some(m) if width.max(height) > m => m as f64 / width.max(height) as f64,
+        _ => 1.0,
+    }
+}
+
+/// A disparity map computed on a downscaled pair, brought back to `width x height`: resized
+/// bilinearly and multiplied by the width ratio (disparity is a horizontal distance).
+pub fn disparity_to_size(small: &DisparityMap, width: usize, height: usize) -> dgstereo_core::Result<DisparityMap> {
+    if (small.width, small.height) == (width, height) {
+        return Ok(small.clone());
+    }
+    let (fx, fy) = (width as f64 / small.width as f64, height as f64 / small.height as f64);
+    let (data, ow, oh) = resize_plane_linear(&small.data, small.width, small.height, fx, fy);
+    if (ow, oh) != (width, height) {
+        return Err(dgstereo_core::Error::Shape(format!(
+            "disparity of {}x{} resized to {ow}x{oh} instead of {width}x{height}",
+            small.width, small.height
+        )));
+    }
+    let sx = fx as f32;
+    Ok(DisparityMap { width, height, data: data.into_iter().map(|d| d * sx).collect() })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn downscaled_disparity_comes_back_at_size_and_scale() {
+        assert_eq!(fit_scale(450, 375, Some(150)), 150.0 / 450.0);
+        assert_eq!(fit_scale(450, 375, Some(500)), 1.0);
+        assert_eq!(fit_scale(450, 375, None), 1.0);
+        let s = fit_scale(450, 375, Some(150));
+        let (w, h) = scaled_size(450, 375, s, s);
+        let small = DisparityMap { width: w, height: h, data: vec![10.0; w * h] };
+        let back = disparity_to_size(&small, 450, 375).unwrap();
+        assert_eq!((back.width, back.height), (450, 375));
+        assert!(back.data.iter().all(|d| (d - 30.0).abs() < 1e-4), "10 px at a third of the width is 30 px");
+    }
 
     #[test]
     fn linear_matches_opencv_half_pixel_formula() {

@@ -123,6 +123,11 @@ pub struct BenchmarkConfig {
     /// Score only the first N samples.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub limit: Option<usize>,
+    /// Downscale pairs whose longer side exceeds this many pixels before the network (the
+    /// disparity is brought back to the full size and scored there): for models trained on a
+    /// smaller disparity range, such as the CPU smoke runs. Not the benchmark's protocol.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_size: Option<usize>,
 }
 
 fn default_iters() -> usize {
@@ -195,7 +200,14 @@ mod tests {
 
     #[test]
     fn table_metrics_follow_the_protocol() {
-        let b = |d| BenchmarkConfig { name: None, dataset: d, root: PathBuf::new(), iters: 32, limit: None };
+        let b = |d| BenchmarkConfig {
+            name: None,
+            dataset: d,
+            root: PathBuf::new(),
+            iters: 32,
+            limit: None,
+            max_size: None,
+        };
         assert_eq!(b(DatasetKind::Middlebury).table_metrics(), vec!["epe", "bad-2"]);
         assert_eq!(b(DatasetKind::Kitti2015).table_metrics()[0], "epe");
         assert_eq!(b(DatasetKind::Folder).table_metrics(), vec!["epe", "bad-2", "bad-3"]);

@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 use burn::tensor::Device;
 use dgstereo_core::{Error, Result};
+use dgstereo_data::resize::{disparity_to_size, fit_scale, resize_disparity, resize_mask, resize_rgb};
 use dgstereo_data::{Dataset, DisparityMap, Mask, Sample};
 use dgstereo_eval::{BenchmarkConfig, Metrics, evaluate_dataset};
 use dgstereo_model::RaftStereo;
@@ -176,7 +177,7 @@ pub fn evaluate_benchmark(
         Arc::new(dataset) as Arc<dyn Dataset>,
         indices,
         benchmark.dataset.protocol(),
-        |sample| predict_sample(&model, parts, &prior, sample, benchmark.iters, device),
+        |sample| predict_sample(&model, parts, &prior, sample, benchmark, device),
         |_| {},
     );
     if let Some(f) = result.failures.first() {
@@ -192,25 +193,40 @@ pub fn evaluate_benchmark(
     Ok(result.table.aggregates().remove(0).all)
 }
 
-/// The disparity of one benchmark sample at its own size.
+/// The disparity of one benchmark sample at its own size (computed at `max_size` if smaller).
 fn predict_sample(
     model: &RaftStereo,
     parts: &TrainParts,
     prior: &Prior,
     sample: &Sample,
-    iters: usize,
+    benchmark: &BenchmarkConfig,
     device: &Device,
 ) -> Result<DisparityMap> {
     let (w, h) = (sample.left.width, sample.left.height);
+    let s = fit_scale(w, h, benchmark.max_size);
     // Without ground truth (only possible for a prior that does not need it) zeros stand in.
     let disparity = sample.disparity.clone().unwrap_or_else(|| DisparityMap::filled(w, h, 0.0));
-    let pair = TrainingPair {
-        name: sample.name.clone(),
-        left: sample.left.clone(),
-        right: sample.right.clone(),
-        disparity_nearest: disparity.clone(),
-        disparity,
-        valid: sample.valid.clone().unwrap_or_else(|| Mask::filled(w, h, false)),
+    let valid = sample.valid.clone().unwrap_or_else(|| Mask::filled(w, h, false));
+    let pair = if s < 1.0 {
+        let (disparity, disparity_nearest) = resize_disparity(&disparity, s, s);
+        TrainingPair {
+            name: sample.name.clone(),
+            left: resize_rgb(&sample.left, s, s),
+            right: resize_rgb(&sample.right, s, s),
+            disparity,
+            disparity_nearest,
+            valid: resize_mask(&valid, s, s),
+        }
+    } else {
+        TrainingPair {
+            name: sample.name.clone(),
+            left: sample.left.clone(),
+            right: sample.right.clone(),
+            disparity_nearest: disparity.clone(),
+            disparity,
+            valid,
+        }
     };
-    predict_pair(model, &parts.model, prior, &pair, iters, device)
+    let small = predict_pair(model, &parts.model, prior, &pair, benchmark.iters, device)?;
+    disparity_to_size(&small, w, h)
 }
