@@ -20,7 +20,7 @@ use dgstereo_data::{DisparityMap, RgbImage, save_rgb, write_disparity};
 
 use crate::calib::Calibration;
 use crate::pointcloud::{PlyEncoding, depth_map, point_cloud, write_ply};
-use crate::visualize::{colorize, display_range};
+use crate::visualize::{colorize, display_range, side_by_side};
 
 /// One kind of output.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -33,6 +33,8 @@ pub enum SaveKind {
     Png16,
     /// Turbo colour picture with a legend.
     Color,
+    /// The left image and the colour picture side by side (a quick look, for reports).
+    Preview,
     /// Depth in metres as PFM (needs calibration).
     Depth,
     /// Coloured point cloud as PLY (needs calibration).
@@ -52,6 +54,7 @@ impl SaveKind {
             SaveKind::Npy => format!("{name}_disparity.npy"),
             SaveKind::Png16 => format!("{name}_disparity_png16.png"),
             SaveKind::Color => format!("{name}_disparity_color.png"),
+            SaveKind::Preview => format!("{name}_preview.png"),
             SaveKind::Depth => format!("{name}_depth.pfm"),
             SaveKind::Ply => format!("{name}_points.ply"),
         }
@@ -95,6 +98,7 @@ pub fn write_outputs(
         match kind {
             SaveKind::Pfm | SaveKind::Npy | SaveKind::Png16 => write_disparity(&path, disp)?,
             SaveKind::Color => save_rgb(&path, &colorize(disp, display_range(disp), true))?,
+            SaveKind::Preview => save_rgb(&path, &side_by_side(&[left, &colorize(disp, display_range(disp), false)]))?,
             SaveKind::Depth | SaveKind::Ply => {
                 let calib = calib.context("depth and point clouds need a calibration: pass --calib FILE")?;
                 let depth = depth.get_or_insert_with(|| depth_map(disp, calib));

@@ -60,6 +60,8 @@ fn check_outputs(out: &Path, name: &str, size: (usize, usize), max_depth: f32, p
     let color = load_rgb(out.join(format!("{name}_disparity_color.png"))).unwrap();
     assert_eq!(color.width, size.0);
     assert!(color.height > size.1, "a legend below the map");
+    let preview = load_rgb(out.join(format!("{name}_preview.png"))).unwrap();
+    assert_eq!((preview.width, preview.height), (2 * size.0, size.1), "left image | colour map");
     let depth = read_disparity(out.join(format!("{name}_depth.pfm"))).unwrap();
     assert_eq!((depth.width, depth.height), size);
     let kept = depth.data.iter().filter(|z| z.is_finite() && **z > 0.0 && **z <= max_depth).count();
@@ -98,7 +100,7 @@ fn oakd_grayscale_pairs_write_every_kind() {
         "-r",
         &format!("{}/*_right.png", data.display()),
         "--save",
-        "pfm,npy,png16,color,depth,ply",
+        "pfm,npy,png16,color,preview,depth,ply",
         "--calib",
         calib.to_str().unwrap(),
         "--max-depth",
@@ -151,7 +153,7 @@ fn cones_pair_with_middlebury_calibration_and_ascii_ply() {
         "-r",
         cones.join("right_rgb.png").to_str().unwrap(),
         "--save",
-        "pfm,npy,png16,color,depth,ply",
+        "pfm,npy,png16,color,preview,depth,ply",
         "--calib",
         calib.to_str().unwrap(),
         "--max-depth",

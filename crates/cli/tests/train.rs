@@ -6,21 +6,11 @@
 //! Compute is kept small: 8-channel trunks, 16-channel GRUs on one level, 32x64 crops, three
 //! steps, two update iterations.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn cones_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/cones")
-}
-
-fn dgstereo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dgstereo")).args(args).output().expect("the dgstereo binary runs")
-}
-
-fn text(o: &Output) -> String {
-    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
-
+use common::{cones_dir, dgstereo, text};
 /// A tiny experiment scored on `benchmark_root`, written into `dir`.
 fn tiny_experiment(dir: &Path, name: &str, benchmark_root: &Path, extra: &str) -> PathBuf {
     let toml = format!(

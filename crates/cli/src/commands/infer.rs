@@ -40,7 +40,8 @@ pub struct InferArgs {
     /// Output folder.
     #[arg(long, default_value = "out/infer")]
     out: PathBuf,
-    /// Outputs, comma-separated: pfm, npy, png16, color, depth, ply.
+    /// Outputs, comma-separated: pfm, npy, png16, color, preview (left image and colour map side
+    /// by side), depth, ply.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "pfm,color")]
     save: Vec<SaveKind>,
     /// Calibration for depth and ply: Middlebury calib.txt, JSON (fx, fy, cx, cy, baseline) or
