@@ -4,22 +4,17 @@
 //! Compute is kept small: one update iteration and images downscaled by `--max-size` (the
 //! disparity is still written at the input size), with the reference random weights.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+use common::{cones_dir, dgstereo};
 use dgstereo_core::shared::shared_dir_for_test;
 use dgstereo_data::{DisparityMap, load_rgb, read_disparity, save_rgb};
 
-fn cones_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/cones")
-}
-
 fn weights(test: &str) -> Option<PathBuf> {
     shared_dir_for_test(test, "golden/raft_stereo_random.pth").map(|s| s.join("golden/raft_stereo_random.pth"))
-}
-
-fn dgstereo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dgstereo")).args(args).output().expect("the dgstereo binary runs")
 }
 
 fn text(o: &Output) -> (String, String) {

@@ -145,19 +145,32 @@ impl AblationTable {
     }
 }
 
-/// Scores the final model of the finished run in `out` on the run's held-out synthetic set.
-pub fn evaluate_finished_run(parts: &TrainParts, out: &Path, device: &Device) -> Result<Metrics> {
-    let weights = out.join("model.safetensors");
+/// The final model of a finished run and its prior provider, loaded once for all its scores
+/// (a Depth Anything V2 provider alone is a ViT checkpoint to read).
+pub struct FinishedRun {
+    model: RaftStereo,
+    prior: Prior,
+}
+
+impl FinishedRun {
+    /// Loads `out/model.safetensors` into the run's model and builds the run's prior.
+    pub fn load(parts: &TrainParts, out: &Path, device: &Device) -> Result<Self> {
+        let weights = out.join("model.safetensors");
+        let model = dgstereo_model::checkpoint::load_safetensors(parts.model.init(device)?, &weights)?;
+        Ok(Self { model, prior: parts.prior.init(device)? })
+    }
+}
+
+/// Scores the final model of a finished run on the run's held-out synthetic set.
+pub fn evaluate_finished_run(parts: &TrainParts, run: &FinishedRun, device: &Device) -> Result<Metrics> {
     let set = ValidationSet::new(&parts.data.validation);
     if set.is_empty() {
         return Err(Error::Config(format!("run '{}': data.validation.count is 0, nothing to evaluate on", parts.name)));
     }
-    let model = dgstereo_model::checkpoint::load_safetensors(parts.model.init(device)?, &weights)?;
-    let prior = parts.prior.init(device)?;
-    set.evaluate(&model, &parts.model, &prior, device)
+    set.evaluate(&run.model, &parts.model, &run.prior, device)
 }
 
-/// Scores the final model of the finished run in `out` on `benchmark` under its protocol.
+/// Scores the final model of a finished run on `benchmark` under its protocol.
 ///
 /// The prior comes from the run's own provider; a simulated prior is simulated from the sample's
 /// ground truth, as in training (an ablation device, not a deployable prior). Returns the
@@ -165,19 +178,16 @@ pub fn evaluate_finished_run(parts: &TrainParts, out: &Path, device: &Device) ->
 /// naming it (a table with silently missing samples would mislead).
 pub fn evaluate_benchmark(
     parts: &TrainParts,
-    out: &Path,
+    run: &FinishedRun,
     benchmark: &BenchmarkConfig,
     device: &Device,
 ) -> Result<Metrics> {
     let (dataset, indices) = benchmark.dataset()?;
-    let model =
-        dgstereo_model::checkpoint::load_safetensors(parts.model.init(device)?, &out.join("model.safetensors"))?;
-    let prior = parts.prior.init(device)?;
     let result = evaluate_dataset(
         Arc::new(dataset) as Arc<dyn Dataset>,
         indices,
         benchmark.dataset.protocol(),
-        |sample| predict_sample(&model, parts, &prior, sample, benchmark, device),
+        |sample| predict_sample(&run.model, parts, &run.prior, sample, benchmark, device),
         |_| {},
     );
     if let Some(f) = result.failures.first() {

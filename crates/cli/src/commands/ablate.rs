@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::Args;
 use dgstereo_core::DeviceChoice;
-use dgstereo_train::ablation::{AblationTable, TABLE_METRICS, evaluate_benchmark, evaluate_finished_run};
+use dgstereo_train::ablation::{AblationTable, FinishedRun, TABLE_METRICS, evaluate_benchmark, evaluate_finished_run};
 use dgstereo_train::run::{checkpoint_dir, is_finished};
 
 use super::train::{folder_name, parts_of, train_one};
@@ -72,14 +72,15 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
                 && !dgstereo_train::checkpoint::list_checkpoints(&checkpoint_dir(&out))?.is_empty();
             train_one(parts.clone(), &out, resume, !a.quiet, &device)?;
         }
-        let metrics = evaluate_finished_run(&parts, &out, &device)?;
+        let finished = FinishedRun::load(&parts, &out, &device)?;
+        let metrics = evaluate_finished_run(&parts, &finished, &device)?;
         println!(
             "{name}: {synthetic} EPE {:.3} px, bad-1 {:.2} %, bad-3 {:.2} %",
             metrics.epe, metrics.bad_1, metrics.bad_3
         );
         let mut scores = vec![(synthetic.clone(), metrics)];
         for b in &benchmarks {
-            let m = evaluate_benchmark(&parts, &out, b, &device)
+            let m = evaluate_benchmark(&parts, &finished, b, &device)
                 .with_context(|| format!("run '{name}': benchmark '{}'", b.label()))?;
             let shown: Vec<String> =
                 b.table_metrics().iter().map(|k| format!("{k} {:.3}", m.get(k).unwrap_or(f64::NAN))).collect();
