@@ -171,3 +171,39 @@ fn bad_experiment_files_name_the_file_and_key() {
     assert!(t.contains("no-such-benchmark") && t.contains("cones"), "{t}");
     assert!(!t.contains("panicked"), "{t}");
 }
+
+#[test]
+fn experiment_samples_writes_the_augmented_training_pairs() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("rich.toml");
+    std::fs::write(
+        &file,
+        r#"name = "rich"
+[train]
+batch_size = 2
+crop = [32, 64]
+[[data.sources]]
+kind = "synthetic"
+width = 96
+height = 48
+textures = "rich"
+"#,
+    )
+    .unwrap();
+    let out = dir.path().join("samples");
+    let o = dgstereo(&["experiment", "samples", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--count", "3"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("step 1, element 0: synthetic/"), "{stdout}");
+    for k in 0..3 {
+        let picture = dgstereo_data::load_rgb(out.join(format!("sample-{k:03}.png"))).unwrap();
+        // Left | right | colour-coded ground truth (with its legend strip below).
+        assert_eq!(picture.width, 3 * 64, "sample {k}");
+        assert!(picture.height >= 32, "sample {k}");
+    }
+    // A misspelt texture preset is named with its key.
+    std::fs::write(&file, std::fs::read_to_string(&file).unwrap().replace("\"rich\"", "\"fancy\"")).unwrap();
+    let o = dgstereo(&["experiment", "samples", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("textures"), "{}", text(&o));
+}

@@ -3,7 +3,9 @@
 //! Design decision: the production code takes an optional [`StageClock`] and wraps each stage in
 //! [`timed`]; with `None` it runs the stage and nothing else. The CPU backend executes every
 //! operation eagerly, so the time a closure takes is the time of its stage. A stage that runs
-//! several times (the update iterations) accumulates its seconds and counts its calls.
+//! several times (the update iterations) accumulates its seconds and counts its calls. A GPU
+//! backend queues operations and returns at once, so a clock made with [`StageClock::synced`]
+//! waits for the device before and after each stage: slower, but each stage's time is its own.
 
 use std::time::Instant;
 
@@ -22,6 +24,7 @@ pub struct StageSeconds {
 #[derive(Debug, Clone, Default)]
 pub struct StageClock {
     stages: Vec<StageSeconds>,
+    sync: Option<burn::tensor::Device>,
 }
 
 impl StageClock {
@@ -30,10 +33,25 @@ impl StageClock {
         Self::default()
     }
 
+    /// A clock that waits for `device` to finish its queued work before and after each stage
+    /// (needed on a GPU, harmless on the CPU).
+    pub fn synced(device: burn::tensor::Device) -> Self {
+        Self { stages: Vec::new(), sync: Some(device) }
+    }
+
+    fn wait(&self) {
+        if let Some(d) = &self.sync {
+            // A failed sync surfaces again at the next read of a result; timing needs no error.
+            let _ = d.sync();
+        }
+    }
+
     /// Runs `f`, adding its wall-clock time to stage `name`.
     pub fn time<T>(&mut self, name: &'static str, f: impl FnOnce() -> T) -> T {
+        self.wait();
         let start = Instant::now();
         let out = f();
+        self.wait();
         let seconds = start.elapsed().as_secs_f64();
         match self.stages.iter_mut().find(|s| s.name == name) {
             Some(s) => {

@@ -79,7 +79,7 @@ pub fn profile_forward(
         return Err(Error::Config("iterations must be at least 1".into()));
     }
     let macs = StageMacs::new(config, [h, w]);
-    let mut clock = StageClock::new();
+    let mut clock = StageClock::synced(left.device());
     let out =
         model.forward_flow(left, right, prior, iters, ForwardOptions { clock: Some(&mut clock), ..Default::default() });
     // MACs per call of each counted stage; the encoders and the build run once per pass.

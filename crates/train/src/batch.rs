@@ -135,8 +135,10 @@ impl TrainingData {
             match dataset(s, i)? {
                 Some((name, dataset)) => sources.push(Source::Files { name, dataset }),
                 None => {
-                    let DataSource::Synthetic { width, height, max_disparity, count, .. } = s else { unreachable!() };
-                    let mut config = SyntheticConfig::with_size(*width, *height);
+                    let DataSource::Synthetic { width, height, max_disparity, count, textures, .. } = s else {
+                        unreachable!()
+                    };
+                    let mut config = SyntheticConfig::with_size(*width, *height).with_textures(*textures);
                     if let Some(m) = max_disparity {
                         config.max_disparity = *m;
                     }

@@ -6,6 +6,7 @@
 use std::path::PathBuf;
 
 use dgstereo_core::{Error, Result};
+use dgstereo_data::synthetic::TexturePreset;
 use serde::{Deserialize, Serialize};
 
 /// The recipe of RAFT-Stereo and the paper; every value a key of the `[train]` table.
@@ -140,6 +141,7 @@ impl TrainingConfig {
 /// weight = 1.0           # share of the batch elements drawn from this source
 /// width = 640
 /// height = 384
+/// textures = "smooth"    # or "rich": dead-leaves shapes, flat and low-contrast surfaces, shading
 /// [data.validation]
 /// count = 8              # held-out synthetic pairs (scene seeds 2^40 + i; training draws other seeds)
 /// ```
@@ -233,6 +235,11 @@ pub enum DataSource {
         /// A fixed set of this many scenes; unlimited (a new scene per draw) when absent.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         count: Option<usize>,
+        /// Texture mix: `"smooth"` (default: full-contrast gratings on every surface, the original
+        /// generator) or `"rich"` (adds dead-leaves shapes with sharp edges, flat and low-contrast
+        /// surfaces, and shading; `SyntheticConfig::rich` of the data crate).
+        #[serde(default, skip_serializing_if = "is_smooth", deserialize_with = "texture_preset")]
+        textures: TexturePreset,
     },
     /// SceneFlow (`root` holds `frames_*pass` and `disparity`).
     Sceneflow {
@@ -285,6 +292,19 @@ pub enum DataSource {
     },
 }
 
+fn is_smooth(t: &TexturePreset) -> bool {
+    *t == TexturePreset::Smooth
+}
+
+/// Reads `textures`, naming the key in the error (an internally tagged enum's errors otherwise
+/// only point at the table).
+fn texture_preset<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<TexturePreset, D::Error> {
+    use serde::de::{Error as _, IntoDeserializer, value};
+    let name = String::deserialize(d).map_err(|e| D::Error::custom(format!("textures: {e}")))?;
+    TexturePreset::deserialize(IntoDeserializer::<value::Error>::into_deserializer(name.as_str()))
+        .map_err(|e| D::Error::custom(format!("textures = \"{name}\": {e}")))
+}
+
 fn default_subset() -> String {
     "flyingthings".into()
 }
@@ -303,6 +323,7 @@ impl Default for DataSource {
             height: default_height(),
             max_disparity: None,
             count: None,
+            textures: TexturePreset::Smooth,
         }
     }
 }
@@ -335,10 +356,14 @@ pub struct ValidationConfig {
     pub seed: u64,
     /// Update iterations at validation (`valid_iters`).
     pub iters: usize,
+    /// Texture mix of the pairs, as a synthetic source's `textures` (default `"smooth"`, which
+    /// keeps validation numbers comparable with earlier runs).
+    #[serde(skip_serializing_if = "is_smooth", deserialize_with = "texture_preset")]
+    pub textures: TexturePreset,
 }
 
 impl Default for ValidationConfig {
     fn default() -> Self {
-        Self { count: 8, width: 640, height: 384, seed: 1 << 40, iters: 32 }
+        Self { count: 8, width: 640, height: 384, seed: 1 << 40, iters: 32, textures: TexturePreset::Smooth }
     }
 }

@@ -21,7 +21,7 @@ pub struct ValidationSet {
 impl ValidationSet {
     /// Renders `config.count` synthetic pairs (scene seeds `seed .. seed + count`).
     pub fn new(config: &ValidationConfig) -> Self {
-        let synth = SyntheticConfig::with_size(config.width, config.height);
+        let synth = SyntheticConfig::with_size(config.width, config.height).with_textures(config.textures);
         let pairs = (0..config.count as u64)
             .map(|i| {
                 let seed = config.seed.wrapping_add(i);

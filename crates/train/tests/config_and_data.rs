@@ -2,6 +2,7 @@
 
 mod common;
 
+use dgstereo_data::synthetic::TexturePreset;
 use dgstereo_train::batch::TrainingData;
 use dgstereo_train::{DataSource, TrainingConfig, TrainingDataConfig};
 
@@ -56,8 +57,14 @@ fn batches_depend_only_on_seed_and_step() {
 fn augmented_batches_have_the_crop_size_and_both_targets() {
     let mut parts = common::tiny_parts(10, 1, 1e-3, None, 2);
     parts.data.augment = true;
-    parts.data.sources =
-        vec![DataSource::Synthetic { weight: 1.0, width: 96, height: 64, max_disparity: None, count: None }];
+    parts.data.sources = vec![DataSource::Synthetic {
+        weight: 1.0,
+        width: 96,
+        height: 64,
+        max_disparity: None,
+        count: None,
+        textures: Default::default(),
+    }];
     let data = TrainingData::new(&parts.data, &parts.train).unwrap();
     let pairs = data.batch(3, 2).unwrap();
     for p in &pairs {
@@ -65,4 +72,47 @@ fn augmented_batches_have_the_crop_size_and_both_targets() {
         assert_eq!((p.disparity_nearest.height, p.disparity_nearest.width), (32, 64));
         assert!(p.valid.count() > 0);
     }
+}
+
+#[test]
+fn synthetic_textures_key_selects_the_preset_and_rejects_unknown_values() {
+    let parse = |extra: &str| {
+        toml::from_str::<TrainingDataConfig>(&format!("[[sources]]\nkind = \"synthetic\"\nwidth = 48\n{extra}"))
+    };
+    let textures = |d: &TrainingDataConfig| match &d.sources[0] {
+        DataSource::Synthetic { textures, .. } => *textures,
+        other => panic!("{other:?}"),
+    };
+    let smooth = parse("").unwrap();
+    assert_eq!(textures(&smooth), TexturePreset::Smooth);
+    assert_eq!(textures(&parse("textures = \"smooth\"").unwrap()), TexturePreset::Smooth);
+    let rich = parse("textures = \"rich\"").unwrap();
+    assert_eq!(textures(&rich), TexturePreset::Rich);
+    // Written back, the key round-trips (and stays absent for the default).
+    assert!(!toml::to_string(&smooth).unwrap().contains("textures"));
+    assert_eq!(toml::from_str::<TrainingDataConfig>(&toml::to_string(&rich).unwrap()).unwrap(), rich);
+    let e = parse("textures = \"fancy\"").unwrap_err().to_string();
+    assert!(e.contains("textures") && e.contains("fancy") && e.contains("rich"), "{e}");
+    let e = parse("textures = 3").unwrap_err().to_string();
+    assert!(e.contains("textures"), "{e}");
+    // The validation set takes the same key.
+    let v = toml::from_str::<TrainingDataConfig>("[validation]\ntextures = \"rich\"").unwrap();
+    assert_eq!(v.validation.textures, TexturePreset::Rich);
+    assert_eq!(toml::from_str::<TrainingDataConfig>("").unwrap().validation.textures, TexturePreset::Smooth);
+    let e = toml::from_str::<TrainingDataConfig>("[validation]\ntextures = \"rough\"").unwrap_err().to_string();
+    assert!(e.contains("textures") && e.contains("rough"), "{e}");
+
+    // The rich source renders the same scenes (same disparity) with other colours.
+    let mut parts = common::tiny_parts(10, 1, 1e-3, None, 2);
+    let smooth_data = TrainingData::new(&parts.data, &parts.train).unwrap();
+    let DataSource::Synthetic { textures, .. } = &mut parts.data.sources[0] else { unreachable!() };
+    *textures = TexturePreset::Rich;
+    let rich_data = TrainingData::new(&parts.data, &parts.train).unwrap();
+    let (mut differ, mut same_disparity) = (false, true);
+    for step in 0..3 {
+        let (a, b) = (smooth_data.pair(step, 0).unwrap(), rich_data.pair(step, 0).unwrap());
+        same_disparity &= a.disparity == b.disparity;
+        differ |= a.left != b.left;
+    }
+    assert!(same_disparity && differ);
 }

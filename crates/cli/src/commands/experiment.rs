@@ -3,12 +3,17 @@
 //! `check` resolves and validates each file (bases, sweeps, defaults), then builds every run's
 //! model, counts its trainable parameters and runs one forward pass on a small synthetic pair.
 //! It prints one line per run and exits with status 1 when any file or run fails; a failing file
-//! does not stop the others from being checked.
+//! does not stop the others from being checked. `samples` writes the training pairs a run draws
+//! (after augmentation, exactly as the trainer sees them) as pictures, to look at the data before
+//! spending hours on it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use anyhow::Context;
 use clap::Subcommand;
+
+use crate::visualize::{colorize, display_range, side_by_side};
 
 /// Experiment-file tools.
 #[derive(Subcommand)]
@@ -28,6 +33,17 @@ pub enum ExperimentCommand {
         #[arg(long)]
         show: bool,
     },
+    /// Writes training pairs as the trainer draws them: left | right | ground truth, one PNG each.
+    Samples {
+        /// Experiment file (its first run when the file sweeps).
+        file: PathBuf,
+        /// Output folder.
+        #[arg(long, default_value = "out/samples")]
+        out: PathBuf,
+        /// How many pairs: the batch elements of the first steps, in training order.
+        #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u16).range(1..))]
+        count: u16,
+    },
 }
 
 fn parse_size(text: &str) -> Result<[usize; 2], String> {
@@ -42,7 +58,30 @@ fn parse_size(text: &str) -> Result<[usize; 2], String> {
 pub fn run(command: ExperimentCommand) -> anyhow::Result<ExitCode> {
     match command {
         ExperimentCommand::Check { files, size, iters, show } => check(&files, size, iters as usize, show),
+        ExperimentCommand::Samples { file, out, count } => samples(&file, &out, count as usize),
     }
+}
+
+fn samples(file: &Path, out: &Path, count: usize) -> anyhow::Result<ExitCode> {
+    let run = dgstereo_experiment::load(file)?
+        .into_iter()
+        .next()
+        .ok_or_else(|| anyhow::anyhow!("{}: the file defines no run", file.display()))?;
+    let (data_config, train) = (&run.config.data, &run.config.train);
+    let data = dgstereo_train::batch::TrainingData::new(data_config, train)
+        .with_context(|| format!("{}: training data", file.display()))?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let batch = train.batch_size.max(1);
+    for k in 0..count {
+        let (step, element) = (k / batch, k % batch);
+        let pair = data.pair(step, element).with_context(|| format!("{}: pair {k}", file.display()))?;
+        let truth = colorize(&pair.disparity, display_range(&pair.disparity), true);
+        let picture = side_by_side(&[&pair.left, &pair.right, &truth]);
+        let path = out.join(format!("sample-{k:03}.png"));
+        dgstereo_data::image::save_rgb(&path, &picture)?;
+        println!("{}  step {step}, element {element}: {}", path.display(), pair.name);
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool) -> anyhow::Result<ExitCode> {

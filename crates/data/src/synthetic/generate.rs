@@ -1,4 +1,5 @@
-//! Random scene generation: how many surfaces, of which kinds, where, at which disparity.
+//! Random scene generation: how many surfaces, of which kinds, where, at which disparity, and
+//! the generator's settings ([`SyntheticConfig`], with the [`TexturePreset`]s).
 
 use std::f64::consts::PI;
 
@@ -7,7 +8,8 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::SyntheticScene;
-use super::surface::{DisparityField, Grating, Outline, Surface, Texture};
+use super::random_texture::{smooth_texture, styled_texture};
+use super::surface::{DisparityField, Outline, Surface};
 
 /// Parameters of the synthetic scene generator.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -32,6 +34,33 @@ pub struct SyntheticConfig {
     pub min_wavelength: f64,
     /// Longest texture wavelength in pixels.
     pub max_wavelength: f64,
+    /// Probabilities of the foreground texture kinds gratings, dead leaves, flat, low contrast
+    /// (normalised; see [`super::TextureKind`]). Default: gratings only.
+    #[serde(default = "gratings_only")]
+    pub texture_weights: [f64; 4],
+    /// The same for the background.
+    #[serde(default = "gratings_only")]
+    pub background_texture_weights: [f64; 4],
+    /// Probability that a surface gets a smooth brightness gain ([`super::Shading`]). Default 0.
+    #[serde(default)]
+    pub shading_prob: f64,
+}
+
+fn gratings_only() -> [f64; 4] {
+    [1.0, 0.0, 0.0, 0.0]
+}
+
+/// A named texture mix for [`SyntheticConfig::with_textures`] (the `textures` key of a training
+/// source).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TexturePreset {
+    /// Full-contrast gratings and noise on every surface, no shading: the original generator.
+    #[default]
+    Smooth,
+    /// Foreground 35 % gratings, 35 % dead leaves, 15 % flat, 15 % low contrast; background
+    /// 25 %, 35 %, 20 %, 20 %; half the surfaces shaded.
+    Rich,
 }
 
 impl Default for SyntheticConfig {
@@ -47,6 +76,9 @@ impl Default for SyntheticConfig {
             kind_weights: [0.3, 0.3, 0.2, 0.2],
             min_wavelength: 4.0,
             max_wavelength: 64.0,
+            texture_weights: gratings_only(),
+            background_texture_weights: gratings_only(),
+            shading_prob: 0.0,
         }
     }
 }
@@ -57,31 +89,28 @@ impl SyntheticConfig {
     pub fn with_size(width: usize, height: usize) -> Self {
         Self { width, height, max_disparity: (0.15 * width as f64).max(4.0), ..Self::default() }
     }
-}
 
-fn texture(rng: &mut ChaCha8Rng, cfg: &SyntheticConfig) -> Texture {
-    let base = [rng.gen_range(40.0..215.0), rng.gen_range(40.0..215.0), rng.gen_range(40.0..215.0)];
-    let (lo, hi) = (cfg.min_wavelength.max(2.0).ln(), cfg.max_wavelength.max(cfg.min_wavelength.max(2.0)).ln());
-    let n = rng.gen_range(2..=4);
-    let gratings = (0..n)
-        .map(|_| {
-            let wl = if hi > lo { rng.gen_range(lo..=hi).exp() } else { lo.exp() };
-            let t: f64 = rng.gen_range(0.0..PI);
-            let f = 2.0 * PI / wl;
-            let a: f64 = rng.gen_range(8.0..40.0);
-            let tint = [rng.gen_range(0.5..1.0), rng.gen_range(0.5..1.0), rng.gen_range(0.5..1.0)];
-            Grating { k: [f * t.cos(), f * t.sin()], phase: rng.gen_range(0.0..2.0 * PI), amp: tint.map(|c| a * c) }
-        })
-        .collect();
-    let wl_min = cfg.min_wavelength.max(2.0);
-    let noise_cell = rng.gen_range(wl_min..=cfg.max_wavelength.max(wl_min)) * 0.5 + wl_min * 0.5;
-    let na: f64 = rng.gen_range(10.0..40.0);
-    Texture {
-        base,
-        gratings,
-        noise_cell,
-        noise_amp: [na, na * rng.gen_range(0.5..1.0), na * rng.gen_range(0.5..1.0)],
-        noise_seed: rng.r#gen(),
+    /// [`Self::with_size`] with the [`TexturePreset::Rich`] texture mix.
+    pub fn rich(width: usize, height: usize) -> Self {
+        Self::with_size(width, height).with_textures(TexturePreset::Rich)
+    }
+
+    /// This configuration with the texture mix (weights and shading) of `preset`.
+    pub fn with_textures(self, preset: TexturePreset) -> Self {
+        match preset {
+            TexturePreset::Smooth => Self {
+                texture_weights: gratings_only(),
+                background_texture_weights: gratings_only(),
+                shading_prob: 0.0,
+                ..self
+            },
+            TexturePreset::Rich => Self {
+                texture_weights: [0.35, 0.35, 0.15, 0.15],
+                background_texture_weights: [0.25, 0.35, 0.2, 0.2],
+                shading_prob: 0.5,
+                ..self
+            },
+        }
     }
 }
 
@@ -93,6 +122,9 @@ fn angle(rng: &mut ChaCha8Rng) -> (f64, f64) {
 /// A random scene; see [`SyntheticScene::random`].
 pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    // Texture kinds and their parameters come from another stream of the same seed.
+    let mut style = ChaCha8Rng::seed_from_u64(seed);
+    style.set_stream(1);
     let (w, h) = (cfg.width as f64, cfg.height as f64);
     let (dmin, dmax) = (cfg.min_disparity, cfg.max_disparity.max(cfg.min_disparity + 1.0));
     let range = dmax - dmin;
@@ -107,11 +139,10 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
     let corners = [(-dmax, 0.0), (w + dmax, 0.0), (-dmax, h), (w + dmax, h)];
     let low = corners.iter().map(|(x, y)| a * x + b * y).fold(f64::INFINITY, f64::min);
     let c = dmin - low + rng.gen_range(0.0..=0.05 * range);
-    let background = Surface::new(
-        Outline::Everything,
-        DisparityField { c, a, b, kx: 0.0, ky: 0.0, x0: 0.0, y0: 0.0 },
-        texture(&mut rng, cfg),
-    );
+    let smooth = smooth_texture(&mut rng, cfg);
+    let texture = styled_texture(&mut style, cfg, smooth, &cfg.background_texture_weights, [0.0, w, 0.0, h]);
+    let background =
+        Surface::new(Outline::Everything, DisparityField { c, a, b, kx: 0.0, ky: 0.0, x0: 0.0, y0: 0.0 }, texture);
     let mut surfaces = vec![background];
 
     let n = if cfg.max_surfaces > cfg.min_surfaces {
@@ -188,7 +219,9 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
             ky = rng.gen_range(-1.0..=1.0) * kmax_y;
         }
         let field = DisparityField { c, a, b, kx, ky, x0: (bb[0] + bb[1]) / 2.0, y0: (bb[2] + bb[3]) / 2.0 };
-        surfaces.push(Surface::new(outline, field, texture(&mut rng, cfg)));
+        let smooth = smooth_texture(&mut rng, cfg);
+        let texture = styled_texture(&mut style, cfg, smooth, &cfg.texture_weights, bb);
+        surfaces.push(Surface::new(outline, field, texture));
     }
     SyntheticScene { width: cfg.width, height: cfg.height, surfaces }
 }

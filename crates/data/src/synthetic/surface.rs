@@ -1,6 +1,8 @@
 //! Surfaces of a synthetic scene: an outline, a disparity field and a texture, all expressed in
 //! left-view pixel coordinates (pixel `(i, j)` has its centre at `x = i, y = j`).
 
+use super::texture::SurfaceTexture;
+
 /// The outline of a surface in the left view.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Outline {
@@ -156,79 +158,6 @@ impl DisparityField {
     }
 }
 
-/// One sinusoidal grating of a texture.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Grating {
-    /// Spatial frequency vector (radians per pixel) along x and y.
-    pub k: [f64; 2],
-    /// Phase.
-    pub phase: f64,
-    /// Amplitude per channel.
-    pub amp: [f64; 3],
-}
-
-/// A smooth colour texture: a base colour, sinusoidal gratings and smooth value noise.
-///
-/// Every component is band-limited (wavelengths at least a few pixels), so the texture is well
-/// approximated by linear interpolation between pixel centres.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Texture {
-    /// Base colour, 0..255.
-    pub base: [f64; 3],
-    /// Gratings added to the base.
-    pub gratings: Vec<Grating>,
-    /// Noise lattice spacing in pixels (0 = no noise).
-    pub noise_cell: f64,
-    /// Noise amplitude per channel.
-    pub noise_amp: [f64; 3],
-    /// Noise hash seed.
-    pub noise_seed: u64,
-}
-
-impl Texture {
-    /// The colour at left-view point `(x, y)`, clamped to 0..255.
-    pub fn at(&self, x: f64, y: f64) -> [f32; 3] {
-        let mut c = self.base;
-        for g in &self.gratings {
-            let s = (g.k[0] * x + g.k[1] * y + g.phase).sin();
-            for (ch, a) in c.iter_mut().zip(g.amp) {
-                *ch += a * s;
-            }
-        }
-        if self.noise_cell > 0.0 {
-            for (i, ch) in c.iter_mut().enumerate() {
-                *ch += self.noise_amp[i]
-                    * value_noise(x / self.noise_cell, y / self.noise_cell, self.noise_seed ^ (i as u64 * 0x9e37));
-            }
-        }
-        [c[0].clamp(0.0, 255.0) as f32, c[1].clamp(0.0, 255.0) as f32, c[2].clamp(0.0, 255.0) as f32]
-    }
-}
-
-fn hash2(ix: i64, iy: i64, seed: u64) -> f64 {
-    let mut z =
-        seed ^ (ix as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (iy as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^= z >> 31;
-    (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-}
-
-/// Smooth value noise in `[-1, 1]` on a unit lattice, with smoothstep blending.
-fn value_noise(x: f64, y: f64, seed: u64) -> f64 {
-    let (fx, fy) = (x.floor(), y.floor());
-    let (tx, ty) = (x - fx, y - fy);
-    let (sx, sy) = (tx * tx * (3.0 - 2.0 * tx), ty * ty * (3.0 - 2.0 * ty));
-    let (ix, iy) = (fx as i64, fy as i64);
-    let v00 = hash2(ix, iy, seed);
-    let v10 = hash2(ix + 1, iy, seed);
-    let v01 = hash2(ix, iy + 1, seed);
-    let v11 = hash2(ix + 1, iy + 1, seed);
-    let top = v00 + (v10 - v00) * sx;
-    let bot = v01 + (v11 - v01) * sx;
-    top + (bot - top) * sy
-}
-
 /// A surface of the scene.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Surface {
@@ -236,8 +165,8 @@ pub struct Surface {
     pub outline: Outline,
     /// Its disparity.
     pub field: DisparityField,
-    /// Its colour.
-    pub texture: Texture,
+    /// Its colour, a function of the left-view point.
+    pub texture: SurfaceTexture,
     /// Left-view box `[x0, x1, y0, y1]` of the outline.
     pub bounds: [f64; 4],
     /// Bounds `[min, max]` of the disparity over `bounds` (with a margin).
@@ -245,8 +174,10 @@ pub struct Surface {
 }
 
 impl Surface {
-    /// A surface, computing its bounds.
-    pub fn new(outline: Outline, field: DisparityField, texture: Texture) -> Self {
+    /// A surface, computing its bounds (a plain [`super::Texture`] converts into a
+    /// [`SurfaceTexture`] without shading).
+    pub fn new(outline: Outline, field: DisparityField, texture: impl Into<SurfaceTexture>) -> Self {
+        let texture = texture.into();
         let bounds = outline.bounds();
         let disparity_bounds = if bounds[0].is_finite() {
             let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);

@@ -41,6 +41,7 @@ pub fn tiny_parts(steps: usize, iters: usize, lr: f64, count: Option<usize>, bat
             height: SIZE[0],
             max_disparity: Some(5.0),
             count,
+            textures: Default::default(),
         }],
         augment: false,
         validation: ValidationConfig { count: 0, ..ValidationConfig::default() },
