@@ -191,7 +191,8 @@ textures = "rich"
     )
     .unwrap();
     let out = dir.path().join("samples");
-    let o = dgstereo(&["experiment", "samples", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--count", "3"]);
+    let o =
+        dgstereo(&["experiment", "samples", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--count", "3"]);
     assert!(o.status.success(), "{}", text(&o));
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("step 1, element 0: synthetic/"), "{stdout}");

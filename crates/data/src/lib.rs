@@ -8,7 +8,8 @@
 //! ([`datasets`]) only list files ([`SampleFiles`]); a [`FileDataset`] reads them on demand and a
 //! [`PrefetchLoader`] reads ahead on rayon's pool. The [`synthetic`] generator renders exact
 //! stereo scenes by ray casting disparity-linear surfaces, and [`mod@augment`] reproduces the dense
-//! FlowAugmentor, resizing disparity both bilinearly and by nearest neighbour.
+//! FlowAugmentor, resizing disparity both bilinearly and by nearest neighbour, and the sparse
+//! one ([`augment_sparse`]) that moves the valid points of real ground truth instead.
 #![deny(missing_docs)]
 
 pub mod augment;
@@ -23,7 +24,7 @@ pub mod resize;
 pub mod synthetic;
 pub mod text;
 
-pub use augment::{AugmentConfig, AugmentedSample, augment};
+pub use augment::{AugmentConfig, AugmentedSample, augment, augment_sparse};
 pub use datasets::{Dataset, FileDataset, Sample, SampleFiles, SyntheticDataset, ValidRule};
 pub use disparity_io::{DisparityFormat, read_disparity, write_disparity};
 pub use image::{DisparityMap, Mask, RgbImage, load_mask, load_rgb, save_mask, save_rgb};

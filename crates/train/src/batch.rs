@@ -51,7 +51,7 @@ pub struct TrainingPair {
 
 enum Source {
     Synthetic { config: SyntheticConfig, count: Option<usize>, base_seed: u64 },
-    Files { name: String, dataset: FileDataset },
+    Files { name: String, dataset: FileDataset, sparse: bool },
 }
 
 /// The configured training sources, ready to draw pairs from.
@@ -133,7 +133,7 @@ impl TrainingData {
         let mut sources = Vec::new();
         for (i, s) in data.sources.iter().enumerate() {
             match dataset(s, i)? {
-                Some((name, dataset)) => sources.push(Source::Files { name, dataset }),
+                Some((name, dataset)) => sources.push(Source::Files { name, dataset, sparse: s.sparse_ground_truth() }),
                 None => {
                     let DataSource::Synthetic { width, height, max_disparity, count, textures, .. } = s else {
                         unreachable!()
@@ -167,6 +167,7 @@ impl TrainingData {
         let total = *self.cumulative.last().expect("at least one source");
         let u = rng.gen_range(0.0..total);
         let which = self.cumulative.iter().position(|&c| u < c).unwrap_or(self.sources.len() - 1);
+        let sparse = matches!(self.sources[which], Source::Files { sparse: true, .. });
         let (name, left, right, disparity, valid) = match &self.sources[which] {
             Source::Synthetic { config, count, base_seed } => {
                 let scene = match count {
@@ -176,7 +177,7 @@ impl TrainingData {
                 let s = synthetic::generate(config, scene);
                 (format!("synthetic/{scene}"), s.left, s.right, s.disparity, s.valid)
             }
-            Source::Files { name, dataset } => {
+            Source::Files { name, dataset, .. } => {
                 let index = rng.gen_range(0..dataset.len());
                 let s = dataset.get(index)?;
                 let (Some(d), Some(v)) = (s.disparity, s.valid) else {
@@ -189,7 +190,8 @@ impl TrainingData {
         let [ch, cw] = self.crop;
         match &self.augment {
             Some(cfg) => {
-                let a = dgstereo_data::augment(cfg, &left, &right, &disparity, Some(&valid), aug_seed)
+                let augment = if sparse { dgstereo_data::augment_sparse } else { dgstereo_data::augment };
+                let a = augment(cfg, &left, &right, &disparity, Some(&valid), aug_seed)
                     .map_err(|e| Error::Other(format!("{name}: {e}")))?;
                 Ok(TrainingPair {
                     name,

@@ -289,6 +289,9 @@ pub enum DataSource {
         weight: f64,
         /// The folder.
         root: PathBuf,
+        /// Ground truth with holes (LiDAR, KITTI-style PNGs): augment with the sparse augmentor.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        sparse: bool,
     },
 }
 
@@ -313,6 +316,19 @@ fn default_pass() -> String {
 }
 fn default_kitti() -> u32 {
     2015
+}
+
+impl DataSource {
+    /// Whether the ground truth has holes, so augmentation must move valid points rather than
+    /// interpolate (RAFT-Stereo's `sparse=True` sets: KITTI, ETH3D, Middlebury; a folder when it
+    /// says so).
+    pub fn sparse_ground_truth(&self) -> bool {
+        match self {
+            Self::Synthetic { .. } | Self::Sceneflow { .. } => false,
+            Self::Middlebury { .. } | Self::Eth3d { .. } | Self::Kitti { .. } => true,
+            Self::Folder { sparse, .. } => *sparse,
+        }
+    }
 }
 
 impl Default for DataSource {

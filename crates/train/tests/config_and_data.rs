@@ -29,7 +29,7 @@ fn unknown_keys_and_bad_values_are_named() {
     let e = TrainingConfig { clip: -1.0, ..TrainingConfig::default() }.validate().unwrap_err().to_string();
     assert!(e.contains("train.clip"), "{e}");
     let d = TrainingDataConfig {
-        sources: vec![DataSource::Folder { weight: 1.0, root: "/no/such/folder".into() }],
+        sources: vec![DataSource::Folder { weight: 1.0, root: "/no/such/folder".into(), sparse: false }],
         ..TrainingDataConfig::default()
     };
     let e = TrainingData::new(&d, &TrainingConfig::default()).err().unwrap().to_string();
@@ -115,4 +115,52 @@ fn synthetic_textures_key_selects_the_preset_and_rejects_unknown_values() {
         differ |= a.left != b.left;
     }
     assert!(same_disparity && differ);
+}
+
+/// A folder source marked `sparse` goes through the sparse augmentor: every supervised pixel
+/// holds a scaled ground-truth value, never one blended with the holes (0 in KITTI files).
+#[test]
+fn sparse_folder_sources_move_ground_truth_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (160, 96);
+    let mut img = dgstereo_data::RgbImage::new(w, h);
+    let mut disp = dgstereo_data::DisparityMap { width: w, height: h, data: vec![0.0; w * h] };
+    for y in 0..h {
+        for x in 0..w {
+            img.set(x, y, [(x * 7 % 255) as f32, (y * 5 % 255) as f32, 90.0]);
+            if x % 3 == 0 && y % 2 == 0 {
+                disp.data[y * w + x] = 8.0 + (x / 16) as f32;
+            }
+        }
+    }
+    dgstereo_data::save_rgb(dir.path().join("a_left.png"), &img).unwrap();
+    dgstereo_data::save_rgb(dir.path().join("a_right.png"), &img).unwrap();
+    dgstereo_data::kitti_png::write_kitti_png(dir.path().join("a_disp.png"), &disp).unwrap();
+    let values: Vec<f32> = disp.data.iter().copied().filter(|d| *d > 0.0).collect();
+    let train = TrainingConfig { crop: [48, 64], ..TrainingConfig::default() };
+    let blended = |sparse: bool| {
+        let data = TrainingDataConfig {
+            sources: vec![DataSource::Folder { weight: 1.0, root: dir.path().into(), sparse }],
+            ..TrainingDataConfig::default()
+        };
+        let data = TrainingData::new(&data, &train).unwrap();
+        (0..8)
+            .map(|step| {
+                let p = data.pair(step, 0).unwrap();
+                assert_eq!((p.disparity.width, p.disparity.height), (64, 48));
+                // The scale is drawn per pair; supervised values are ground-truth values times
+                // one factor, so their ratios must be ratios of ground-truth values.
+                let supervised: Vec<f32> =
+                    p.disparity.data.iter().zip(&p.valid.data).filter(|(_, ok)| **ok).map(|(d, _)| *d).collect();
+                let Some(&first) = supervised.first() else { return 0 };
+                let distinct_ratio = supervised.iter().any(|d| {
+                    let k = d / first;
+                    !values.iter().any(|v| values.iter().any(|u| (u / v - k).abs() < 1e-4))
+                });
+                usize::from(distinct_ratio)
+            })
+            .sum::<usize>()
+    };
+    assert_eq!(blended(true), 0, "the sparse augmentor supervises only moved ground-truth points");
+    assert!(blended(false) > 0, "the dense augmentor interpolates into the holes");
 }

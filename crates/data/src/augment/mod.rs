@@ -1,4 +1,5 @@
-//! RAFT-Stereo's dense `FlowAugmentor` (SceneFlow training), deterministic per seed.
+//! RAFT-Stereo's dense `FlowAugmentor` (SceneFlow training), deterministic per seed; the sparse
+//! one for real data sets with holes in their ground truth is in [`sparse`].
 //!
 //! Order, as in `core/utils/augmentor.py`: colour → eraser → spatial → crop.
 //! - **Colour** ([`color`]): `ColorJitter(brightness, contrast, saturation_range, hue)` then
@@ -17,6 +18,9 @@
 //!   `y0 + randint(-2, 2)`; otherwise `y0 ∈ [0, H - ch]`, `x0 ∈ [0, W - cw]`.
 
 pub mod color;
+pub mod sparse;
+
+pub use sparse::{augment_sparse, resize_sparse_disparity};
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
