@@ -95,6 +95,32 @@ fn correlation(c: &mut Criterion) {
     group.finish();
 }
 
+/// The host convolution kernel against burn's on the largest convolutions of a pass: the
+/// GRU-1/4 candidate (384 -> 128 channels at the 1/4 grid) and a feature-encoder layer1
+/// convolution (64 -> 64 at 1/2 resolution).
+fn convolution(c: &mut Criterion) {
+    use burn::tensor::module::conv2d;
+    use burn::tensor::ops::ConvOptions;
+    use dgstereo_core::host_conv::conv2d_host;
+    let mut group = c.benchmark_group("convolution");
+    group.sample_size(10);
+    let [h, w] = SIZES[0].0;
+    for (cin, cout, [ch, cw], name) in
+        [(384, 128, [h / 4, w / 4], "GRU 1/4 384->128 80x184"), (64, 64, [h / 2, w / 2], "layer1 64->64 160x368")]
+    {
+        let x = random([1, cin, ch, cw]);
+        let weight = random([cout, cin, 3, 3]).mul_scalar(0.05);
+        let options = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
+        group.bench_function(BenchmarkId::new("3x3 Stock", name), |b| {
+            b.iter(|| dgstereo_core::tensor::to_vec(conv2d(x.clone(), weight.clone(), None, options.clone())))
+        });
+        group.bench_function(BenchmarkId::new("3x3 Host", name), |b| {
+            b.iter(|| dgstereo_core::tensor::to_vec(conv2d_host(x.clone(), weight.clone(), None, &options)))
+        });
+    }
+    group.finish();
+}
+
 fn update(c: &mut Criterion) {
     let model = model();
     let block = &model.update_block;
@@ -188,5 +214,5 @@ fn training_step(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, encoders, correlation, update, forward, training_step);
+criterion_group!(benches, encoders, convolution, correlation, update, forward, training_step);
 criterion_main!(benches);

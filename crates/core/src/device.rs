@@ -72,3 +72,19 @@ fn probe_gpu(device: &Device) -> crate::Result<()> {
 pub fn default_device() -> Device {
     Device::flex()
 }
+
+static HOST_KERNELS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
+
+/// Turns the hand-written host kernels on or off for the whole process (on by default); off,
+/// burn's operations run everywhere, which is how `dgstereo bench --kernels stock` measures what
+/// the kernels gain.
+pub fn set_host_kernels(enabled: bool) {
+    HOST_KERNELS.store(enabled, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Whether the hand-written host kernels apply on `device`: the plain CPU backend (Flex) without
+/// autodiff, i.e. inference on the CPU, unless [`set_host_kernels`] turned them off. Everywhere
+/// else burn's operations run.
+pub fn host_kernels_apply(device: &Device) -> bool {
+    HOST_KERNELS.load(std::sync::atomic::Ordering::Relaxed) && *device == Device::flex() && !device.is_autodiff()
+}

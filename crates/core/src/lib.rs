@@ -10,6 +10,7 @@
 
 pub mod device;
 pub mod error;
+pub mod host_conv;
 pub mod layers;
 pub mod padding;
 pub mod resample;

@@ -37,7 +37,7 @@ pub enum LookupKernel {
 impl LookupKernel {
     /// The fast kernel where it applies: the CPU backend without autodiff; else the stock one.
     pub fn for_device(device: &Device) -> Self {
-        if *device == Device::flex() && !device.is_autodiff() { Self::Host } else { Self::Stock }
+        if dgstereo_core::device::host_kernels_apply(device) { Self::Host } else { Self::Stock }
     }
 }
 

@@ -3,6 +3,7 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor, activation::relu};
+use dgstereo_core::host_conv::conv2d_forward;
 use dgstereo_core::layers::{ConvInit, conv2d};
 
 use crate::feature::trunk_strides;
@@ -29,7 +30,7 @@ impl ContextHead {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        self.conv.forward(self.block.forward(x))
+        conv2d_forward(&self.conv, self.block.forward(x))
     }
 }
 
@@ -88,7 +89,7 @@ impl ContextEncoder {
 
     /// The trunk output at 1/f (`[N, trunk[2], H/f, W/f]`).
     pub fn trunk(&self, image: Tensor<4>) -> Tensor<4> {
-        let x = relu(self.norm1.forward(self.conv1.forward(image)));
+        let x = relu(self.norm1.forward(conv2d_forward(&self.conv1, image)));
         let x = forward_layer(&self.layer1, x);
         let x = forward_layer(&self.layer2, x);
         forward_layer(&self.layer3, x)

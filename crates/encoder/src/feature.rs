@@ -3,6 +3,7 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor, activation::relu};
+use dgstereo_core::host_conv::conv2d_forward;
 use dgstereo_core::layers::{ConvInit, conv2d};
 
 use crate::FeatureExtractor;
@@ -55,11 +56,11 @@ impl FeatureEncoder {
 
 impl FeatureExtractor for FeatureEncoder {
     fn features(&self, images: Tensor<4>) -> Tensor<4> {
-        let x = relu(self.norm1.forward(self.conv1.forward(images)));
+        let x = relu(self.norm1.forward(conv2d_forward(&self.conv1, images)));
         let x = forward_layer(&self.layer1, x);
         let x = forward_layer(&self.layer2, x);
         let x = forward_layer(&self.layer3, x);
-        self.conv2.forward(x)
+        conv2d_forward(&self.conv2, x)
     }
 }
 
@@ -85,6 +86,6 @@ impl SharedFeatureHead {
 
     /// Features from the trunk output `[N, 128, H, W]`.
     pub fn forward(&self, trunk: Tensor<4>) -> Tensor<4> {
-        self.conv.forward(self.block.forward(trunk))
+        conv2d_forward(&self.conv, self.block.forward(trunk))
     }
 }

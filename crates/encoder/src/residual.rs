@@ -3,6 +3,7 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor, activation::relu};
+use dgstereo_core::host_conv::conv2d_forward;
 use dgstereo_core::layers::{ConvInit, conv2d};
 
 use crate::norm::{Norm, NormKind};
@@ -48,10 +49,10 @@ impl ResidualBlock {
 
     /// Applies the block.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = relu(self.norm1.forward(self.conv1.forward(x.clone())));
-        let y = relu(self.norm2.forward(self.conv2.forward(y)));
+        let y = relu(self.norm1.forward(conv2d_forward(&self.conv1, x.clone())));
+        let y = relu(self.norm2.forward(conv2d_forward(&self.conv2, y)));
         let x = match (&self.downsample, &self.norm3) {
-            (Some(conv), Some(norm)) => norm.forward(conv.forward(x)),
+            (Some(conv), Some(norm)) => norm.forward(conv2d_forward(conv, x)),
             _ => x,
         };
         relu(x + y)

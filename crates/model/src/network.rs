@@ -7,6 +7,7 @@ use burn::nn::conv::Conv2d;
 use burn::tensor::activation::{relu, tanh};
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::DepthPrior;
+use dgstereo_core::host_conv::conv2d_forward;
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::timing::{StageClock, timed};
 use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CostVolume};
@@ -180,7 +181,7 @@ impl RaftStereo {
         let mut gates: Vec<GateContext> = Vec::with_capacity(levels);
         for (i, [h, c]) in context.levels.into_iter().enumerate() {
             let (h, g) = timed(&mut clock, "context encoder", || {
-                (tanh(h), GateContext::from_zqr(self.context_zqr_convs[i].forward(relu(c))))
+                (tanh(h), GateContext::from_zqr(conv2d_forward(&self.context_zqr_convs[i], relu(c))))
             });
             record!(format!("context.hidden.{i}"), &h);
             record!(format!("context.z.{i}"), &g.z);

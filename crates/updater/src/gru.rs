@@ -8,12 +8,12 @@
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
-use burn::tensor::module::conv2d as conv2d_op;
 use burn::tensor::ops::ConvOptions;
 use burn::tensor::{
     Device, Tensor,
     activation::{sigmoid, tanh},
 };
+use dgstereo_core::host_conv::{conv2d_forward, conv2d_op};
 use dgstereo_core::layers::{ConvInit, conv2d};
 
 /// A ConvGRU whose gates also receive precomputed context terms.
@@ -75,7 +75,7 @@ impl ConvGru {
         let zr = sigmoid(self.gates(hx) + ctx.zr.clone());
         let z = zr.clone().narrow(1, 0, hidden);
         let r = zr.narrow(1, hidden, hidden);
-        let q = tanh(self.convq.forward(Tensor::cat(vec![r * h.clone(), x], 1)) + ctx.q.clone());
+        let q = tanh(conv2d_forward(&self.convq, Tensor::cat(vec![r * h.clone(), x], 1)) + ctx.q.clone());
         (z.clone().neg().add_scalar(1.0)) * h + z * q
     }
 

@@ -4,6 +4,7 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor, activation::relu};
+use dgstereo_core::host_conv::conv2d_forward;
 use dgstereo_core::layers::{ConvInit, conv2d};
 
 /// Correlation branch (1x1, 3x3), flow branch (7x7, 3x3) and an optional guidance branch
@@ -48,13 +49,13 @@ impl MotionEncoder {
 
     /// The GRU input of one iteration.
     pub fn forward(&self, flow: Tensor<4>, corr: Tensor<4>, guidance: Option<&Tensor<4>>) -> Tensor<4> {
-        let cor = relu(self.convc2.forward(relu(self.convc1.forward(corr))));
-        let flo = relu(self.convf2.forward(relu(self.convf1.forward(flow.clone()))));
+        let cor = relu(conv2d_forward(&self.convc2, relu(conv2d_forward(&self.convc1, corr))));
+        let flo = relu(conv2d_forward(&self.convf2, relu(conv2d_forward(&self.convf1, flow.clone()))));
         let mut parts = vec![cor, flo];
         if let (Some(g1), Some(g2), Some(g)) = (&self.convg1, &self.convg2, guidance) {
-            parts.push(relu(g2.forward(relu(g1.forward(g.clone())))));
+            parts.push(relu(conv2d_forward(g2, relu(conv2d_forward(g1, g.clone())))));
         }
-        let out = relu(self.conv.forward(Tensor::cat(parts, 1)));
+        let out = relu(conv2d_forward(&self.conv, Tensor::cat(parts, 1)));
         Tensor::cat(vec![out, flow], 1)
     }
 }

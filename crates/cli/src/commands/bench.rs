@@ -50,6 +50,10 @@ pub struct BenchArgs {
     /// The machine's peak GFLOP/s, for the share-of-peak column (2 cores here: ~200).
     #[arg(long, default_value_t = 200.0)]
     pub peak_gflops: f64,
+    /// CPU kernels: `host` (the hand-written convolution and lookup kernels, the default) or
+    /// `stock` (burn's operations only, the reference), to measure what the kernels gain.
+    #[arg(long, default_value = "host", value_parser = ["host", "stock"])]
+    pub kernels: String,
 }
 
 /// Parses `HxW`.
@@ -104,6 +108,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         "alt" => CorrelationImplementation::Alt,
         other => bail!("--corr '{other}': expected reg or alt"),
     };
+    dgstereo_core::device::set_host_kernels(a.kernels == "host");
     let device = a.device.parse::<DeviceChoice>()?.device()?;
     let config = match &a.config {
         Some(p) => {
@@ -143,12 +148,13 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let med = median(&mut times);
     let gflops = 2.0 * macs as f64 / med / 1e9;
     println!(
-        "size {h}x{w} (padded {}x{}), {} iterations, {} cost volume, device {}, {} threads",
+        "size {h}x{w} (padded {}x{}), {} iterations, {} cost volume, device {}, {} kernels, {} threads",
         padded[0],
         padded[1],
         a.iters,
         a.corr,
         a.device,
+        a.kernels,
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );
     println!("runs {} after {} warm-up: median {med:.3} s, min {min:.3} s", a.runs, a.warmup);

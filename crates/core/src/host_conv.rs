@@ -1,0 +1,300 @@
+//! A 2-D convolution for CPU inference: im2col tiles straight from NCHW and the `gemm` crate,
+//! every step parallel.
+//!
+//! Design decision: burn Flex's convolution is the same im2col + `gemm` product, but before the
+//! parallel tiles it transposes the whole input to NHWC and flattens the weights on the calling
+//! thread, with the channel as the innermost loop over an NCHW source (one cache line per
+//! element). Profiled on this project's 2-core machine, that serial part left one core idle for
+//! a large share of a forward pass. Here the weight `[O, C, kh, kw]` is already the row-major
+//! `O x (C·kh·kw)` matrix the product needs, each tile of output rows builds its own column
+//! matrix from NCHW rows (a shifted copy per `(c, ky, kx)`), and the product writes into the
+//! NCHW output directly. Only for plain CPU tensors without autodiff
+//! ([`crate::device::host_kernels_apply`]); burn's convolution stays the reference, and the tests
+//! check both agree.
+//!
+//! The `gemm` crate's entry point is an `unsafe fn` taking raw pointers and strides; it is called
+//! once, on buffers this module allocates with exactly the dimensions it passes, which is the only
+//! `unsafe` in the workspace.
+#![allow(unsafe_code)]
+
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::Conv2d;
+use burn::tensor::module::conv2d;
+use burn::tensor::ops::ConvOptions;
+use burn::tensor::{Device, Tensor, TensorData};
+use rayon::prelude::*;
+
+use crate::device::host_kernels_apply;
+
+/// Output pixels per tile: enough columns for an efficient product, few enough for many tiles.
+const TILE_PIXELS: usize = 512;
+
+/// `conv.forward(x)`: the host kernel for CPU inference, burn's convolution elsewhere.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; output `[N, O, H_out, W_out]`
+pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let padding = match conv.padding {
+        PaddingConfig2d::Explicit(top, left, bottom, right) => [(top, bottom), (left, right)],
+        PaddingConfig2d::Valid => [(0, 0), (0, 0)],
+        PaddingConfig2d::Same => return conv.forward(x),
+    };
+    if conv.groups != 1 || !host_kernels_apply(&x.device()) {
+        return conv.forward(x);
+    }
+    let options = ConvOptions::new_with_padding(conv.stride, padding, conv.dilation, 1);
+    conv2d_host(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options)
+}
+
+/// burn's `conv2d(x, weight, bias, options)` as [`conv2d_forward`] chooses: the host kernel for
+/// CPU inference (groups = 1), burn's operation elsewhere.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`; output `[N, O, H_out, W_out]`
+pub fn conv2d_op(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: ConvOptions<2>) -> Tensor<4> {
+    if options.groups != 1 || !host_kernels_apply(&x.device()) {
+        return conv2d(x, weight, bias, options);
+    }
+    conv2d_host(x, weight, bias, &options)
+}
+
+/// `conv2d(x, weight, bias)` with `options` (groups = 1), computed on the host.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`
+/// - output: `[N, O, H_out, W_out]` with `H_out = (H + 2·pad - dil·(kh - 1) - 1) / stride + 1`
+pub fn conv2d_host(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: &ConvOptions<2>) -> Tensor<4> {
+    let device: Device = x.device();
+    let [n, c, h, w] = x.dims();
+    let [o, cw, kh, kw] = weight.dims();
+    assert_eq!(options.groups, 1, "conv2d_host: grouped convolutions are not supported");
+    assert_eq!(c, cw, "conv2d_host: input has {c} channels, the weight expects {cw}");
+    let [sh, sw] = options.stride;
+    let [(ph, ph_end), (pw, pw_end)] = options.padding;
+    let [dh, dw] = options.dilation;
+    let out_h = (h + ph + ph_end - dh * (kh - 1) - 1) / sh + 1;
+    let out_w = (w + pw + pw_end - dw * (kw - 1) - 1) / sw + 1;
+    let x = crate::tensor::to_vec(x);
+    let wt = crate::tensor::to_vec(weight);
+    let bias = bias.map(crate::tensor::to_vec);
+    let k = c * kh * kw;
+    let plane = out_h * out_w;
+    let rows_per_tile = (TILE_PIXELS / out_w.max(1)).clamp(1, out_h.max(1));
+    let tiles_per_image = out_h.div_ceil(rows_per_tile);
+    let geometry = Geometry { c, h, w, kh, kw, sh, sw, ph, pw, dh, dw, out_w };
+
+    // Per tile (image-major): the O x P block of output it covers, row-major.
+    let blocks: Vec<Vec<f32>> = (0..n * tiles_per_image)
+        .into_par_iter()
+        .map(|t| {
+            let (b, tile) = (t / tiles_per_image, t % tiles_per_image);
+            let oy0 = tile * rows_per_tile;
+            let oy1 = (oy0 + rows_per_tile).min(out_h);
+            let p = (oy1 - oy0) * out_w;
+            // Column matrix, K x P row-major: row (ci, ky, kx), column (oy, ox) of the tile. The
+            // buffer is the thread's, reused across calls, and every element is written below
+            // (zeros where the kernel reaches into the padding), so it is never cleared first.
+            COLUMNS.with_borrow_mut(|col| {
+                col.resize(k * p, 0.0);
+                fill_columns(&mut col[..k * p], &x[b * c * h * w..(b + 1) * c * h * w], geometry, oy0..oy1);
+                let mut block = vec![0.0f32; o * p];
+                // SAFETY: `block` is O x P (row stride P), `wt` is O x K (row stride K) and `col`
+                // holds K x P (row stride P), all contiguous and alive for the call; `read_dst` is
+                // false so `block` is only written.
+                unsafe {
+                    gemm::gemm(
+                        o,
+                        p,
+                        k,
+                        block.as_mut_ptr(),
+                        1,
+                        p as isize,
+                        false,
+                        wt.as_ptr(),
+                        1,
+                        k as isize,
+                        col.as_ptr(),
+                        1,
+                        p as isize,
+                        0.0f32,
+                        1.0f32,
+                        false,
+                        false,
+                        false,
+                        gemm::Parallelism::None,
+                    );
+                }
+                block
+            })
+        })
+        .collect();
+
+    // Scatter the blocks into NCHW planes, adding the bias.
+    let mut out = vec![0.0f32; n * o * plane];
+    out.par_chunks_mut(plane.max(1)).enumerate().for_each(|(i, dst)| {
+        let (b, oc) = (i / o, i % o);
+        let add = bias.as_ref().map_or(0.0, |v| v[oc]);
+        for tile in 0..tiles_per_image {
+            let oy0 = tile * rows_per_tile;
+            let p = ((oy0 + rows_per_tile).min(out_h) - oy0) * out_w;
+            let src = &blocks[b * tiles_per_image + tile][oc * p..][..p];
+            for (d, s) in dst[oy0 * out_w..][..p].iter_mut().zip(src) {
+                *d = s + add;
+            }
+        }
+    });
+    Tensor::from_data(TensorData::new(out, [n, o, out_h, out_w]), &device)
+}
+
+thread_local! {
+    /// Each worker thread's column buffer, grown to the largest tile it has built.
+    static COLUMNS: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Sizes of one convolution: input channels and size, kernel, stride, leading padding,
+/// dilation, output width.
+#[derive(Clone, Copy)]
+struct Geometry {
+    c: usize,
+    h: usize,
+    w: usize,
+    kh: usize,
+    kw: usize,
+    sh: usize,
+    sw: usize,
+    ph: usize,
+    pw: usize,
+    dh: usize,
+    dw: usize,
+    out_w: usize,
+}
+
+/// Writes every element of the column matrix of output rows `rows` of one image (`src`, NCHW).
+fn fill_columns(col: &mut [f32], src: &[f32], g: Geometry, rows: std::ops::Range<usize>) {
+    let p = rows.len() * g.out_w;
+    for ci in 0..g.c {
+        let channel = &src[ci * g.h * g.w..(ci + 1) * g.h * g.w];
+        for ky in 0..g.kh {
+            for kx in 0..g.kw {
+                let row = &mut col[((ci * g.kh + ky) * g.kw + kx) * p..][..p];
+                let offset = (kx * g.dw) as isize - g.pw as isize;
+                for (r, oy) in rows.clone().enumerate() {
+                    let dst = &mut row[r * g.out_w..][..g.out_w];
+                    let iy = (oy * g.sh + ky * g.dh) as isize - g.ph as isize;
+                    if iy < 0 || iy >= g.h as isize {
+                        dst.fill(0.0);
+                        continue;
+                    }
+                    let line = &channel[iy as usize * g.w..][..g.w];
+                    if g.sw == 1 {
+                        // ix = ox + offset: one shifted copy, zeros outside the input.
+                        let lo = (-offset).clamp(0, g.out_w as isize) as usize;
+                        let hi = (g.w as isize - offset).clamp(lo as isize, g.out_w as isize) as usize;
+                        let start = (lo as isize + offset) as usize;
+                        dst[..lo].fill(0.0);
+                        dst[lo..hi].copy_from_slice(&line[start..start + (hi - lo)]);
+                        dst[hi..].fill(0.0);
+                    } else {
+                        for (ox, v) in dst.iter_mut().enumerate() {
+                            let ix = (ox * g.sw) as isize + offset;
+                            *v = if ix >= 0 && ix < g.w as isize { line[ix as usize] } else { 0.0 };
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Distribution;
+
+    fn case(n: usize, c: usize, o: usize, hw: [usize; 2], k: [usize; 2], stride: usize, pad: [usize; 2], dil: usize) {
+        let device = Device::flex();
+        let x = Tensor::<4>::random([n, c, hw[0], hw[1]], Distribution::Normal(0.0, 1.0), &device);
+        let wt = Tensor::<4>::random([o, c, k[0], k[1]], Distribution::Normal(0.0, 0.2), &device);
+        let b = Tensor::<1>::random([o], Distribution::Normal(0.0, 1.0), &device);
+        let options = ConvOptions::new([stride, stride], pad, [dil, dil], 1);
+        let stock = conv2d(x.clone(), wt.clone(), Some(b.clone()), options.clone());
+        let host = conv2d_host(x, wt, Some(b), &options);
+        assert_eq!(stock.dims(), host.dims());
+        let diff = crate::tensor::max_abs_diff(stock, host);
+        assert!(diff < 1e-4, "n {n} c {c} o {o} {hw:?} k {k:?} s {stride} p {pad:?} d {dil}: {diff}");
+    }
+
+    #[test]
+    fn module_forward_takes_the_host_kernel_only_for_cpu_inference() {
+        use burn::module::Module;
+        use burn::nn::conv::Conv2dConfig;
+        let device = Device::flex();
+        let conv = Conv2dConfig::new([4, 6], [3, 3]).with_padding(PaddingConfig2d::Explicit(1, 2, 1, 2)).init(&device);
+        let x = Tensor::<4>::random([1, 4, 10, 12], Distribution::Normal(0.0, 1.0), &device);
+        let diff = crate::tensor::max_abs_diff(conv.forward(x.clone()), conv2d_forward(&conv, x.clone()));
+        assert!(diff < 1e-5, "{diff}");
+        // With autodiff the stock operation runs and gradients flow.
+        let ad = device.autodiff();
+        let conv_ad = conv.fork(&ad).train();
+        let y = conv2d_forward(&conv_ad, Tensor::from_data(x.into_data(), &ad)).sum();
+        let grads = y.backward();
+        assert!(conv_ad.weight.grad(&grads).is_some());
+    }
+
+    #[test]
+    fn host_convolution_agrees_with_burn() {
+        case(1, 3, 8, [9, 13], [3, 3], 1, [1, 1], 1);
+        case(2, 5, 7, [17, 11], [3, 3], 2, [1, 1], 1);
+        case(1, 4, 6, [20, 31], [7, 7], 2, [3, 3], 1);
+        case(1, 6, 4, [12, 40], [1, 1], 1, [0, 0], 1);
+        case(1, 3, 5, [15, 15], [3, 3], 1, [2, 2], 2);
+        case(1, 2, 3, [9, 10], [1, 7], 1, [0, 3], 1);
+        case(1, 2, 3, [10, 9], [7, 1], 1, [3, 0], 1);
+        case(1, 16, 32, [40, 600], [3, 3], 1, [1, 1], 1); // several tiles per image
+        // Smaller again: the threads' reused column buffers hold stale values from the case above.
+        case(2, 3, 4, [7, 9], [3, 3], 1, [1, 1], 1);
+        case(1, 5, 4, [11, 9], [5, 5], 3, [2, 2], 1);
+    }
+}
+
+#[cfg(test)]
+mod timing {
+    use super::*;
+    use burn::tensor::Distribution;
+    use std::time::Instant;
+
+    /// Back-to-back medians of both paths on the model's shapes (run by hand, `--ignored`).
+    #[test]
+    #[ignore]
+    fn host_and_stock_convolution_times() {
+        let device = Device::flex();
+        for (c, o, h, w, k, s) in
+            [(384, 128, 96, 112, 3, 1), (64, 64, 192, 224, 3, 1), (3, 64, 384, 448, 7, 2), (256, 256, 48, 56, 3, 1)]
+        {
+            let x = Tensor::<4>::random([1, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+            let wt = Tensor::<4>::random([o, c, k, k], Distribution::Normal(0.0, 0.1), &device);
+            let options = ConvOptions::new([s, s], [k / 2, k / 2], [1, 1], 1);
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            for _ in 0..7 {
+                let t = Instant::now();
+                let y = conv2d(x.clone(), wt.clone(), None, options.clone());
+                let _ = crate::tensor::to_vec(y);
+                a.push(t.elapsed().as_secs_f64());
+                let t = Instant::now();
+                let y = conv2d_host(x.clone(), wt.clone(), None, &options);
+                let _ = crate::tensor::to_vec(y);
+                b.push(t.elapsed().as_secs_f64());
+            }
+            a.sort_by(f64::total_cmp);
+            b.sort_by(f64::total_cmp);
+            let gmac = (o * c * k * k * (h / s) * (w / s)) as f64 / 1e9;
+            eprintln!(
+                "{c}->{o} {h}x{w} k{k} s{s}: stock {:.1} ms ({:.0} GFLOP/s), host {:.1} ms ({:.0} GFLOP/s)",
+                a[3] * 1e3,
+                2.0 * gmac / a[3],
+                b[3] * 1e3,
+                2.0 * gmac / b[3]
+            );
+        }
+    }
+}
