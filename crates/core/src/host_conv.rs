@@ -34,16 +34,23 @@ const TILE_PIXELS: usize = 512;
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output `[N, O, H_out, W_out]`
 pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    match conv_options(conv) {
+        Some(options) if host_kernels_apply(&x.device()) => {
+            conv2d_host(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options)
+        }
+        _ => conv.forward(x),
+    }
+}
+
+/// The options of `conv` as the host kernel takes them; `None` for what it does not do (groups,
+/// `Same` padding, which depends on the input size).
+pub fn conv_options(conv: &Conv2d) -> Option<ConvOptions<2>> {
     let padding = match conv.padding {
         PaddingConfig2d::Explicit(top, left, bottom, right) => [(top, bottom), (left, right)],
         PaddingConfig2d::Valid => [(0, 0), (0, 0)],
-        PaddingConfig2d::Same => return conv.forward(x),
+        PaddingConfig2d::Same => return None,
     };
-    if conv.groups != 1 || !host_kernels_apply(&x.device()) {
-        return conv.forward(x);
-    }
-    let options = ConvOptions::new_with_padding(conv.stride, padding, conv.dilation, 1);
-    conv2d_host(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options)
+    (conv.groups == 1).then(|| ConvOptions::new_with_padding(conv.stride, padding, conv.dilation, 1))
 }
 
 /// burn's `conv2d(x, weight, bias, options)` as [`conv2d_forward`] chooses: the host kernel for
@@ -65,18 +72,38 @@ pub fn conv2d_op(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, optio
 /// - output: `[N, O, H_out, W_out]` with `H_out = (H + 2·pad - dil·(kh - 1) - 1) / stride + 1`
 pub fn conv2d_host(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: &ConvOptions<2>) -> Tensor<4> {
     let device: Device = x.device();
-    let [n, c, h, w] = x.dims();
-    let [o, cw, kh, kw] = weight.dims();
+    let (x_dims, w_dims) = (x.dims(), weight.dims());
+    let x = crate::tensor::to_vec(x);
+    let wt = crate::tensor::to_vec(weight);
+    let bias = bias.map(crate::tensor::to_vec);
+    let (out, dims) = conv2d_host_slices(&x, x_dims, &wt, w_dims, bias.as_deref(), options);
+    Tensor::from_data(TensorData::new(out, dims), &device)
+}
+
+/// [`conv2d_host`] on host buffers (row-major NCHW input, OIHW weight), for kernels that chain
+/// several steps without going through tensors. Returns the output and its dimensions.
+///
+/// # Shapes
+/// - `x`: `x_dims = [N, C, H, W]`; `weight`: `w_dims = [O, C, kh, kw]`; `bias`: `[O]`
+pub fn conv2d_host_slices(
+    x: &[f32],
+    x_dims: [usize; 4],
+    wt: &[f32],
+    w_dims: [usize; 4],
+    bias: Option<&[f32]>,
+    options: &ConvOptions<2>,
+) -> (Vec<f32>, [usize; 4]) {
+    let [n, c, h, w] = x_dims;
+    let [o, cw, kh, kw] = w_dims;
     assert_eq!(options.groups, 1, "conv2d_host: grouped convolutions are not supported");
     assert_eq!(c, cw, "conv2d_host: input has {c} channels, the weight expects {cw}");
+    assert_eq!(x.len(), n * c * h * w, "conv2d_host: input buffer does not match {x_dims:?}");
+    assert_eq!(wt.len(), o * c * kh * kw, "conv2d_host: weight buffer does not match {w_dims:?}");
     let [sh, sw] = options.stride;
     let [(ph, ph_end), (pw, pw_end)] = options.padding;
     let [dh, dw] = options.dilation;
     let out_h = (h + ph + ph_end - dh * (kh - 1) - 1) / sh + 1;
     let out_w = (w + pw + pw_end - dw * (kw - 1) - 1) / sw + 1;
-    let x = crate::tensor::to_vec(x);
-    let wt = crate::tensor::to_vec(weight);
-    let bias = bias.map(crate::tensor::to_vec);
     let k = c * kh * kw;
     let plane = out_h * out_w;
     let rows_per_tile = (TILE_PIXELS / out_w.max(1)).clamp(1, out_h.max(1));
@@ -133,7 +160,7 @@ pub fn conv2d_host(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, opt
     let mut out = vec![0.0f32; n * o * plane];
     out.par_chunks_mut(plane.max(1)).enumerate().for_each(|(i, dst)| {
         let (b, oc) = (i / o, i % o);
-        let add = bias.as_ref().map_or(0.0, |v| v[oc]);
+        let add = bias.map_or(0.0, |v| v[oc]);
         for tile in 0..tiles_per_image {
             let oy0 = tile * rows_per_tile;
             let p = ((oy0 + rows_per_tile).min(out_h) - oy0) * out_w;
@@ -143,7 +170,7 @@ pub fn conv2d_host(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, opt
             }
         }
     });
-    Tensor::from_data(TensorData::new(out, [n, o, out_h, out_w]), &device)
+    (out, [n, o, out_h, out_w])
 }
 
 thread_local! {
@@ -211,6 +238,7 @@ mod tests {
     use super::*;
     use burn::tensor::Distribution;
 
+    #[allow(clippy::too_many_arguments)]
     fn case(n: usize, c: usize, o: usize, hw: [usize; 2], k: [usize; 2], stride: usize, pad: [usize; 2], dil: usize) {
         let device = Device::flex();
         let x = Tensor::<4>::random([n, c, hw[0], hw[1]], Distribution::Normal(0.0, 1.0), &device);

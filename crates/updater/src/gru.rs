@@ -13,6 +13,7 @@ use burn::tensor::{
     Device, Tensor,
     activation::{sigmoid, tanh},
 };
+use dgstereo_core::device::host_kernels_apply;
 use dgstereo_core::host_conv::{conv2d_forward, conv2d_op};
 use dgstereo_core::layers::{ConvInit, conv2d};
 
@@ -71,6 +72,11 @@ impl ConvGru {
     pub fn forward(&self, h: Tensor<4>, ctx: &GateContext, inputs: Vec<Tensor<4>>) -> Tensor<4> {
         let hidden = h.dims()[1];
         let x = Tensor::cat(inputs, 1);
+        if host_kernels_apply(&h.device())
+            && let Some(next) = super::gru_host::step(self, h.clone(), ctx, x.clone())
+        {
+            return next;
+        }
         let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
         let zr = sigmoid(self.gates(hx) + ctx.zr.clone());
         let z = zr.clone().narrow(1, 0, hidden);
@@ -120,5 +126,24 @@ mod tests {
         let q = tanh(gru.convq.forward(Tensor::cat(vec![r * h.clone(), x.clone()], 1)) + ctx.q.clone());
         let expected = (z.clone().neg().add_scalar(1.0)) * h.clone() + z * q;
         assert!(max_abs_diff(gru.forward(h, &ctx, vec![x]), expected) < 1e-5);
+    }
+
+    /// The fused host step (CPU inference) equals the tensor-op step (run here on the autodiff
+    /// device, where the host kernels never apply), with several inputs and a batch of two.
+    #[test]
+    fn host_step_equals_the_tensor_step() {
+        use burn::module::Module;
+        let device = default_device();
+        let ad = device.clone().autodiff();
+        let gru = ConvGru::new(16, 12, &device);
+        let gru_ad = gru.clone().fork(&ad);
+        assert!(host_kernels_apply(&device) && !host_kernels_apply(&ad), "one path each");
+        let rand = |c: usize| Tensor::<4>::random([2, c, 9, 13], Distribution::Normal(0.0, 1.0), &device);
+        let (h, x1, x2, zqr) = (rand(16), rand(5), rand(7), rand(48));
+        let on_ad = |t: &Tensor<4>| Tensor::<4>::from_data(t.to_data(), &ad);
+        let host = gru.forward(h.clone(), &GateContext::from_zqr(zqr.clone()), vec![x1.clone(), x2.clone()]);
+        let stock = gru_ad.forward(on_ad(&h), &GateContext::from_zqr(on_ad(&zqr)), vec![on_ad(&x1), on_ad(&x2)]);
+        let diff = max_abs_diff(host, Tensor::from_data(stock.into_data(), &device));
+        assert!(diff < 1e-5, "{diff}");
     }
 }

@@ -11,6 +11,7 @@
 
 pub mod block;
 pub mod gru;
+mod gru_host;
 pub mod guidance;
 pub mod motion;
 pub mod upsample;

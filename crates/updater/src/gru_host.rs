@@ -1,0 +1,104 @@
+//! The ConvGRU step for CPU inference with its element-wise work fused into two parallel passes.
+//!
+//! Design decision: burn's CPU backend runs each element-wise operation as its own pass on one
+//! thread, and a GRU step has a dozen of them between its two convolutions (concatenations, the
+//! context additions, sigmoid, the reset product, tanh, the blend). Here the step stays on host
+//! buffers from the concatenated input to the new state: the fused-gate convolution and the
+//! candidate convolution run the workspace's host convolution on those buffers, pass one computes
+//! both gates and writes `[r·h, x]` straight into the candidate's input, pass two computes the
+//! candidate's `tanh` and the blend, both in parallel over channel planes. Used only where the
+//! host kernels apply (CPU inference, [`dgstereo_core::device::host_kernels_apply`]); the
+//! tensor-op step in [`super::gru`] stays the reference and the tests check both agree.
+
+use burn::tensor::{Tensor, TensorData};
+use dgstereo_core::host_conv::{conv_options, conv2d_host_slices};
+use dgstereo_core::tensor::to_vec;
+use rayon::prelude::*;
+
+use super::gru::{ConvGru, GateContext};
+
+fn sigmoid(v: f32) -> f32 {
+    1.0 / (1.0 + (-v).exp())
+}
+
+/// One step `h' = (1 - z)·h + z·tanh(convq([r·h, x]) + cq)` on the host.
+///
+/// # Shapes
+/// - `h`, the context terms: `[N, C, H, W]`; `x`: `[N, Cx, H, W]`; output `[N, C, H, W]`
+///
+/// `None` (nothing computed) when a convolution has options the host kernel does not take.
+pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, x: Tensor<4>) -> Option<Tensor<4>> {
+    let (zr_options, q_options) = (conv_options(&gru.convz)?, conv_options(&gru.convq)?);
+    if conv_options(&gru.convr)? != zr_options {
+        return None;
+    }
+    let device = h.device();
+    let [n, c, hh, ww] = h.dims();
+    let cx = x.dims()[1];
+    let plane = hh * ww;
+    let channels = c + cx;
+    let hv = to_vec(h);
+    let xv = to_vec(x);
+
+    // [h, x] per image, the gates' input; later reused as [r·h, x], the candidate's input.
+    let mut hx = vec![0.0f32; n * channels * plane];
+    hx.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
+        let (b, ch) = (i / channels, i % channels);
+        let src = if ch < c { &hv[(b * c + ch) * plane..] } else { &xv[(b * cx + ch - c) * plane..] };
+        dst.copy_from_slice(&src[..plane]);
+    });
+
+    let zr_weight = to_vec(Tensor::cat(vec![gru.convz.weight.val(), gru.convr.weight.val()], 0));
+    let zr_bias = match (&gru.convz.bias, &gru.convr.bias) {
+        (Some(z), Some(r)) => Some(to_vec(Tensor::cat(vec![z.val(), r.val()], 0))),
+        _ => None,
+    };
+    let [_, _, kh, kw] = gru.convz.weight.dims();
+    let [_, _, qh, qw] = gru.convq.weight.dims();
+    let (gates, _) = conv2d_host_slices(
+        &hx,
+        [n, channels, hh, ww],
+        &zr_weight,
+        [2 * c, channels, kh, kw],
+        zr_bias.as_deref(),
+        &zr_options,
+    );
+    let zr_ctx = to_vec(ctx.zr.clone());
+
+    // Pass one: z (kept) and r·h (over h's planes of the buffer; the x planes stay).
+    let mut z = vec![0.0f32; n * c * plane];
+    z.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
+        let (b, ch) = (i / c, i % c);
+        let g = &gates[(b * 2 * c + ch) * plane..][..plane];
+        let k = &zr_ctx[(b * 2 * c + ch) * plane..][..plane];
+        for ((d, g), k) in dst.iter_mut().zip(g).zip(k) {
+            *d = sigmoid(g + k);
+        }
+    });
+    hx.par_chunks_mut(plane).enumerate().filter(|(i, _)| i % channels < c).for_each(|(i, dst)| {
+        let (b, ch) = (i / channels, i % channels);
+        let g = &gates[(b * 2 * c + c + ch) * plane..][..plane];
+        let k = &zr_ctx[(b * 2 * c + c + ch) * plane..][..plane];
+        for ((d, g), k) in dst.iter_mut().zip(g).zip(k) {
+            *d *= sigmoid(g + k);
+        }
+    });
+
+    let q_weight = to_vec(gru.convq.weight.val());
+    let q_bias = gru.convq.bias.as_ref().map(|b| to_vec(b.val()));
+    let (q, _) =
+        conv2d_host_slices(&hx, [n, channels, hh, ww], &q_weight, [c, channels, qh, qw], q_bias.as_deref(), &q_options);
+    let q_ctx = to_vec(ctx.q.clone());
+
+    // Pass two: the new state.
+    let mut out = vec![0.0f32; n * c * plane];
+    out.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
+        let s = i * plane;
+        let (z, h, q, k) = (&z[s..s + plane], &hv[s..s + plane], &q[s..s + plane], &q_ctx[s..s + plane]);
+        for (j, d) in dst.iter_mut().enumerate() {
+            let cand = (q[j] + k[j]).tanh();
+            *d = (1.0 - z[j]) * h[j] + z[j] * cand;
+        }
+    });
+    Some(Tensor::from_data(TensorData::new(out, [n, c, hh, ww]), &device))
+}
