@@ -32,3 +32,13 @@ build-gpu:
 lint:
     cargo clippy --workspace --all-targets -- -D warnings
     cargo fmt --all -- --check
+
+# Whole-inference timing with and without the host kernels (the issue's 384x448, 32 iterations).
+bench-kernels size="384x448" iters="32":
+    cargo build --release -p dgstereo
+    target/release/dgstereo bench --size {{size}} --iters {{iters}} --kernels stock
+    target/release/dgstereo bench --size {{size}} --iters {{iters}} --kernels host
+
+# Look at the training pairs an experiment draws (augmented, as the trainer sees them).
+samples experiment:
+    cargo run --release -p dgstereo -- experiment samples {{experiment}} --out out/samples
