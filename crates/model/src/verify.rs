@@ -75,8 +75,11 @@ impl fmt::Display for VerifyReport {
     }
 }
 
+/// Reference tensors by name: shape and values.
+pub type ReferenceTensors = BTreeMap<String, (Vec<usize>, Vec<f32>)>;
+
 /// Reads every float32 tensor of a safetensors file as `(shape, values)`.
-pub fn read_reference(path: &Path) -> Result<BTreeMap<String, (Vec<usize>, Vec<f32>)>> {
+pub fn read_reference(path: &Path) -> Result<ReferenceTensors> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let st =
         SafeTensors::deserialize(&bytes).map_err(|e| Error::format(path, format!("not a safetensors file: {e}")))?;
@@ -92,7 +95,7 @@ pub fn read_reference(path: &Path) -> Result<BTreeMap<String, (Vec<usize>, Vec<f
 }
 
 fn tensor4(
-    reference: &BTreeMap<String, (Vec<usize>, Vec<f32>)>,
+    reference: &ReferenceTensors,
     key: &str,
     path: &Path,
     device: &Device,
