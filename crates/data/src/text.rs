@@ -126,7 +126,7 @@ mod tests {
 
     #[test]
     fn values_are_short() {
-        assert_eq!(format_value(3.14159), "3.1");
+        assert_eq!(format_value(3.24159), "3.2");
         assert_eq!(format_value(250.4), "250");
         assert_eq!(format_value(15000.0), "15K");
         assert_eq!(format_value(2_500_000.0), "2.5M");
