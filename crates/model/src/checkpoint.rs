@@ -72,6 +72,9 @@ fn load_pytorch_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Result
             unknown.len()
         ));
     }
+    // Convolutions whose input grew start from the file's weights on their leading channels.
+    let (model, grown) = crate::grown_inputs::warm_start(model, path, &kept)?;
+    let kept = kept.into_iter().filter(|k| !grown.contains(k));
     check_finite(&model, path)?;
     Ok((model, result.missing.into_iter().map(|(k, _)| k).chain(kept).collect()))
 }
@@ -141,15 +144,20 @@ fn load_safetensors_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Re
             unused.len()
         ));
     }
+    // Convolutions whose input grew start from the file's weights on their leading channels.
+    let (model, grown) = crate::grown_inputs::warm_start(model, path, &kept)?;
+    let kept = kept.into_iter().filter(|k| !grown.contains(k));
     check_finite(&model, path)?;
     Ok((model, result.missing.into_iter().map(|(k, _)| k).chain(kept).collect()))
 }
 
 /// Loads weights by extension (`.pth`/`.pt`: official layout, `.safetensors`: ours, training
 /// checkpoints included) into `model`. With `strict`, every parameter must be in the file with
-/// its shape; otherwise parameters it lacks or holds in another shape (a layer whose input grew,
-/// such as the motion encoder's last convolution under guidance) keep their initialisation and
-/// are returned by name. Keys the model lacks and non-finite weights are errors either way.
+/// its shape; otherwise parameters it lacks or holds in another shape keep their initialisation
+/// and are returned by name, except (safetensors files) a convolution whose input channels grew,
+/// such as the motion encoder's last one under guidance: it takes the file's weights on its
+/// leading input channels and zeros on the new ones ([`crate::grown_inputs`]), so it computes
+/// what it computed before. Keys the model lacks and non-finite weights are errors either way.
 pub fn load_weights(model: RaftStereo, path: &Path, strict: bool) -> Result<(RaftStereo, Vec<String>)> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     match ext.as_str() {

@@ -11,6 +11,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod flops;
+pub mod grown_inputs;
 pub mod inference;
 pub mod network;
 pub mod profile;

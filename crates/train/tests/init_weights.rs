@@ -13,12 +13,17 @@ use dgstereo_prior::{PriorConfig, SimulatedPriorConfig};
 use dgstereo_train::Trainer;
 
 fn weights(model: &RaftStereo) -> Vec<(String, Vec<f32>)> {
-    let mut out: Vec<(String, Vec<f32>)> = model
+    shaped_weights(model).into_iter().map(|(n, _, v)| (n, v)).collect()
+}
+
+fn shaped_weights(model: &RaftStereo) -> Vec<(String, Vec<usize>, Vec<f32>)> {
+    let mut out: Vec<(String, Vec<usize>, Vec<f32>)> = model
         .collect(None, None, true)
         .into_iter()
         .map(|t| {
             let data = burn::store::bridge::to_data(&t).unwrap();
-            (t.name.clone(), data.convert::<f32>().try_to_vec::<f32>().unwrap())
+            let shape = data.shape().to_vec();
+            (t.name.clone(), shape, data.convert::<f32>().try_to_vec::<f32>().unwrap())
         })
         .collect();
     out.sort_by(|a, b| a.0.cmp(&b.0));
@@ -49,21 +54,34 @@ fn a_run_starts_from_the_given_weights() {
     let e = Trainer::new(parts.clone(), &device).err().expect("strict init refuses missing keys").to_string();
     assert!(e.contains("train.init") && e.contains("fusion"), "{e}");
     parts.train.init_strict = false;
-    // Guidance also widens the motion encoder's last convolution: another shape, kept random.
+    // Guidance also widens the motion encoder's last convolution (its inputs are the correlation
+    // and flow features, then the guidance features): the file's weights on the leading input
+    // channels, zeros on the new ones, so it computes what it computed in the baseline.
     parts.model.updater.guidance = GuidanceKind::Gradient;
-    let partial = weights(&Trainer::new(parts.clone(), &device).unwrap().inference_model());
-    let donor = weights(&donor);
-    for (name, values) in &partial {
-        match donor.iter().find(|(n, _)| n == name) {
-            Some((_, d)) if d.len() == values.len() => assert_eq!(values, d, "{name} comes from the file"),
-            Some(_) => assert!(name.starts_with("update_block.encoder"), "{name} changed shape"),
+    let partial = shaped_weights(&Trainer::new(parts.clone(), &device).unwrap().inference_model());
+    let donor_shaped = shaped_weights(&donor);
+    let mut grown = 0;
+    for (name, shape, values) in &partial {
+        match donor_shaped.iter().find(|(n, _, _)| n == name) {
+            Some((_, _, d)) if d.len() == values.len() => assert_eq!(values, d, "{name} comes from the file"),
+            Some((_, ds, d)) => {
+                assert!(name.starts_with("update_block.encoder"), "{name} changed shape");
+                assert_eq!((ds[0], &ds[2..]), (shape[0], &shape[2..]), "{name}: only the inputs grew");
+                let (old, new) = (d.len() / ds[0], values.len() / shape[0]);
+                for (o, row) in values.chunks(new).enumerate() {
+                    assert_eq!(&row[..old], &d[o * old..(o + 1) * old], "{name}: output {o}, old inputs");
+                    assert!(row[old..].iter().all(|v| *v == 0.0), "{name}: output {o}, new inputs start at zero");
+                }
+                grown += 1;
+            }
             None => assert!(
                 name.starts_with("fusion") || name.starts_with("update_block.encoder"),
                 "{name} is neither in the file nor new"
             ),
         }
     }
-    assert!(partial.iter().any(|(n, _)| n.starts_with("fusion")));
+    assert!(partial.iter().any(|(n, _, _)| n.starts_with("fusion")));
+    assert_eq!(grown, 1, "the motion encoder's last convolution grew");
 
     // A file that does not exist is named.
     parts.train.init = Some(dir.path().join("missing.safetensors"));
