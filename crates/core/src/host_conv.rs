@@ -102,8 +102,14 @@ pub fn conv2d_host_slices(
     let [sh, sw] = options.stride;
     let [(ph, ph_end), (pw, pw_end)] = options.padding;
     let [dh, dw] = options.dilation;
-    let out_h = (h + ph + ph_end - dh * (kh - 1) - 1) / sh + 1;
-    let out_w = (w + pw + pw_end - dw * (kw - 1) - 1) / sw + 1;
+    let (reach_h, reach_w) = (dh * (kh - 1) + 1, dw * (kw - 1) + 1);
+    assert!(
+        h + ph + ph_end >= reach_h && w + pw + pw_end >= reach_w,
+        "conv2d_host: a {h}x{w} input with padding {:?} is smaller than the {reach_h}x{reach_w} kernel",
+        options.padding
+    );
+    let out_h = (h + ph + ph_end - reach_h) / sh + 1;
+    let out_w = (w + pw + pw_end - reach_w) / sw + 1;
     let k = c * kh * kw;
     let plane = out_h * out_w;
     let rows_per_tile = (TILE_PIXELS / out_w.max(1)).clamp(1, out_h.max(1));
