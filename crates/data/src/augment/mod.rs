@@ -129,19 +129,7 @@ pub fn augment(
     seed: u64,
 ) -> Result<AugmentedSample> {
     let (w, h) = (left.width, left.height);
-    if (right.width, right.height) != (w, h) || (disparity.width, disparity.height) != (w, h) {
-        return Err(Error::Shape(format!(
-            "augment: left {w}x{h}, right {}x{}, disparity {}x{}",
-            right.width, right.height, disparity.width, disparity.height
-        )));
-    }
-    let valid = match valid {
-        Some(m) if (m.width, m.height) != (w, h) => {
-            return Err(Error::Shape(format!("augment: valid mask {}x{} for images {w}x{h}", m.width, m.height)));
-        }
-        Some(m) => m.clone(),
-        None => disparity.valid_finite(),
-    };
+    let valid = checked_validity(left, right, disparity, valid, DisparityMap::valid_finite)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (mut l, mut r) = (left.clone(), right.clone());
 
@@ -153,11 +141,7 @@ pub fn augment(
             gamma(&mut rng, cfg, img);
         }
     } else {
-        let p = JitterParams::draw(&mut rng, cfg.brightness, cfg.contrast, cfg.saturation, cfg.hue);
-        apply_jitter(&mut [&mut l, &mut r], &p);
-        let (g, gain) = draw_gamma(&mut rng, cfg);
-        adjust_gamma(&mut l, g, gain);
-        adjust_gamma(&mut r, g, gain);
+        jitter_jointly(&mut rng, cfg, &mut l, &mut r);
     }
 
     // Eraser.
@@ -215,6 +199,40 @@ pub fn augment(
         valid,
         scale,
     })
+}
+
+/// Checks that both views and the disparity (and `valid`, if given) have one size; returns
+/// `valid`, or `default` of the disparity when there is none.
+fn checked_validity(
+    left: &RgbImage,
+    right: &RgbImage,
+    disparity: &DisparityMap,
+    valid: Option<&Mask>,
+    default: fn(&DisparityMap) -> Mask,
+) -> Result<Mask> {
+    let (w, h) = (left.width, left.height);
+    if (right.width, right.height) != (w, h) || (disparity.width, disparity.height) != (w, h) {
+        return Err(Error::Shape(format!(
+            "augment: left {w}x{h}, right {}x{}, disparity {}x{}",
+            right.width, right.height, disparity.width, disparity.height
+        )));
+    }
+    match valid {
+        Some(m) if (m.width, m.height) != (w, h) => {
+            Err(Error::Shape(format!("augment: valid mask {}x{} for images {w}x{h}", m.width, m.height)))
+        }
+        Some(m) => Ok(m.clone()),
+        None => Ok(default(disparity)),
+    }
+}
+
+/// One colour-jitter and gamma draw applied to both views (as one stacked image in RAFT).
+fn jitter_jointly(rng: &mut ChaCha8Rng, cfg: &AugmentConfig, l: &mut RgbImage, r: &mut RgbImage) {
+    let p = JitterParams::draw(rng, cfg.brightness, cfg.contrast, cfg.saturation, cfg.hue);
+    apply_jitter(&mut [&mut *l, &mut *r], &p);
+    let (g, gain) = draw_gamma(rng, cfg);
+    adjust_gamma(l, g, gain);
+    adjust_gamma(r, g, gain);
 }
 
 fn uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {

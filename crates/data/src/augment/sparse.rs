@@ -21,8 +21,7 @@ use rand_chacha::ChaCha8Rng;
 
 use dgstereo_core::{Error, Result};
 
-use super::color::{JitterParams, adjust_gamma, apply_jitter};
-use super::{AugmentConfig, AugmentedSample, draw_gamma, erase, uniform};
+use super::{AugmentConfig, AugmentedSample, checked_validity, erase, jitter_jointly, uniform};
 use crate::image::{DisparityMap, Mask, RgbImage};
 use crate::resize::{resize_rgb, scaled_size};
 
@@ -70,28 +69,12 @@ pub fn augment_sparse(
     seed: u64,
 ) -> Result<AugmentedSample> {
     let (w, h) = (left.width, left.height);
-    if (right.width, right.height) != (w, h) || (disparity.width, disparity.height) != (w, h) {
-        return Err(Error::Shape(format!(
-            "augment: left {w}x{h}, right {}x{}, disparity {}x{}",
-            right.width, right.height, disparity.width, disparity.height
-        )));
-    }
-    let valid = match valid {
-        Some(m) if (m.width, m.height) != (w, h) => {
-            return Err(Error::Shape(format!("augment: valid mask {}x{} for images {w}x{h}", m.width, m.height)));
-        }
-        Some(m) => m.clone(),
-        None => Mask { width: w, height: h, data: disparity.data.iter().map(|d| d.is_finite() && *d > 0.0).collect() },
-    };
+    let valid = checked_validity(left, right, disparity, valid, DisparityMap::valid_positive)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (mut l, mut r) = (left.clone(), right.clone());
 
     // Colour: one draw for both views.
-    let p = JitterParams::draw(&mut rng, cfg.brightness, cfg.contrast, cfg.saturation, cfg.hue);
-    apply_jitter(&mut [&mut l, &mut r], &p);
-    let (g, gain) = draw_gamma(&mut rng, cfg);
-    adjust_gamma(&mut l, g, gain);
-    adjust_gamma(&mut r, g, gain);
+    jitter_jointly(&mut rng, cfg, &mut l, &mut r);
 
     // Eraser.
     if rng.gen_bool(cfg.eraser_prob.clamp(0.0, 1.0)) {
