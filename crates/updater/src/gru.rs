@@ -90,14 +90,24 @@ impl ConvGru {
     /// # Shapes
     /// - `hx`: `[N, hidden + input_dim, H, W]`; output `[N, 2·hidden, H, W]`
     pub fn gates(&self, hx: Tensor<4>) -> Tensor<4> {
+        let (weight, bias) = self.gate_weights();
+        let [_, _, kh, kw] = weight.dims();
+        let options = ConvOptions::new(self.convz.stride, [kh / 2, kw / 2], self.convz.dilation, self.convz.groups);
+        conv2d_op(hx, weight, bias, options)
+    }
+
+    /// The weights and biases of `convz` and `convr` stacked along the output channels: the one
+    /// convolution of both gates.
+    ///
+    /// # Shapes
+    /// - weight `[2·hidden, hidden + input_dim, kh, kw]`; bias `[2·hidden]`
+    pub(crate) fn gate_weights(&self) -> (Tensor<4>, Option<Tensor<1>>) {
         let weight = Tensor::cat(vec![self.convz.weight.val(), self.convr.weight.val()], 0);
         let bias = match (&self.convz.bias, &self.convr.bias) {
             (Some(bz), Some(br)) => Some(Tensor::cat(vec![bz.val(), br.val()], 0)),
             _ => None,
         };
-        let [_, _, kh, kw] = weight.dims();
-        let options = ConvOptions::new(self.convz.stride, [kh / 2, kw / 2], self.convz.dilation, self.convz.groups);
-        conv2d_op(hx, weight, bias, options)
+        (weight, bias)
     }
 }
 

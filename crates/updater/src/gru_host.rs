@@ -48,11 +48,8 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, x: Tensor<4>)
         dst.copy_from_slice(&src[..plane]);
     });
 
-    let zr_weight = to_vec(Tensor::cat(vec![gru.convz.weight.val(), gru.convr.weight.val()], 0));
-    let zr_bias = match (&gru.convz.bias, &gru.convr.bias) {
-        (Some(z), Some(r)) => Some(to_vec(Tensor::cat(vec![z.val(), r.val()], 0))),
-        _ => None,
-    };
+    let (zr_weight, zr_bias) = gru.gate_weights();
+    let (zr_weight, zr_bias) = (to_vec(zr_weight), zr_bias.map(to_vec));
     let [_, _, kh, kw] = gru.convz.weight.dims();
     let [_, _, qh, qw] = gru.convq.weight.dims();
     let (gates, _) = conv2d_host_slices(
