@@ -1,6 +1,7 @@
 //! The synthetic generator: exact correspondence, determinism, speed.
 
-use dgstereo_data::RgbImage;
+mod common;
+
 use dgstereo_data::synthetic::{DisparityField, Outline, Surface, SyntheticConfig, SyntheticScene, Texture, generate};
 
 fn small(seed_wl: f64) -> SyntheticConfig {
@@ -10,16 +11,6 @@ fn small(seed_wl: f64) -> SyntheticConfig {
         max_disparity: 24.0,
         ..SyntheticConfig::with_size(96, 64)
     }
-}
-
-/// Samples `img` at `(x, y)` with linear interpolation along x (clamped at the borders).
-fn sample_x(img: &RgbImage, x: f64, y: usize) -> [f32; 3] {
-    let x = x.clamp(0.0, (img.width - 1) as f64);
-    let x0 = x.floor() as usize;
-    let x1 = (x0 + 1).min(img.width - 1);
-    let t = (x - x0 as f64) as f32;
-    let (a, b) = (img.get(x0, y), img.get(x1, y));
-    [0, 1, 2].map(|c| a[c] * (1.0 - t) + b[c] * t)
 }
 
 #[test]
@@ -37,23 +28,11 @@ fn right_view_at_the_disparity_reproduces_the_left_view_exactly() {
     for seed in 0..4 {
         let scene = SyntheticScene::random(&cfg, seed);
         let s = scene.render();
-        let mut checked = 0;
-        for y in 0..s.left.height {
-            for x in 0..s.left.width {
-                let d = f64::from(s.disparity.get(x, y));
-                assert!(d.is_finite() && d >= cfg.min_disparity - 1e-6 && d <= cfg.max_disparity + 1e-6, "d {d}");
-                if s.occlusion.get(x, y) {
-                    continue;
-                }
-                // Continuous right view at x - d (the exact sampling position).
-                let r = scene.right_colour(x as f64 - d, y as f64);
-                let l = s.left.get(x, y);
-                for c in 0..3 {
-                    assert!((r[c] - l[c]).abs() < 1e-3, "seed {seed} ({x},{y}) {l:?} vs {r:?}");
-                }
-                checked += 1;
-            }
+        for &d in &s.disparity.data {
+            let d = f64::from(d);
+            assert!(d.is_finite() && d >= cfg.min_disparity - 1e-6 && d <= cfg.max_disparity + 1e-6, "d {d}");
         }
+        let checked = common::assert_right_view_matches_left(&scene, &s, seed);
         let n = s.left.width * s.left.height;
         assert!(checked > n / 2, "seed {seed}: only {checked} of {n} pixels visible in both views");
     }
@@ -65,30 +44,10 @@ fn warping_the_right_image_by_the_left_disparity_reproduces_the_left_image() {
     let cfg = small(16.0);
     for seed in 10..13 {
         let s = generate(&cfg, seed);
-        let (mut n, mut sum, mut worst) = (0usize, 0f64, 0f32);
-        for y in 0..s.left.height {
-            for x in 0..s.left.width {
-                if s.occlusion.get(x, y) {
-                    continue;
-                }
-                let xr = x as f64 - f64::from(s.disparity.get(x, y));
-                // Skip points whose interpolation mixes two surfaces of the right view.
-                let own = s.surface_left[y * s.left.width + x];
-                let (x0, x1) = (xr.floor().max(0.0) as usize, (xr.ceil().max(0.0) as usize).min(s.left.width - 1));
-                let w = s.left.width;
-                if s.surface_right[y * w + x0] != own || s.surface_right[y * w + x1] != own {
-                    continue;
-                }
-                let r = sample_x(&s.right, xr, y);
-                let l = s.left.get(x, y);
-                for c in 0..3 {
-                    let e = (r[c] - l[c]).abs();
-                    worst = worst.max(e);
-                    sum += f64::from(e);
-                }
-                n += 1;
-            }
-        }
+        let errors = common::warping_errors(&s);
+        let n = errors.len() / 3;
+        let sum: f64 = errors.iter().map(|e| f64::from(*e)).sum();
+        let worst = errors.iter().copied().fold(0f32, f32::max);
         let mean = sum / (3 * n) as f64;
         assert!(n > 2000, "seed {seed}: {n} pixels compared");
         assert!(mean < 0.5 && worst < 6.0, "seed {seed}: mean {mean}, worst {worst}");

@@ -2,7 +2,8 @@
 //! presets: exact correspondence, sharp but anti-aliased edges, reproducibility, and the default
 //! path unchanged.
 
-use dgstereo_data::RgbImage;
+mod common;
+
 use dgstereo_data::synthetic::{
     Pattern, Shading, SurfaceTexture, SyntheticConfig, SyntheticScene, TextureKind, TexturePreset, generate,
 };
@@ -16,16 +17,6 @@ fn only(kind: usize, shading_prob: f64, min_wavelength: f64) -> SyntheticConfig 
     let mut w = [0.0; 4];
     w[kind] = 1.0;
     SyntheticConfig { texture_weights: w, background_texture_weights: w, shading_prob, ..small_rich(min_wavelength) }
-}
-
-/// Samples `img` at `(x, y)` with linear interpolation along x (clamped at the borders).
-fn sample_x(img: &RgbImage, x: f64, y: usize) -> [f32; 3] {
-    let x = x.clamp(0.0, (img.width - 1) as f64);
-    let x0 = x.floor() as usize;
-    let x1 = (x0 + 1).min(img.width - 1);
-    let t = (x - x0 as f64) as f32;
-    let (a, b) = (img.get(x0, y), img.get(x1, y));
-    [0, 1, 2].map(|c| a[c] * (1.0 - t) + b[c] * t)
 }
 
 fn fnv(h: &mut u64, v: u64) {
@@ -122,20 +113,7 @@ fn rich_right_view_at_the_disparity_reproduces_the_left_view_exactly() {
         for seed in seeds {
             let scene = SyntheticScene::random(&cfg, seed);
             let s = scene.render();
-            let mut checked = 0;
-            for y in 0..s.left.height {
-                for x in 0..s.left.width {
-                    if s.occlusion.get(x, y) {
-                        continue;
-                    }
-                    let r = scene.right_colour(x as f64 - f64::from(s.disparity.get(x, y)), y as f64);
-                    let l = s.left.get(x, y);
-                    for c in 0..3 {
-                        assert!((r[c] - l[c]).abs() < 1e-3, "seed {seed} ({x},{y}) {l:?} vs {r:?}");
-                    }
-                    checked += 1;
-                }
-            }
+            let checked = common::assert_right_view_matches_left(&scene, &s, seed);
             assert!(checked > s.left.data.len() / 6, "seed {seed}: {checked} pixels visible in both views");
         }
     }
@@ -152,29 +130,11 @@ fn warping_the_rich_right_image_reproduces_the_left_image_away_from_sharp_edges(
         [(only(1, 1.0, 4.0), 10), (only(1, 1.0, 8.0), 11), (only(1, 1.0, 16.0), 12), (small_rich(4.0), 13)]
     {
         let s = generate(&cfg, seed);
-        let w = s.left.width;
-        let (mut n, mut sum, mut large) = (0usize, 0f64, 0usize);
-        for y in 0..s.left.height {
-            for x in 0..w {
-                if s.occlusion.get(x, y) {
-                    continue;
-                }
-                let xr = x as f64 - f64::from(s.disparity.get(x, y));
-                let own = s.surface_left[y * w + x];
-                let (x0, x1) = (xr.floor().max(0.0) as usize, (xr.ceil().max(0.0) as usize).min(w - 1));
-                if s.surface_right[y * w + x0] != own || s.surface_right[y * w + x1] != own {
-                    continue;
-                }
-                let (r, l) = (sample_x(&s.right, xr, y), s.left.get(x, y));
-                for c in 0..3 {
-                    let e = (r[c] - l[c]).abs();
-                    assert!(e.is_finite());
-                    sum += f64::from(e);
-                    large += usize::from(e > 10.0);
-                }
-                n += 1;
-            }
-        }
+        let errors = common::warping_errors(&s);
+        assert!(errors.iter().all(|e| e.is_finite()));
+        let n = errors.len() / 3;
+        let sum: f64 = errors.iter().map(|e| f64::from(*e)).sum();
+        let large = errors.iter().filter(|e| **e > 10.0).count();
         let mean = sum / (3 * n) as f64;
         let large = large as f64 / (3 * n) as f64;
         assert!(n > 1500, "seed {seed}: {n} pixels compared");
