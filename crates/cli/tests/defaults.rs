@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{assets, dgstereo, text};
+use common::{assets, dgstereo, infer_cones, text};
 use dgstereo_core::shared::shared_dir_for_test;
 
 /// The demo's metric `key` on all pixels with ground truth (its JSON line).
@@ -42,14 +42,8 @@ fn infer_with_a_prior_uses_the_paper_default() {
         return;
     };
     let dav2 = shared.join("golden/depth_anything_v2_vits_random.pth");
-    let cones = assets().join("cones");
     let dir = tempfile::tempdir().unwrap();
-    let o = dgstereo(&[
-        "infer",
-        "-l",
-        cones.join("left_rgb.png").to_str().unwrap(),
-        "-r",
-        cones.join("right_rgb.png").to_str().unwrap(),
+    let o = infer_cones(&[
         "--prior-weights",
         dav2.to_str().unwrap(),
         "--iters",

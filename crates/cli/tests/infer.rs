@@ -9,7 +9,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use common::{cones_dir, dgstereo};
+use common::{cones_dir, dgstereo, infer_cones};
 use dgstereo_core::shared::shared_dir_for_test;
 use dgstereo_data::{DisparityMap, load_rgb, read_disparity, save_rgb};
 
@@ -140,13 +140,7 @@ fn cones_pair_with_middlebury_calibration_and_ascii_ply() {
         "cam0=[3000 0 900; 0 3000 750; 0 0 1]\ncam1=[3000 0 900; 0 3000 750; 0 0 1]\ndoffs=0\nbaseline=100\nwidth=1800\nheight=1500\nndisp=256\n",
     )
     .unwrap();
-    let cones = cones_dir();
-    let o = dgstereo(&[
-        "infer",
-        "-l",
-        cones.join("left_rgb.png").to_str().unwrap(),
-        "-r",
-        cones.join("right_rgb.png").to_str().unwrap(),
+    let o = infer_cones(&[
         "--save",
         "pfm,npy,png16,color,preview,depth,ply",
         "--calib",

@@ -10,7 +10,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{cones_dir, dgstereo, text};
+use common::{cones_dir, dgstereo, infer_cones, text};
 /// A tiny experiment scored on `benchmark_root`, written into `dir`.
 fn tiny_experiment(dir: &Path, name: &str, benchmark_root: &Path, extra: &str) -> PathBuf {
     let toml = format!(
@@ -75,12 +75,7 @@ fn train_writes_model_log_plot_and_checkpoints() {
     assert!(log.contains(r#""kind":"validation""#), "validation at step 2 is logged");
     // The trained weights carry their config: `infer` loads them without an experiment file.
     let pred = dir.path().join("pred");
-    let o = dgstereo(&[
-        "infer",
-        "-l",
-        cones_dir().join("left_rgb.png").to_str().unwrap(),
-        "-r",
-        cones_dir().join("right_rgb.png").to_str().unwrap(),
+    let o = infer_cones(&[
         "--weights",
         out.join("model.safetensors").to_str().unwrap(),
         "--iters",
