@@ -252,10 +252,14 @@ mod tests {
         let b = Tensor::<1>::random([o], Distribution::Normal(0.0, 1.0), &device);
         let options = ConvOptions::new([stride, stride], pad, [dil, dil], 1);
         let stock = conv2d(x.clone(), wt.clone(), Some(b.clone()), options.clone());
-        let host = conv2d_host(x, wt, Some(b), &options);
+        let host = conv2d_host(x.clone(), wt.clone(), Some(b.clone()), &options);
         assert_eq!(stock.dims(), host.dims());
-        let diff = crate::tensor::max_abs_diff(stock, host);
+        let diff = crate::tensor::max_abs_diff(stock.clone(), host);
         assert!(diff < 1e-4, "n {n} c {c} o {o} {hw:?} k {k:?} s {stride} p {pad:?} d {dil}: {diff}");
+        // Without a bias: the stock result minus the bias it added.
+        let unbiased = conv2d_host(x, wt, None, &options);
+        let diff = crate::tensor::max_abs_diff(stock - b.reshape([1, o as i32, 1, 1]), unbiased);
+        assert!(diff < 1e-4, "no bias: n {n} c {c} o {o} {hw:?} k {k:?}: {diff}");
     }
 
     #[test]
@@ -288,5 +292,9 @@ mod tests {
         // Smaller again: the threads' reused column buffers hold stale values from the case above.
         case(2, 3, 4, [7, 9], [3, 3], 1, [1, 1], 1);
         case(1, 5, 4, [11, 9], [5, 5], 3, [2, 2], 1);
+        // Deep columns (40 x 9 = 360 rows), one output channel, a 1x1 image.
+        case(2, 40, 13, [21, 27], [3, 3], 1, [1, 1], 1);
+        case(1, 30, 1, [5, 70], [3, 3], 1, [1, 1], 1);
+        case(1, 64, 6, [1, 1], [1, 1], 1, [0, 0], 1);
     }
 }

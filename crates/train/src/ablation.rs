@@ -156,7 +156,10 @@ impl FinishedRun {
     /// Loads `out/model.safetensors` into the run's model and builds the run's prior.
     pub fn load(parts: &TrainParts, out: &Path, device: &Device) -> Result<Self> {
         let weights = out.join("model.safetensors");
-        let model = dgstereo_model::checkpoint::load_safetensors(parts.model.init(device)?, &weights)?;
+        let model = dgstereo_model::checkpoint::load_safetensors(
+            crate::trainer::init_model(&parts.model, device, None)?,
+            &weights,
+        )?;
         Ok(Self { model, prior: parts.prior.init(device)? })
     }
 }

@@ -4,7 +4,10 @@
 //! files), the AdamW state as one `u8` tensor [`OPTIMIZER_KEY`] (burn-optim's burnpack bytes), and
 //! in the metadata: the step, the schedule, the seed (all randomness derives from the seed and the
 //! step, see [`crate::batch`]), the map from parameter path to optimiser identity, the model
-//! config as JSON and the resolved experiment TOML.
+//! config as JSON and the resolved experiment TOML. With `train.ema_decay`, the model's keys hold
+//! the moving average and the raw trained weights follow under [`RAW_WEIGHTS_PREFIX`] (the
+//! metadata `ema_decay` says so), so weight readers get the average and resuming gets both
+//! ([`crate::ema`]).
 //!
 //! Writing is atomic: the bytes go to a hidden temporary file in the same folder, which is
 //! flushed to disk (`fsync`) and then renamed over the final name, so a reader sees the previous
@@ -18,10 +21,13 @@ use std::path::{Path, PathBuf};
 use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::Bytes;
 use dgstereo_core::{Error, Result};
+use dgstereo_model::RaftStereo;
+use dgstereo_model::checkpoint::TRAINING_STATE_PREFIX;
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
+use crate::ema::{Ema, RAW_WEIGHTS_PREFIX};
 use crate::params::{assign_param_ids, param_ids};
-use crate::trainer::{TrainParts, Trainer, adamw};
+use crate::trainer::{TrainParts, Trainer, adamw, init_model};
 
 /// The tensor holding the optimiser state.
 pub const OPTIMIZER_KEY: &str = "__train__.optimizer_burnpack";
@@ -86,17 +92,28 @@ pub fn prune_checkpoints(dir: &Path, keep: usize) -> Result<()> {
     Ok(())
 }
 
-/// The bytes of a checkpoint of `trainer`.
-pub fn checkpoint_bytes(trainer: &Trainer) -> Result<Vec<u8>> {
-    let model = trainer.inference_model();
+/// The safetensors bytes of `model`'s tensors under their module paths.
+fn tensor_bytes(model: &RaftStereo) -> Result<Vec<u8>> {
     let fail = |m: String| Error::Other(format!("cannot serialise the checkpoint: {m}"));
     let mut store = SafetensorsStore::from_bytes(None);
     model.save_into(&mut store).map_err(|e| fail(e.to_string()))?;
-    let model_bytes = store.get_bytes().map_err(|e| fail(e.to_string()))?;
+    store.get_bytes().map_err(|e| fail(e.to_string()))
+}
+
+/// The bytes of a checkpoint of `trainer`.
+pub fn checkpoint_bytes(trainer: &Trainer) -> Result<Vec<u8>> {
+    let fail = |m: String| Error::Other(format!("cannot serialise the checkpoint: {m}"));
+    let model_bytes = tensor_bytes(&trainer.shipped_model())?;
     let parsed = SafeTensors::deserialize(&model_bytes).map_err(|e| fail(e.to_string()))?;
+    // With EMA the model keys hold the average; the trained weights go under the prefix.
+    let raw_bytes = trainer.ema.as_ref().map(|_| tensor_bytes(&trainer.inference_model())).transpose()?;
+    let raw = raw_bytes.as_deref().map(SafeTensors::deserialize).transpose().map_err(|e| fail(e.to_string()))?;
     let optimizer = trainer.optimizer.into_bytes().map_err(|e| fail(format!("optimizer state: {e}")))?;
     let optimizer: &[u8] = &optimizer;
     let mut views: Vec<(String, TensorView<'_>)> = parsed.tensors();
+    if let Some(raw) = &raw {
+        views.extend(raw.tensors().into_iter().map(|(name, view)| (format!("{RAW_WEIGHTS_PREFIX}{name}"), view)));
+    }
     views.push((
         OPTIMIZER_KEY.to_string(),
         TensorView::new(Dtype::U8, vec![optimizer.len()], optimizer).map_err(|e| fail(e.to_string()))?,
@@ -118,6 +135,9 @@ pub fn checkpoint_bytes(trainer: &Trainer) -> Result<Vec<u8>> {
     meta.insert("model_config".into(), to_json(&parts.model));
     meta.insert("config".into(), parts.resolved_toml.clone());
     meta.insert("name".into(), parts.name.clone());
+    if let Some(ema) = &trainer.ema {
+        meta.insert("ema_decay".into(), ema.decay().to_string());
+    }
     safetensors::serialize(views, &Some(meta)).map_err(|e| fail(e.to_string()))
 }
 
@@ -132,6 +152,9 @@ pub fn save_checkpoint(trainer: &Trainer, dir: &Path, keep: usize) -> Result<Pat
     let path = dir.join(checkpoint_name(trainer.step));
     // Never replace good checkpoints with non-finite weights.
     dgstereo_model::checkpoint::check_finite(&trainer.inference_model(), &path)?;
+    if trainer.ema.is_some() {
+        dgstereo_model::checkpoint::check_finite(&trainer.shipped_model(), &path)?;
+    }
     write_atomic(&path, &checkpoint_bytes(trainer)?)?;
     prune_checkpoints(dir, keep)?;
     Ok(path)
@@ -146,7 +169,12 @@ pub fn read_metadata(path: &Path) -> Result<BTreeMap<String, String>> {
 }
 
 /// Restores a run from a checkpoint written by [`save_checkpoint`]: weights, parameter
-/// identities, optimiser state and step. `parts` must build the same network.
+/// identities, optimiser state, step and, with `train.ema_decay`, the moving average. `parts`
+/// must build the same network.
+///
+/// A checkpoint saved without EMA resumed with `ema_decay` set starts the average at its
+/// weights; one saved with EMA resumed without it continues from its raw trained weights. Both
+/// print a notice.
 pub fn load_checkpoint(parts: TrainParts, path: &Path, device: &burn::tensor::Device) -> Result<Trainer> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let bad = |m: String| Error::Checkpoint { path: path.into(), message: m };
@@ -171,8 +199,45 @@ pub fn load_checkpoint(parts: TrainParts, path: &Path, device: &burn::tensor::De
         .from_bytes(Bytes::from_bytes_vec(optimizer.data().to_vec()))
         .map_err(|e| bad(format!("optimizer state: {e}")))?;
 
-    let mut model = parts.model.init(device)?;
-    let mut store = SafetensorsStore::from_bytes(Some(bytes.clone())).allow_partial(true).validate(false);
+    // With EMA the model keys hold the average and the trained weights are under the prefix.
+    let raw: Vec<(String, TensorView<'_>)> = parsed
+        .tensors()
+        .into_iter()
+        .filter_map(|(name, view)| name.strip_prefix(RAW_WEIGHTS_PREFIX).map(|n| (n.to_string(), view)))
+        .collect();
+    let saved_with_ema = !raw.is_empty();
+    let model = if saved_with_ema {
+        let raw_bytes = safetensors::serialize(raw, &None).map_err(|e| bad(format!("raw weights: {e}")))?;
+        read_model(&parts, raw_bytes, path, device)?
+    } else {
+        read_model(&parts, bytes.clone(), path, device)?
+    };
+    let (model, missing) = assign_param_ids(model, &ids);
+    if let Some(p) = missing.first() {
+        return Err(bad(format!("no optimiser identity for parameter '{p}'")));
+    }
+    let mut trainer = Trainer::with_model(parts, model, device, optimizer, step)?;
+    match (trainer.parts.train.ema_decay, saved_with_ema) {
+        (Some(decay), true) => trainer.ema = Some(Ema::new(decay, read_model(&trainer.parts, bytes, path, device)?)),
+        (Some(_), false) => eprintln!(
+            "{}: saved without train.ema_decay; the moving average of the weights starts at its weights (step {step})",
+            path.display()
+        ),
+        (None, true) => eprintln!(
+            "{}: saved with train.ema_decay, which is no longer set; continuing from its raw trained weights without a moving average",
+            path.display()
+        ),
+        (None, false) => {}
+    }
+    Ok(trainer)
+}
+
+/// The model of `parts` with the weights of the safetensors `bytes` (read from `path`) under
+/// their module paths; every weight must be there, and keys under `__train__.` are skipped.
+fn read_model(parts: &TrainParts, bytes: Vec<u8>, path: &Path, device: &burn::tensor::Device) -> Result<RaftStereo> {
+    let bad = |m: String| Error::Checkpoint { path: path.into(), message: m };
+    let mut model = init_model(&parts.model, device, None)?;
+    let mut store = SafetensorsStore::from_bytes(Some(bytes)).allow_partial(true).validate(false);
     let result = model.load_from(&mut store).map_err(|e| bad(format!("cannot read the weights: {e}")))?;
     if let Some(e) = result.errors.first() {
         return Err(bad(e.to_string()));
@@ -180,21 +245,18 @@ pub fn load_checkpoint(parts: TrainParts, path: &Path, device: &burn::tensor::De
     if let Some((k, _)) = result.missing.first() {
         return Err(bad(format!("missing weight '{k}' ({} in all)", result.missing.len())));
     }
-    if let Some(k) = result.unused.iter().find(|k| k.as_str() != OPTIMIZER_KEY) {
+    if let Some(k) = result.unused.iter().find(|k| !k.starts_with(TRAINING_STATE_PREFIX)) {
         return Err(bad(format!("unknown weight '{k}'")));
     }
     dgstereo_model::checkpoint::check_finite(&model, path)?;
-    let (model, missing) = assign_param_ids(model, &ids);
-    if let Some(p) = missing.first() {
-        return Err(bad(format!("no optimiser identity for parameter '{p}'")));
-    }
-    Trainer::with_model(parts, model, device, optimizer, step)
+    Ok(model)
 }
 
 #[cfg(test)]
 mod tests {
     #[test]
-    fn optimizer_state_is_under_the_prefix_weight_loading_skips() {
+    fn training_state_is_under_the_prefix_weight_loading_skips() {
         assert!(super::OPTIMIZER_KEY.starts_with(dgstereo_model::checkpoint::TRAINING_STATE_PREFIX));
+        assert!(crate::ema::RAW_WEIGHTS_PREFIX.starts_with(dgstereo_model::checkpoint::TRAINING_STATE_PREFIX));
     }
 }

@@ -57,6 +57,11 @@ pub struct TrainingConfig {
     /// with guidance, when the paper's model starts from RAFT-Stereo weights). Keys the model
     /// lacks are always an error.
     pub init_strict: bool,
+    /// Decay of an exponential moving average of the weights ([`crate::ema`]), in `[0, 1)`;
+    /// absent: no average. When set, validation, the checkpoints' model weights and the final
+    /// `model.safetensors` are the average (e.g. 0.999: about the last thousand steps).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ema_decay: Option<f64>,
 }
 
 impl Default for TrainingConfig {
@@ -80,6 +85,7 @@ impl Default for TrainingConfig {
             validate_every: 5000,
             init: None,
             init_strict: true,
+            ema_decay: None,
         }
     }
 }
@@ -121,6 +127,11 @@ impl TrainingConfig {
         }
         if self.keep_checkpoints == 0 {
             return err("train.keep_checkpoints must be at least 1".into());
+        }
+        if let Some(d) = self.ema_decay
+            && !(d.is_finite() && (0.0..1.0).contains(&d))
+        {
+            return err(format!("train.ema_decay = {d}: must be a finite value in [0, 1)"));
         }
         Ok(())
     }

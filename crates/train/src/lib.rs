@@ -12,6 +12,8 @@
 //! checkpoint ([`checkpoint`]) holding the weights, the optimiser state, the parameter identities
 //! and the step reproduces an uninterrupted run exactly. [`run::train`] is the loop: logging
 //! (JSONL, progress bar), validation, plots and atomic checkpoints that keep the last N.
+//! `train.ema_decay` adds a moving average of the weights ([`ema`]) that validation, checkpoints'
+//! model weights and the final model use.
 #![deny(missing_docs)]
 
 pub mod ablation;
@@ -19,6 +21,7 @@ pub mod batch;
 pub mod checkpoint;
 pub mod clip;
 mod config;
+pub mod ema;
 pub mod params;
 pub mod plot;
 pub mod run;

@@ -4,24 +4,26 @@
 //! the parameter, and safetensors files carry no identity. A checkpoint therefore stores the map
 //! from module path to id, and resuming re-labels the freshly built model's parameters with the
 //! saved ids ([`assign_param_ids`]) so the saved optimiser state attaches to the same tensors.
+//! burn also draws a parameter's initial value lazily, at its first use; [`materialize`] draws
+//! them all at once.
 
 use std::collections::BTreeMap;
 
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
-use burn::tensor::Tensor;
+use burn::tensor::{Bool, Int, Tensor};
 
 /// Tracks the dotted module path during a traversal.
 #[derive(Default)]
-struct PathStack(Vec<String>);
+pub(crate) struct PathStack(Vec<String>);
 
 impl PathStack {
-    fn enter(&mut self, name: &str) {
+    pub(crate) fn enter(&mut self, name: &str) {
         self.0.push(name.to_string());
     }
-    fn exit(&mut self) {
+    pub(crate) fn exit(&mut self) {
         self.0.pop();
     }
-    fn current(&self) -> String {
+    pub(crate) fn current(&self) -> String {
         self.0.join(".")
     }
 }
@@ -89,4 +91,24 @@ pub fn assign_param_ids<M: Module>(module: M, ids: &BTreeMap<String, u64>) -> (M
     let mut assigner = IdAssigner { path: PathStack::default(), ids, missing: Vec::new() };
     let module = module.map(&mut assigner);
     (module, assigner.missing)
+}
+
+struct Materializer;
+
+impl ModuleVisitor for Materializer {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let _ = param.val();
+    }
+    fn visit_int<const D: usize>(&mut self, param: &Param<Tensor<D, Int>>) {
+        let _ = param.val();
+    }
+    fn visit_bool<const D: usize>(&mut self, param: &Param<Tensor<D, Bool>>) {
+        let _ = param.val();
+    }
+}
+
+/// Draws the initial value of every lazily initialised parameter of `module` now, in module
+/// order (the order a first traversal would draw them in).
+pub fn materialize<M: Module>(module: &M) {
+    module.visit(&mut Materializer);
 }

@@ -4,11 +4,13 @@
 //! - `config.toml`: the resolved experiment;
 //! - `log.jsonl`: one JSON object per logged step (`kind = "train"`: step, loss, epe, bad3, lr,
 //!   steps_per_s, grad_norm) and per validation (`kind = "validation"`: step and the eval
-//!   crate's metrics), `step` counting completed steps;
+//!   crate's metrics), `step` counting completed steps; with `train.ema_decay` validation
+//!   scores the moving average of the weights and its lines say `"weights": "ema"`;
 //! - `curves.png`: training and validation curves, rewritten at every validation;
 //! - `checkpoints/step-NNNNNNNN.safetensors`: the newest `keep_checkpoints` training checkpoints;
-//! - `model.safetensors` and `summary.json`: the final weights (loadable by `dgstereo infer`) and
-//!   the final metrics, written when the run completes; their presence marks a finished run.
+//! - `model.safetensors` and `summary.json`: the final weights (loadable by `dgstereo infer`; the
+//!   moving average with `train.ema_decay`) and the final metrics, written when the run
+//!   completes; their presence marks a finished run.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -194,16 +196,21 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
             !validation.is_empty() && ((t.validate_every > 0 && done % t.validate_every == 0) || done == t.steps);
         if validate_now {
             let m = validation.evaluate(
-                &trainer.inference_model(),
+                &trainer.shipped_model(),
                 &trainer.parts.model,
                 trainer.prior(),
                 &trainer.device,
             )?;
-            append_line(
-                &log_path,
-                &json!({"kind": "validation", "step": done, "epe": m.epe, "bad3": m.bad_3, "metrics": metrics_json(&m)}),
-            )?;
-            bar.println(format!("validation at step {done}: EPE {:.3} px, bad-3 {:.2} %", m.epe, m.bad_3));
+            let mut line =
+                json!({"kind": "validation", "step": done, "epe": m.epe, "bad3": m.bad_3, "metrics": metrics_json(&m)});
+            let weights = if trainer.ema.is_some() {
+                line["weights"] = json!("ema");
+                " (EMA weights)"
+            } else {
+                ""
+            };
+            append_line(&log_path, &line)?;
+            bar.println(format!("validation{weights} at step {done}: EPE {:.3} px, bad-3 {:.2} %", m.epe, m.bad_3));
             curves.valid_epe.push((done as f64, m.epe));
             write_plot(&curves, &plot_path)?;
             summary.validation = Some(m);
@@ -220,16 +227,22 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
             write_plot(&curves, &plot_path)?;
         }
         let model_config = serde_json::to_string(&trainer.parts.model).map_err(|e| Error::Other(e.to_string()))?;
+        let ema_decay = trainer.ema.as_ref().map(|e| e.decay().to_string());
+        let mut metadata = vec![("model_config", model_config.as_str()), ("config", &trainer.parts.resolved_toml)];
+        metadata.extend(ema_decay.as_deref().map(|d| ("ema_decay", d)));
         dgstereo_model::checkpoint::save_safetensors(
-            &trainer.inference_model(),
+            &trainer.shipped_model(),
             &out.join("model.safetensors"),
-            &[("model_config", &model_config), ("config", &trainer.parts.resolved_toml)],
+            &metadata,
         )?;
         let last = summary.last.map(|r| json!({"loss": r.loss, "epe": r.epe, "bad3": r.bad3}));
-        let summary_json = json!({
+        let mut summary_json = json!({
             "name": trainer.parts.name, "steps": trainer.step, "last_train": last,
             "validation": summary.validation.as_ref().map(metrics_json),
         });
+        if let Some(ema) = &trainer.ema {
+            summary_json["ema_decay"] = json!(ema.decay());
+        }
         crate::checkpoint::write_atomic(&out.join("summary.json"), format!("{summary_json:#}\n").as_bytes())?;
     }
     Ok(summary)

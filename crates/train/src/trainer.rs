@@ -1,4 +1,5 @@
-//! One training step: batch, prior, forward over all iterations, loss, backward, clip, AdamW.
+//! One training step: batch, prior, forward over all iterations, loss, backward, clip, AdamW,
+//! and with `train.ema_decay` the update of the weights' moving average ([`crate::ema`]).
 
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
@@ -13,6 +14,8 @@ use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 use crate::batch::{TensorBatch, TrainingData, to_tensors};
 use crate::clip::clip_global_norm;
 use crate::config::{TrainingConfig, TrainingDataConfig};
+use crate::ema::Ema;
+use crate::params::materialize;
 use crate::schedule::OneCycleLr;
 
 /// Everything a run is made of: the experiment's parts and its resolved text.
@@ -80,6 +83,8 @@ pub struct Trainer {
     pub schedule: OneCycleLr,
     /// Steps taken so far (the index of the next step).
     pub step: usize,
+    /// The moving average of the weights, when `train.ema_decay` is set.
+    pub ema: Option<Ema>,
     /// The plain device (validation, data).
     pub device: Device,
     /// The autodiff device.
@@ -96,6 +101,25 @@ pub fn adamw(train: &TrainingConfig) -> ModuleOptimizer {
         .with_epsilon(train.eps as f32)
         .with_weight_decay(train.weight_decay as f32)
         .init()
+}
+
+/// A freshly initialised network of `config` on `device`, the backend's generator first seeded
+/// with `seed` when given.
+///
+/// The generator may be process-wide and burn draws parameters lazily, at their first use: every
+/// initialisation of this crate seeds and draws all parameters ([`materialize`]) under one lock,
+/// so runs started concurrently in one process (tests, ablations) get the same initial weights,
+/// and a network built only to receive loaded weights (`seed = None`) does not draw from another
+/// run's seeded sequence.
+pub fn init_model(config: &ModelConfig, device: &Device, seed: Option<u64>) -> Result<RaftStereo> {
+    static INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _guard = INIT.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some(seed) = seed {
+        device.seed(seed);
+    }
+    let model = config.init(device)?;
+    materialize(&model);
+    Ok(model)
 }
 
 /// The prior of a batch, or `None` when the model does not use one.
@@ -156,14 +180,7 @@ impl Trainer {
     /// A fresh run: weights initialised from `train.seed` on `device`.
     pub fn new(parts: TrainParts, device: &Device) -> Result<Self> {
         parts.validate()?;
-        // The backend's generator may be process-wide: seed and draw under one lock, so runs
-        // started concurrently in one process (tests, ablations) get the same initial weights.
-        static INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
-        let model = {
-            let _guard = INIT.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-            device.seed(parts.train.seed);
-            parts.model.init(device)?
-        };
+        let model = init_model(&parts.model, device, Some(parts.train.seed))?;
         let model = match &parts.train.init {
             Some(path) => {
                 let (model, missing) = dgstereo_model::checkpoint::load_weights(model, path, parts.train.init_strict)
@@ -184,7 +201,8 @@ impl Trainer {
         Self::with_model(parts, model, device, optimizer, 0)
     }
 
-    /// A run from given weights (plain device), optimiser and step counter.
+    /// A run from given weights (plain device), optimiser and step counter; with
+    /// `train.ema_decay`, the average starts at these weights.
     pub fn with_model(
         parts: TrainParts,
         model: RaftStereo,
@@ -199,7 +217,8 @@ impl Trainer {
             OneCycleLr::new(parts.train.lr, parts.train.schedule_total_steps(), parts.train.warmup_fraction)?;
         let data = TrainingData::new(&parts.data, &parts.train)?;
         let prior = parts.prior.init(device)?;
-        Ok(Self { parts, model, optimizer, schedule, step, device: device.clone(), autodiff, data, prior })
+        let ema = parts.train.ema_decay.map(|decay| Ema::new(decay, model.valid()));
+        Ok(Self { parts, model, optimizer, schedule, step, ema, device: device.clone(), autodiff, data, prior })
     }
 
     /// Takes one step. On NaN or inf in the loss or the gradients, fails naming the step and
@@ -241,6 +260,9 @@ impl Trainer {
         let lr = self.schedule.lr(step);
         self.model = self.optimizer.step(lr, self.model.clone(), grads);
         self.step += 1;
+        if let Some(ema) = &mut self.ema {
+            ema.update(&self.model, self.step);
+        }
         let m = sums.metrics();
         Ok(StepReport { step, loss: loss_value, epe: m.epe, bad3: m.bad_3, lr, grad_norm: clip.total_norm })
     }
@@ -250,8 +272,18 @@ impl Trainer {
         &self.prior
     }
 
-    /// The network without autodiff, for inference and saving.
+    /// The trained weights without autodiff (not averaged; see [`Trainer::shipped_model`]).
     pub fn inference_model(&self) -> RaftStereo {
         self.model.valid()
+    }
+
+    /// The weights the run validates, stores under the model keys of its checkpoints and
+    /// writes as its final model: the moving average when `train.ema_decay` is set, else the
+    /// trained weights.
+    pub fn shipped_model(&self) -> RaftStereo {
+        match &self.ema {
+            Some(ema) => ema.model().clone(),
+            None => self.inference_model(),
+        }
     }
 }

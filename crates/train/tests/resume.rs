@@ -9,6 +9,7 @@ use dgstereo_model::RaftStereo;
 use dgstereo_train::Trainer;
 use dgstereo_train::checkpoint::{list_checkpoints, load_checkpoint, save_checkpoint, write_atomic};
 use dgstereo_train::run::{RunOptions, checkpoint_dir, train};
+use dgstereo_train::trainer::init_model;
 
 fn weights(model: &RaftStereo) -> Vec<(String, Vec<f32>)> {
     use burn::store::ModuleSnapshot;
@@ -67,7 +68,9 @@ fn stopped_and_resumed_run_equals_uninterrupted_run() {
     assert!(diff <= 1e-6, "resumed weights differ by {diff}");
     // A training checkpoint also loads as plain weights (its optimiser state is skipped).
     let (_, newest) = list_checkpoints(&checkpoint_dir(&full)).unwrap().pop().unwrap();
-    let as_weights = dgstereo_model::checkpoint::load_safetensors(parts.model.init(&device).unwrap(), &newest).unwrap();
+    let as_weights =
+        dgstereo_model::checkpoint::load_safetensors(init_model(&parts.model, &device, None).unwrap(), &newest)
+            .unwrap();
     assert_eq!(max_diff(&weights(&as_weights), &weights(&a.inference_model())), 0.0);
     // The weights did change over training, so equality is not trivial.
     let fresh = Trainer::new(parts.clone(), &device).unwrap();
