@@ -17,7 +17,7 @@ use std::hint::black_box;
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Distribution, Int, Tensor};
-use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use criterion::{BenchmarkId, Criterion, criterion_group};
 use dgstereo_core::default_device;
 use dgstereo_costvolume::{
     CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, LookupKernel, OnTheFlyCorrelation,
@@ -215,4 +215,10 @@ fn training_step(c: &mut Criterion) {
 }
 
 criterion_group!(benches, encoders, convolution, correlation, update, forward, training_step);
-criterion_main!(benches);
+/// `criterion_main!` with the allocator setting the `dgstereo` binary makes, so the stages are
+/// timed as the binary runs them.
+fn main() {
+    dgstereo_core::allocator::retain_freed_memory();
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}

@@ -51,6 +51,7 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    dgstereo_core::allocator::retain_freed_memory();
     let result = match cli.command {
         Command::Demo(a) => commands::demo::run(a),
         Command::Infer(a) => commands::infer::run(a),

@@ -5,9 +5,11 @@
 //! here is what more than one stage needs: the device choice, the error type, the input padder
 //! that makes any image size a multiple of 32, fixed bilinear resampling expressed as matrix
 //! products (they differentiate on every backend, unlike the GPU backends' resize), a few tensor
-//! helpers, the locator of the shared reference data and the stage clock of the profiler.
+//! helpers, the locator of the shared reference data, the stage clock of the profiler and the allocator
+//! setting the binaries make at start.
 #![deny(missing_docs)]
 
+pub mod allocator;
 pub mod device;
 pub mod error;
 pub mod host_conv;
