@@ -13,6 +13,7 @@ pub mod allocator;
 pub mod device;
 pub mod error;
 pub mod host_conv;
+pub mod host_norm;
 pub mod layers;
 pub mod padding;
 pub mod resample;

@@ -4,7 +4,9 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 /// A tensor's values as a flat `Vec<f32>` in row-major order.
 pub fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().convert::<f32>().try_to_vec::<f32>().expect("float tensor data")
+    // `try_into_vec` takes the buffer over when the tensor owned it alone (no copy), where
+    // `try_to_vec` would always copy it.
+    t.into_data().convert::<f32>().try_into_vec::<f32>().expect("float tensor data")
 }
 
 /// A float tensor of `shape` from row-major `values`.

@@ -2,7 +2,7 @@
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
-use burn::tensor::{Device, Tensor, activation::relu};
+use burn::tensor::{Device, Tensor};
 use dgstereo_core::host_conv::conv2d_forward;
 use dgstereo_core::layers::{ConvInit, conv2d};
 
@@ -89,7 +89,7 @@ impl ContextEncoder {
 
     /// The trunk output at 1/f (`[N, trunk[2], H/f, W/f]`).
     pub fn trunk(&self, image: Tensor<4>) -> Tensor<4> {
-        let x = relu(self.norm1.forward(conv2d_forward(&self.conv1, image)));
+        let x = self.norm1.forward_relu(conv2d_forward(&self.conv1, image), true);
         let x = forward_layer(&self.layer1, x);
         let x = forward_layer(&self.layer2, x);
         forward_layer(&self.layer3, x)

@@ -2,7 +2,7 @@
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
-use burn::tensor::{Device, Tensor, activation::relu};
+use burn::tensor::{Device, Tensor};
 use dgstereo_core::host_conv::conv2d_forward;
 use dgstereo_core::layers::{ConvInit, conv2d};
 
@@ -56,7 +56,7 @@ impl FeatureEncoder {
 
 impl FeatureExtractor for FeatureEncoder {
     fn features(&self, images: Tensor<4>) -> Tensor<4> {
-        let x = relu(self.norm1.forward(conv2d_forward(&self.conv1, images)));
+        let x = self.norm1.forward_relu(conv2d_forward(&self.conv1, images), true);
         let x = forward_layer(&self.layer1, x);
         let x = forward_layer(&self.layer2, x);
         let x = forward_layer(&self.layer3, x);

@@ -2,8 +2,11 @@
 
 use burn::module::{Module, Param};
 use burn::nn::Identity;
+use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::tensor::instance_norm;
+use dgstereo_core::device::host_kernels_apply;
+use dgstereo_core::host_norm::{PlaneNorm, normalize_planes};
+use dgstereo_core::tensor::{instance_norm, to_vec};
 use serde::{Deserialize, Serialize};
 
 const EPS: f64 = 1e-5;
@@ -58,6 +61,32 @@ impl Norm {
             Self::None(_) => x,
         }
     }
+
+    /// [`forward`](Self::forward), then a ReLU when `relu_after`. For CPU inference
+    /// ([`host_kernels_apply`]) the batch, instance and no norm run as one parallel host pass
+    /// with the ReLU ([`normalize_planes`]); elsewhere, and for the group norm, the tensor
+    /// operations.
+    ///
+    /// # Shapes
+    /// - `x`: `[N, C, H, W]`; output: the same
+    pub fn forward_relu(&self, x: Tensor<4>, relu_after: bool) -> Tensor<4> {
+        if host_kernels_apply(&x.device()) {
+            match self {
+                Self::Batch(n) => {
+                    let (scale, shift) = n.scale_shift();
+                    let (scale, shift) = (to_vec(scale), to_vec(shift));
+                    return normalize_planes(x, PlaneNorm::Affine { scale: &scale, shift: &shift }, relu_after);
+                }
+                Self::Instance(n) => {
+                    return normalize_planes(x, PlaneNorm::Instance { epsilon: n.epsilon }, relu_after);
+                }
+                Self::None(_) => return normalize_planes(x, PlaneNorm::Identity, relu_after),
+                Self::Group(_) => {}
+            }
+        }
+        let y = self.forward(x);
+        if relu_after { relu(y) } else { y }
+    }
 }
 
 /// BatchNorm in evaluation mode at all times (RAFT-Stereo's `freeze_bn`).
@@ -91,11 +120,20 @@ impl FrozenBatchNorm {
         }
     }
 
+    /// The per-channel affine the layer applies: `(weight / sqrt(var + eps), bias - mean · scale)`.
+    ///
+    /// # Shapes
+    /// - both `[C]`
+    pub fn scale_shift(&self) -> (Tensor<1>, Tensor<1>) {
+        let scale = self.weight.val() / self.running_var.val().detach().add_scalar(self.epsilon).sqrt();
+        let shift = self.bias.val() - self.running_mean.val().detach() * scale.clone();
+        (scale, shift)
+    }
+
     /// Normalises `[N, C, H, W]` with the running statistics.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let c = self.weight.dims()[0];
-        let scale = self.weight.val() / self.running_var.val().detach().add_scalar(self.epsilon).sqrt();
-        let shift = self.bias.val() - self.running_mean.val().detach() * scale.clone();
+        let (scale, shift) = self.scale_shift();
         x * scale.reshape([1, c, 1, 1]) + shift.reshape([1, c, 1, 1])
     }
 }

@@ -3,7 +3,9 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor, activation::relu};
+use dgstereo_core::device::host_kernels_apply;
 use dgstereo_core::host_conv::conv2d_forward;
+use dgstereo_core::host_norm::add_relu;
 use dgstereo_core::layers::{ConvInit, conv2d};
 
 use crate::norm::{Norm, NormKind};
@@ -49,13 +51,13 @@ impl ResidualBlock {
 
     /// Applies the block.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = relu(self.norm1.forward(conv2d_forward(&self.conv1, x.clone())));
-        let y = relu(self.norm2.forward(conv2d_forward(&self.conv2, y)));
+        let y = self.norm1.forward_relu(conv2d_forward(&self.conv1, x.clone()), true);
+        let y = self.norm2.forward_relu(conv2d_forward(&self.conv2, y), true);
         let x = match (&self.downsample, &self.norm3) {
-            (Some(conv), Some(norm)) => norm.forward(conv2d_forward(conv, x)),
+            (Some(conv), Some(norm)) => norm.forward_relu(conv2d_forward(conv, x), false),
             _ => x,
         };
-        relu(x + y)
+        if host_kernels_apply(&x.device()) { add_relu(x, y) } else { relu(x + y) }
     }
 }
 

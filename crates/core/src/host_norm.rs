@@ -1,0 +1,141 @@
+//! Per-channel normalisation with an optional ReLU in one parallel pass per plane, for CPU
+//! inference.
+//!
+//! Design decision: burn's instance norm is six tensor operations (two means, a subtraction, a
+//! square, a root and a division), a frozen batch norm two and the ReLU after either one more,
+//! each a full pass over the activation on one thread of burn Flex. In the feature encoder's
+//! full-resolution layers (2 images x 64 channels x 192 x 224 at 384x448) that is most of the
+//! time outside the convolutions. Here each `(image, channel)` plane is one rayon task: its
+//! statistics in `f64`, then normalisation, affine and ReLU in the same pass. Only for plain CPU
+//! tensors without autodiff ([`crate::device::host_kernels_apply`]); the tensor operations stay
+//! the reference and the path for training and the GPU, and the tests check both agree.
+
+use burn::tensor::{Tensor, TensorData};
+use rayon::prelude::*;
+
+use crate::tensor::to_vec;
+
+/// What [`normalize_planes`] does to each plane before the optional ReLU.
+#[derive(Debug, Clone, Copy)]
+pub enum PlaneNorm<'a> {
+    /// Instance norm: subtract the plane's mean, divide by `sqrt(var + epsilon)` (biased
+    /// variance), no affine.
+    Instance {
+        /// Added to the variance.
+        epsilon: f64,
+    },
+    /// `x * scale[c] + shift[c]` (a frozen batch norm folded to one affine per channel).
+    Affine {
+        /// Per-channel factor.
+        scale: &'a [f32],
+        /// Per-channel offset.
+        shift: &'a [f32],
+    },
+    /// Nothing (only the ReLU, if asked).
+    Identity,
+}
+
+/// `norm` applied to every `(n, c)` plane of `x`, then `max(0, ·)` when `relu`.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; output: the same
+///
+/// # Panics
+/// When an affine norm's `scale` or `shift` does not have `C` entries.
+pub fn normalize_planes(x: Tensor<4>, norm: PlaneNorm<'_>, relu: bool) -> Tensor<4> {
+    let device = x.device();
+    let dims = x.dims();
+    let [_, c, h, w] = dims;
+    if let PlaneNorm::Affine { scale, shift } = norm {
+        assert!(
+            scale.len() == c && shift.len() == c,
+            "affine norm of {} / {} entries for {c} channels",
+            scale.len(),
+            shift.len()
+        );
+    }
+    let plane = h * w;
+    let mut values = to_vec(x);
+    values.par_chunks_mut(plane.max(1)).enumerate().for_each(|(i, p)| {
+        let (a, b) = match norm {
+            PlaneNorm::Instance { epsilon } => {
+                let mean = p.iter().map(|&v| v as f64).sum::<f64>() / plane as f64;
+                let var = p.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / plane as f64;
+                let inv = 1.0 / (var + epsilon).sqrt();
+                (inv as f32, (-mean * inv) as f32)
+            }
+            PlaneNorm::Affine { scale, shift } => (scale[i % c], shift[i % c]),
+            PlaneNorm::Identity => (1.0, 0.0),
+        };
+        if relu {
+            p.iter_mut().for_each(|v| *v = (*v * a + b).max(0.0));
+        } else {
+            p.iter_mut().for_each(|v| *v = *v * a + b);
+        }
+    });
+    Tensor::from_data(TensorData::new(values, dims), &device)
+}
+
+/// `max(0, a + b)` in one parallel pass.
+///
+/// # Shapes
+/// - `a`, `b`: `[N, C, H, W]`, equal; output: the same
+///
+/// # Panics
+/// When the shapes differ.
+pub fn add_relu(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
+    let device = a.device();
+    let dims = a.dims();
+    assert_eq!(dims, b.dims(), "add_relu: shapes differ");
+    let mut values = to_vec(a);
+    let other = to_vec(b);
+    const CHUNK: usize = 1 << 14;
+    values.par_chunks_mut(CHUNK).zip(other.par_chunks(CHUNK)).for_each(|(v, o)| {
+        v.iter_mut().zip(o).for_each(|(v, o)| *v = (*v + o).max(0.0));
+    });
+    Tensor::from_data(TensorData::new(values, dims), &device)
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::tensor::activation::relu;
+    use burn::tensor::{Device, Distribution};
+
+    use super::*;
+    use crate::tensor::{instance_norm, max_abs_diff};
+
+    fn random(dims: [usize; 4]) -> Tensor<4> {
+        Tensor::random(dims, Distribution::Normal(0.5, 2.0), &Device::flex())
+    }
+
+    #[test]
+    fn planes_agree_with_the_tensor_operations() {
+        let x = random([2, 5, 7, 9]);
+        for relu_after in [false, true] {
+            let stock = instance_norm(x.clone(), 1e-5);
+            let stock = if relu_after { relu(stock) } else { stock };
+            let host = normalize_planes(x.clone(), PlaneNorm::Instance { epsilon: 1e-5 }, relu_after);
+            assert!(max_abs_diff(stock, host) < 1e-5);
+        }
+        let scale = [0.5, -1.0, 2.0, 0.0, 1.5];
+        let shift = [0.1, 0.2, -0.3, 0.4, 0.0];
+        let s = Tensor::<1>::from_floats(scale, &Device::flex()).reshape([1, 5, 1, 1]);
+        let t = Tensor::<1>::from_floats(shift, &Device::flex()).reshape([1, 5, 1, 1]);
+        let stock = relu(x.clone() * s + t);
+        let host = normalize_planes(x.clone(), PlaneNorm::Affine { scale: &scale, shift: &shift }, true);
+        assert!(max_abs_diff(stock, host) < 1e-6);
+        assert!(max_abs_diff(relu(x.clone()), normalize_planes(x, PlaneNorm::Identity, true)) == 0.0);
+    }
+
+    #[test]
+    fn add_relu_agrees_with_the_tensor_operations() {
+        let (a, b) = (random([1, 3, 70, 300]), random([1, 3, 70, 300]));
+        assert!(max_abs_diff(relu(a.clone() + b.clone()), add_relu(a, b)) == 0.0);
+    }
+
+    #[test]
+    #[should_panic(expected = "affine norm of 2 / 2 entries for 5 channels")]
+    fn an_affine_norm_of_the_wrong_width_is_refused() {
+        normalize_planes(random([1, 5, 2, 2]), PlaneNorm::Affine { scale: &[1.0, 1.0], shift: &[0.0, 0.0] }, false);
+    }
+}

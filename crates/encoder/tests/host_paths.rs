@@ -1,0 +1,68 @@
+//! The encoders' CPU-inference path (host convolution, fused norm + ReLU and residual sum) gives
+//! the tensor operations' result: the same module run on the autodiff device takes burn's
+//! operations only.
+
+use burn::module::{Module, Param};
+use burn::tensor::{Device, Distribution, Tensor};
+use dgstereo_core::tensor::max_abs_diff;
+use dgstereo_encoder::norm::Norm;
+use dgstereo_encoder::residual::ResidualBlock;
+use dgstereo_encoder::{ContextEncoder, ContextExtractor, FeatureEncoder, FeatureExtractor, NormKind};
+
+fn image(device: &Device) -> Tensor<4> {
+    Tensor::random([2, 3, 32, 48], Distribution::Uniform(-1.0, 1.0), device)
+}
+
+/// Gives every frozen batch norm of a block non-trivial statistics and affine parameters.
+fn perturb_batch_norm(norm: &mut Norm, device: &Device) {
+    if let Norm::Batch(bn) = norm {
+        let c = bn.weight.dims()[0];
+        let draw = |lo: f64, hi: f64| Tensor::<1>::random([c], Distribution::Uniform(lo, hi), device);
+        bn.weight = Param::from_tensor(draw(0.5, 1.5));
+        bn.bias = Param::from_tensor(draw(-0.5, 0.5));
+        bn.running_mean = Param::from_tensor(draw(-0.3, 0.3)).set_require_grad(false);
+        bn.running_var = Param::from_tensor(draw(0.5, 2.0)).set_require_grad(false);
+    }
+}
+
+fn perturb_block(block: &mut ResidualBlock, device: &Device) {
+    perturb_batch_norm(&mut block.norm1, device);
+    perturb_batch_norm(&mut block.norm2, device);
+    if let Some(norm) = &mut block.norm3 {
+        perturb_batch_norm(norm, device);
+    }
+}
+
+#[test]
+fn feature_encoder_host_path_equals_tensor_operations() {
+    let device = Device::flex();
+    let encoder = FeatureEncoder::new(32, [16, 24, 32], NormKind::Instance, 2, &device);
+    let x = image(&device);
+    let host = encoder.features(x.clone());
+    let ad = device.clone().autodiff();
+    let stock = encoder.fork(&ad).features(Tensor::from_data(x.into_data(), &ad));
+    let stock = Tensor::<4>::from_data(stock.into_data(), &device);
+    let diff = max_abs_diff(host, stock);
+    assert!(diff < 1e-4, "feature encoder: host and tensor paths differ by {diff}");
+}
+
+#[test]
+fn context_encoder_host_path_equals_tensor_operations() {
+    let device = Device::flex();
+    let mut encoder = ContextEncoder::new([16, 16, 16], [16, 24, 32], NormKind::Batch, 2, &device);
+    perturb_batch_norm(&mut encoder.norm1, &device);
+    for block in encoder.layer1.iter_mut().chain(&mut encoder.layer2).chain(&mut encoder.layer3) {
+        perturb_block(block, &device);
+    }
+    let x = image(&device);
+    let host = encoder.context(x.clone(), 3);
+    let ad = device.clone().autodiff();
+    let stock = encoder.fork(&ad).context(Tensor::from_data(x.into_data(), &ad), 3);
+    for (level, (h, s)) in host.levels.iter().zip(&stock.levels).enumerate() {
+        for j in 0..2 {
+            let s = Tensor::<4>::from_data(s[j].clone().into_data(), &device);
+            let diff = max_abs_diff(h[j].clone(), s);
+            assert!(diff < 1e-4, "context level {level} head {j}: host and tensor paths differ by {diff}");
+        }
+    }
+}
