@@ -42,6 +42,30 @@ pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     }
 }
 
+/// `relu(conv.forward(x))`: on CPU inference the host kernel applies the ReLU while it writes
+/// the output (no extra pass), elsewhere burn's convolution and ReLU.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; output `[N, O, H_out, W_out]`
+pub fn conv2d_relu_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    match conv_options(conv) {
+        Some(options) if host_kernels_apply(&x.device()) => {
+            let bias = conv.bias.as_ref().map(|b| b.val());
+            host_tensor_conv(x, conv.weight.val(), bias, &options, Epilogue::Relu)
+        }
+        _ => burn::tensor::activation::relu(conv.forward(x)),
+    }
+}
+
+/// What the host convolution does to each output value after adding the bias.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Epilogue {
+    /// Nothing.
+    Linear,
+    /// `max(0, ·)`.
+    Relu,
+}
+
 /// The options of `conv` as the host kernel takes them; `None` for what it does not do (groups,
 /// `Same` padding, which depends on the input size).
 pub fn conv_options(conv: &Conv2d) -> Option<ConvOptions<2>> {
@@ -71,12 +95,23 @@ pub fn conv2d_op(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, optio
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`
 /// - output: `[N, O, H_out, W_out]` with `H_out = (H + 2·pad - dil·(kh - 1) - 1) / stride + 1`
 pub fn conv2d_host(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: &ConvOptions<2>) -> Tensor<4> {
+    host_tensor_conv(x, weight, bias, options, Epilogue::Linear)
+}
+
+/// [`conv2d_host`] with an epilogue.
+fn host_tensor_conv(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: &ConvOptions<2>,
+    epilogue: Epilogue,
+) -> Tensor<4> {
     let device: Device = x.device();
     let (x_dims, w_dims) = (x.dims(), weight.dims());
     let x = crate::tensor::to_vec(x);
     let wt = crate::tensor::to_vec(weight);
     let bias = bias.map(crate::tensor::to_vec);
-    let (out, dims) = conv2d_host_slices(&x, x_dims, &wt, w_dims, bias.as_deref(), options);
+    let (out, dims) = host_conv_slices(&x, x_dims, &wt, w_dims, bias.as_deref(), options, epilogue);
     Tensor::from_data(TensorData::new(out, dims), &device)
 }
 
@@ -92,6 +127,19 @@ pub fn conv2d_host_slices(
     w_dims: [usize; 4],
     bias: Option<&[f32]>,
     options: &ConvOptions<2>,
+) -> (Vec<f32>, [usize; 4]) {
+    host_conv_slices(x, x_dims, wt, w_dims, bias, options, Epilogue::Linear)
+}
+
+/// [`conv2d_host_slices`] with an epilogue.
+fn host_conv_slices(
+    x: &[f32],
+    x_dims: [usize; 4],
+    wt: &[f32],
+    w_dims: [usize; 4],
+    bias: Option<&[f32]>,
+    options: &ConvOptions<2>,
+    epilogue: Epilogue,
 ) -> (Vec<f32>, [usize; 4]) {
     let [n, c, h, w] = x_dims;
     let [o, cw, kh, kw] = w_dims;
@@ -171,8 +219,10 @@ pub fn conv2d_host_slices(
             let oy0 = tile * rows_per_tile;
             let p = ((oy0 + rows_per_tile).min(out_h) - oy0) * out_w;
             let src = &blocks[b * tiles_per_image + tile][oc * p..][..p];
-            for (d, s) in dst[oy0 * out_w..][..p].iter_mut().zip(src) {
-                *d = s + add;
+            let dst = &mut dst[oy0 * out_w..][..p];
+            match epilogue {
+                Epilogue::Linear => dst.iter_mut().zip(src).for_each(|(d, s)| *d = s + add),
+                Epilogue::Relu => dst.iter_mut().zip(src).for_each(|(d, s)| *d = (s + add).max(0.0)),
             }
         }
     });
@@ -244,6 +294,8 @@ mod tests {
     use super::*;
     use burn::tensor::Distribution;
 
+    use crate::tensor::to_vec;
+
     #[allow(clippy::too_many_arguments)]
     fn case(n: usize, c: usize, o: usize, hw: [usize; 2], k: [usize; 2], stride: usize, pad: [usize; 2], dil: usize) {
         let device = Device::flex();
@@ -277,6 +329,23 @@ mod tests {
         let y = conv2d_forward(&conv_ad, Tensor::from_data(x.into_data(), &ad)).sum();
         let grads = y.backward();
         assert!(conv_ad.weight.grad(&grads).is_some());
+    }
+
+    #[test]
+    fn the_relu_epilogue_equals_relu_after_the_convolution() {
+        use burn::module::Module;
+        use burn::nn::conv::Conv2dConfig;
+        let device = Device::flex();
+        let conv = Conv2dConfig::new([5, 7], [3, 3]).with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1)).init(&device);
+        let x = Tensor::<4>::random([2, 5, 9, 11], Distribution::Normal(0.0, 1.0), &device);
+        let expected = burn::tensor::activation::relu(conv.forward(x.clone()));
+        let host = conv2d_relu_forward(&conv, x.clone());
+        assert!(crate::tensor::max_abs_diff(expected.clone(), host.clone()) < 1e-5);
+        assert!(to_vec(host).iter().any(|&v| v == 0.0), "a random convolution has negative outputs");
+        // The stock path (autodiff) too.
+        let ad = device.clone().autodiff();
+        let stock = conv2d_relu_forward(&conv.fork(&ad), Tensor::from_data(x.into_data(), &ad));
+        assert!(crate::tensor::max_abs_diff(expected, Tensor::from_data(stock.into_data(), &device)) < 1e-5);
     }
 
     #[test]

@@ -4,8 +4,8 @@ use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::module::avg_pool2d;
 use burn::tensor::ops::AvgPoolOptions;
-use burn::tensor::{Device, Tensor, activation::relu};
-use dgstereo_core::host_conv::conv2d_forward;
+use burn::tensor::{Device, Tensor};
+use dgstereo_core::host_conv::{conv2d_forward, conv2d_relu_forward};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::resample::resize_bilinear;
 use dgstereo_core::timing::{StageClock, timed};
@@ -99,7 +99,7 @@ impl MultiLevelUpdateBlock {
     /// # Shapes
     /// - `hidden_fine`: `[N, hidden, H, W]`; output `[N, 1, H, W]`
     pub fn delta_x(&self, hidden_fine: Tensor<4>) -> Tensor<4> {
-        let delta = conv2d_forward(&self.flow_head.conv2, relu(conv2d_forward(&self.flow_head.conv1, hidden_fine)));
+        let delta = conv2d_forward(&self.flow_head.conv2, conv2d_relu_forward(&self.flow_head.conv1, hidden_fine));
         delta.narrow(1, 0, 1)
     }
 
@@ -108,7 +108,7 @@ impl MultiLevelUpdateBlock {
     /// # Shapes
     /// - `hidden_fine`: `[N, hidden, H, W]`; output `[N, 9·f², H, W]`
     pub fn upsample_mask(&self, hidden_fine: Tensor<4>) -> Tensor<4> {
-        conv2d_forward(&self.mask.conv2, relu(conv2d_forward(&self.mask.conv1, hidden_fine))).mul_scalar(0.25)
+        conv2d_forward(&self.mask.conv2, conv2d_relu_forward(&self.mask.conv1, hidden_fine)).mul_scalar(0.25)
     }
 
     /// Updates the coarser GRUs only (the slow-fast schedule's extra calls), timing them on

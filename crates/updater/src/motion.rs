@@ -3,8 +3,8 @@
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
-use burn::tensor::{Device, Tensor, activation::relu};
-use dgstereo_core::host_conv::conv2d_forward;
+use burn::tensor::{Device, Tensor};
+use dgstereo_core::host_conv::conv2d_relu_forward;
 use dgstereo_core::layers::{ConvInit, conv2d};
 
 /// Correlation branch (1x1, 3x3), flow branch (7x7, 3x3) and an optional guidance branch
@@ -49,13 +49,13 @@ impl MotionEncoder {
 
     /// The GRU input of one iteration.
     pub fn forward(&self, flow: Tensor<4>, corr: Tensor<4>, guidance: Option<&Tensor<4>>) -> Tensor<4> {
-        let cor = relu(conv2d_forward(&self.convc2, relu(conv2d_forward(&self.convc1, corr))));
-        let flo = relu(conv2d_forward(&self.convf2, relu(conv2d_forward(&self.convf1, flow.clone()))));
+        let cor = conv2d_relu_forward(&self.convc2, conv2d_relu_forward(&self.convc1, corr));
+        let flo = conv2d_relu_forward(&self.convf2, conv2d_relu_forward(&self.convf1, flow.clone()));
         let mut parts = vec![cor, flo];
         if let (Some(g1), Some(g2), Some(g)) = (&self.convg1, &self.convg2, guidance) {
-            parts.push(relu(conv2d_forward(g2, relu(conv2d_forward(g1, g.clone())))));
+            parts.push(conv2d_relu_forward(g2, conv2d_relu_forward(g1, g.clone())));
         }
-        let out = relu(conv2d_forward(&self.conv, Tensor::cat(parts, 1)));
+        let out = conv2d_relu_forward(&self.conv, Tensor::cat(parts, 1));
         Tensor::cat(vec![out, flow], 1)
     }
 }
