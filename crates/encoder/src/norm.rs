@@ -80,7 +80,8 @@ impl Norm {
                 Self::Instance(n) => {
                     return normalize_planes(x, PlaneNorm::Instance { epsilon: n.epsilon }, relu_after);
                 }
-                Self::None(_) => return normalize_planes(x, PlaneNorm::Identity, relu_after),
+                Self::None(_) if !relu_after => return x,
+                Self::None(_) => return normalize_planes(x, PlaneNorm::Identity, true),
                 Self::Group(_) => {}
             }
         }
