@@ -10,9 +10,11 @@
 //! tensors without autodiff ([`crate::device::host_kernels_apply`]); the tensor operations stay
 //! the reference and the path for training and the GPU, and the tests check both agree.
 
+use burn::tensor::activation::relu;
 use burn::tensor::{Tensor, TensorData};
 use rayon::prelude::*;
 
+use crate::device::host_kernels_apply;
 use crate::tensor::to_vec;
 
 /// What [`normalize_planes`] does to each plane before the optional ReLU.
@@ -76,7 +78,8 @@ pub fn normalize_planes(x: Tensor<4>, norm: PlaneNorm<'_>, relu: bool) -> Tensor
     Tensor::from_data(TensorData::new(values, dims), &device)
 }
 
-/// `max(0, a + b)` in one parallel pass.
+/// `max(0, a + b)`: for CPU inference ([`host_kernels_apply`]) in one parallel host pass,
+/// elsewhere with burn's operations.
 ///
 /// # Shapes
 /// - `a`, `b`: `[N, C, H, W]`, equal; output: the same
@@ -85,6 +88,9 @@ pub fn normalize_planes(x: Tensor<4>, norm: PlaneNorm<'_>, relu: bool) -> Tensor
 /// When the shapes differ.
 pub fn add_relu(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
     let device = a.device();
+    if !host_kernels_apply(&device) {
+        return relu(a + b);
+    }
     let dims = a.dims();
     assert_eq!(dims, b.dims(), "add_relu: shapes differ");
     let mut values = to_vec(a);
@@ -130,7 +136,13 @@ mod tests {
     #[test]
     fn add_relu_agrees_with_the_tensor_operations() {
         let (a, b) = (random([1, 3, 70, 300]), random([1, 3, 70, 300]));
-        assert!(max_abs_diff(relu(a.clone() + b.clone()), add_relu(a, b)) == 0.0);
+        let expected = relu(a.clone() + b.clone());
+        assert!(max_abs_diff(expected.clone(), add_relu(a.clone(), b.clone())) == 0.0);
+        // With autodiff, burn's operations.
+        let ad = Device::flex().autodiff();
+        let [a, b] = [a, b].map(|t| Tensor::<4>::from_data(t.into_data(), &ad));
+        let stock = Tensor::<4>::from_data(add_relu(a, b).into_data(), &Device::flex());
+        assert!(max_abs_diff(expected, stock) == 0.0);
     }
 
     #[test]

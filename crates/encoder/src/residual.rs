@@ -2,8 +2,7 @@
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
-use burn::tensor::{Device, Tensor, activation::relu};
-use dgstereo_core::device::host_kernels_apply;
+use burn::tensor::{Device, Tensor};
 use dgstereo_core::host_conv::conv2d_forward;
 use dgstereo_core::host_norm::add_relu;
 use dgstereo_core::layers::{ConvInit, conv2d};
@@ -57,7 +56,7 @@ impl ResidualBlock {
             (Some(conv), Some(norm)) => norm.forward_relu(conv2d_forward(conv, x), false),
             _ => x,
         };
-        if host_kernels_apply(&x.device()) { add_relu(x, y) } else { relu(x + y) }
+        add_relu(x, y)
     }
 }
 
