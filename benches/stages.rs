@@ -96,18 +96,22 @@ fn correlation(c: &mut Criterion) {
 }
 
 /// The host convolution kernel against burn's on the largest convolutions of a pass: the
-/// GRU-1/4 candidate (384 -> 128 channels at the 1/4 grid) and a feature-encoder layer1
-/// convolution (64 -> 64 at 1/2 resolution).
+/// GRU-1/4 candidate (384 -> 128 channels at the 1/4 grid, of 320x736 and of a 384x448 pair)
+/// and a feature-encoder layer1 convolution (64 -> 64 at 1/2 resolution). `3x3 Host` is the
+/// dispatching kernel (Winograd F(4x4, 3x3) at these sizes unless `DGSTEREO_NO_WINOGRAD=1`),
+/// `3x3 Host im2col` its im2col path alone.
 fn convolution(c: &mut Criterion) {
     use burn::tensor::module::conv2d;
     use burn::tensor::ops::ConvOptions;
-    use dgstereo_core::host_conv::conv2d_host;
+    use dgstereo_core::host_conv::{conv2d_host, conv2d_host_im2col};
     let mut group = c.benchmark_group("convolution");
     group.sample_size(10);
     let [h, w] = SIZES[0].0;
-    for (cin, cout, [ch, cw], name) in
-        [(384, 128, [h / 4, w / 4], "GRU 1/4 384->128 80x184"), (64, 64, [h / 2, w / 2], "layer1 64->64 160x368")]
-    {
+    for (cin, cout, [ch, cw], name) in [
+        (384, 128, [h / 4, w / 4], "GRU 1/4 384->128 80x184"),
+        (384, 128, [96, 112], "GRU 1/4 384->128 96x112"),
+        (64, 64, [h / 2, w / 2], "layer1 64->64 160x368"),
+    ] {
         let x = random([1, cin, ch, cw]);
         let weight = random([cout, cin, 3, 3]).mul_scalar(0.05);
         let options = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
@@ -116,6 +120,9 @@ fn convolution(c: &mut Criterion) {
         });
         group.bench_function(BenchmarkId::new("3x3 Host", name), |b| {
             b.iter(|| dgstereo_core::tensor::to_vec(conv2d_host(x.clone(), weight.clone(), None, &options)))
+        });
+        group.bench_function(BenchmarkId::new("3x3 Host im2col", name), |b| {
+            b.iter(|| dgstereo_core::tensor::to_vec(conv2d_host_im2col(x.clone(), weight.clone(), None, &options)))
         });
     }
     group.finish();

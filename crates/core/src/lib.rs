@@ -14,6 +14,7 @@ pub mod device;
 pub mod error;
 pub mod host_conv;
 pub mod host_norm;
+mod host_winograd;
 pub mod layers;
 pub mod padding;
 pub mod resample;

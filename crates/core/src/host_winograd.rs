@@ -1,0 +1,499 @@
+//! Winograd F(4x4, 3x3) and F(2x2, 3x3): the host convolution's path for 3x3, stride-1
+//! convolutions.
+//!
+//! Design decision: most of a CPU forward pass is 3x3 stride-1 convolutions with many channels
+//! (the ConvGRU gates, the encoders' residual blocks, the motion encoder), and the im2col path
+//! of [`crate::host_conv`] already runs the `gemm` crate near its speed on this machine, so the
+//! remaining gain is fewer multiplications. F(m x m, 3 x 3) computes an m x m output tile from
+//! an α x α input tile (α = m + 2) with α² products instead of 9·m²: F(2x2) 16 instead of 36
+//! (2.25x fewer), F(4x4) 36 instead of 144 (4x fewer). With `U = G g Gᵀ` (weights),
+//! `V = Bᵀ d B` (input tiles) and `Y = Aᵀ M A` (outputs), the products are α² matrix products
+//! `M_k = U_k V_k`, one per position `k` of the transformed tile, `O x C` times `C x T` for `T`
+//! tiles; the transforms are linear combinations with small constant coefficients.
+//!
+//! - The weights are transformed once per call into `[O][α²][C]` (the product's left operand
+//!   `U_k` has row stride `α²·C`), in parallel over output channels.
+//! - The output is cut into bands of whole tile rows per image, processed in parallel with
+//!   rayon; each band transforms its input tiles into the thread's reusable buffers (zeros where
+//!   a tile reaches outside the input: the padding and the partial last tile row or column of
+//!   sizes that are not multiples of m), runs the α² products with `gemm::Parallelism::None`,
+//!   and transforms the result straight into its rows of the NCHW output, adding the bias and
+//!   applying the epilogue. Input rows are split into column phases (column mod m) first, so
+//!   every transform step is a combination of long contiguous vectors (see
+//!   [`transform_inputs`]).
+//! - Band size: [`Variant::band_tiles`] tiles, measured, but at least two bands per rayon thread
+//!   so both cores stay busy on small grids.
+//! - Which variant ([`winograd_variant`]): F(4x4) where the grid has enough tiles, F(2x2) on
+//!   smaller grids, im2col below [`MIN_CHANNELS`] channels or [`MIN_TILES`] tiles.
+//!
+//! Numerics: F(2x2)'s transforms hold only 0, ±1 and ±½, so they are exact up to the rounding
+//! of their additions: a max error of about 1e-6 of the output's magnitude against burn's
+//! convolution at C=384, O=128. F(4x4)'s hold up to ±8 (`Aᵀ`), ±5 (`Bᵀ`) and 1/6, 1/24 (`G`,
+//! not exact in f32), which grows the error about tenfold: about 1e-5 of the output's magnitude
+//! at C=384, O=128. The RAFT-Stereo golden comparison with PyTorch passes with its tolerance
+//! (1e-4 relative per tensor; largest 5.3e-5 as dispatched, 3.6e-5 with F(4x4) forced wherever
+//! Winograd applies, 3.1e-5 with F(2x2) forced, 4.4e-5 with im2col alone: the differences are
+//! rounding noise of the same size). The tests bound both variants.
+//!
+//! The environment variable `DGSTEREO_NO_WINOGRAD=1` (read once per process) turns the path
+//! off, so whole-pipeline runs can compare it with the im2col path.
+//!
+//! The `gemm` crate's entry point is an `unsafe fn` taking raw pointers and strides; the call
+//! below, on buffers this module sizes to exactly the dimensions it passes, is the only
+//! `unsafe` in the file.
+#![allow(unsafe_code)]
+
+use std::ops::Range;
+use std::sync::OnceLock;
+
+use burn::tensor::ops::ConvOptions;
+use rayon::prelude::*;
+
+use crate::host_conv::Epilogue;
+
+/// Fewest input and output channels for which the Winograd path pays. Measured with F(2x2)
+/// against the im2col path at 96x112 (time im2col / time Winograd, two runs): C = O = 8: 0.75
+/// to 0.8, 16: 0.9, 32: 1.0 to 1.2; C = 2 or 4, O = 64: 0.3 to 0.5; C = 256, O = 2: 1.05.
+const MIN_CHANNELS: usize = 32;
+
+/// Fewest 2x2 tiles (over the batch) for which the Winograd path pays: the weight transform and
+/// the per-band products' fixed costs need enough tiles. Measured with F(2x2): C = O = 64 at
+/// 4x4 (4 tiles): 0.4 to 0.5; C = O = 128 at 6x7 (12 tiles): 0.5; C = O = 64 at 12x14 (42
+/// tiles): 0.8 to 1.1; C = 384, O = 128 at 24x28 (168 tiles): 1.0 to 1.4.
+const MIN_TILES: usize = 64;
+
+/// Fewest 4x4 tiles (over the batch) for F(4x4) rather than F(2x2): its weight transform is
+/// 2.25x larger and its bands coarser. Measured (F(2x2) ms / F(4x4) ms, two runs, shared load):
+/// C=384, O=128 at 12x14 (12 tiles): 0.2 to 0.4; 24x28 (42): 0.65 to 1.1; 48x56 (168): 1.05 to
+/// 1.7; C = O = 64 at 32x64 (128): 0.8 to 1.35; C = O = 96 at 24x24 (36): 0.55 to 0.75.
+pub(crate) const MIN_F4_TILES: usize = 128;
+
+/// Whether `DGSTEREO_NO_WINOGRAD` is set to something other than `0` or empty (read once).
+pub(crate) fn winograd_disabled() -> bool {
+    static DISABLED: OnceLock<bool> = OnceLock::new();
+    *DISABLED.get_or_init(|| std::env::var("DGSTEREO_NO_WINOGRAD").is_ok_and(|v| !v.is_empty() && v != "0"))
+}
+
+/// The Winograd variant for a convolution of an `x_dims = [N, C, H, W]` input with an
+/// `w_dims = [O, C, kh, kw]` weight, `None` where the im2col path should run: 3x3, stride 1,
+/// dilation 1, groups 1, at least [`MIN_CHANNELS`] input and output channels and [`MIN_TILES`]
+/// 2x2 output tiles; F(4x4) from [`MIN_F4_TILES`] 4x4 tiles.
+pub(crate) fn winograd_variant(
+    x_dims: [usize; 4],
+    w_dims: [usize; 4],
+    options: &ConvOptions<2>,
+) -> Option<&'static Variant> {
+    let [n, c, h, w] = x_dims;
+    let [o, _, kh, kw] = w_dims;
+    let [(ph, ph_end), (pw, pw_end)] = options.padding;
+    let (out_h, out_w) = ((h + ph + ph_end).saturating_sub(2), (w + pw + pw_end).saturating_sub(2));
+    let tiles = |m: usize| out_h.div_ceil(m) * out_w.div_ceil(m);
+    let suits = [kh, kw] == [3, 3]
+        && options.stride == [1, 1]
+        && options.dilation == [1, 1]
+        && options.groups == 1
+        && c.min(o) >= MIN_CHANNELS
+        && n * tiles(2) >= MIN_TILES;
+    suits.then_some(if n * tiles(4) >= MIN_F4_TILES { &F4 } else { &F2 })
+}
+
+/// A Winograd variant F(m x m, 3 x 3): m x m output tiles from α x α input tiles (α = m + 2)
+/// with α² products, its transforms (rows of `Bᵀ` α x α, `G` α x 3 and `Aᵀ` m x α, in 6-wide
+/// rows of which the first α entries are used) and its band size.
+pub(crate) struct Variant {
+    /// The output tile's side.
+    pub(crate) m: usize,
+    bt: &'static [[f32; 6]],
+    g: &'static [[f32; 3]],
+    at: &'static [[f32; 6]],
+    /// Target tiles per band (rounded to whole tile rows). Measured on the GRU 1/4 convolution
+    /// (C=384, O=128, 96x112, 2 cores under a shared load): F(2x2) 56 tiles 68 ms, 128 to 512
+    /// within 62 to 65 ms; F(4x4) 32 tiles 96 to 115 ms, 64: 85 to 94, 128: 73 to 81, 192: 79
+    /// to 80, 256: 77 ms (few input rows per band read each row twice).
+    band_tiles: usize,
+}
+
+/// F(2x2, 3x3): interpolation points 0, ±1, ∞; 16 products per 4 outputs.
+pub(crate) const F2: Variant = Variant {
+    m: 2,
+    bt: &[[1., 0., -1., 0., 0., 0.], [0., 1., 1., 0., 0., 0.], [0., -1., 1., 0., 0., 0.], [0., 1., 0., -1., 0., 0.]],
+    g: &[[1., 0., 0.], [0.5, 0.5, 0.5], [0.5, -0.5, 0.5], [0., 0., 1.]],
+    at: &[[1., 1., 1., 0., 0., 0.], [0., 1., -1., -1., 0., 0.]],
+    band_tiles: 128,
+};
+
+/// F(4x4, 3x3): interpolation points 0, ±1, ±2, ∞; 36 products per 16 outputs.
+#[rustfmt::skip]
+pub(crate) const F4: Variant = Variant {
+    m: 4,
+    bt: &[[4., 0., -5., 0., 1., 0.], [0., -4., -4., 1., 1., 0.], [0., 4., -4., -1., 1., 0.],
+          [0., -2., -1., 2., 1., 0.], [0., 2., -1., -2., 1., 0.], [0., 4., 0., -5., 0., 1.]],
+    g: &[[1. / 4., 0., 0.], [-1. / 6., -1. / 6., -1. / 6.], [-1. / 6., 1. / 6., -1. / 6.],
+         [1. / 24., 1. / 12., 1. / 6.], [1. / 24., -1. / 12., 1. / 6.], [0., 0., 1.]],
+    at: &[[1., 1., 1., 1., 1., 0.], [0., 1., -1., 2., -2., 0.], [0., 1., 1., 4., 4., 0.], [0., 1., -1., 8., -8., 1.]],
+    band_tiles: 192,
+};
+
+/// Tile grid of one convolution: channels, input size, leading padding, output width, tile
+/// size and tiles per row.
+#[derive(Clone, Copy)]
+struct Tiling {
+    c: usize,
+    o: usize,
+    h: usize,
+    w: usize,
+    ph: usize,
+    pw: usize,
+    out_w: usize,
+    m: usize,
+    tiles_w: usize,
+}
+
+thread_local! {
+    /// Each worker thread's band buffers, grown to the largest band it has run: transformed
+    /// inputs (`α² x C x T`), products (`α² x O x T`) and row scratch.
+    static BUFFERS: std::cell::RefCell<[Vec<f32>; 3]> = const { std::cell::RefCell::new([Vec::new(), Vec::new(), Vec::new()]) };
+}
+
+/// A 3x3, stride-1 convolution by Winograd `variant`, with the bias and `epilogue` applied.
+/// Returns the output and its dimensions.
+///
+/// # Shapes
+/// - `x`: `x_dims = [N, C, H, W]` (NCHW); `wt`: `[O, C, 3, 3]` (OIHW); `bias`: `[O]`
+/// - `padding`: `[(top, bottom), (left, right)]`; output `[N, O, H + top + bottom - 2,
+///   W + left + right - 2]`
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn winograd_conv(
+    variant: &Variant,
+    x: &[f32],
+    x_dims: [usize; 4],
+    wt: &[f32],
+    o: usize,
+    bias: Option<&[f32]>,
+    padding: [(usize, usize); 2],
+    epilogue: Epilogue,
+) -> (Vec<f32>, [usize; 4]) {
+    let [n, c, h, w] = x_dims;
+    let [(ph, ph_end), (pw, pw_end)] = padding;
+    assert_eq!(wt.len(), o * c * 9, "winograd_conv: the weight is not [{o}, {c}, 3, 3]");
+    assert!(h + ph + ph_end >= 3 && w + pw + pw_end >= 3, "winograd_conv: input smaller than the kernel");
+    let (m, k2) = (variant.m, (variant.m + 2) * (variant.m + 2));
+    let (out_h, out_w) = (h + ph + ph_end - 2, w + pw + pw_end - 2);
+    let (tiles_h, tiles_w) = (out_h.div_ceil(m), out_w.div_ceil(m));
+    let tiling = Tiling { c, o, h, w, ph, pw, out_w, m, tiles_w };
+    let u = transform_weights(variant, wt, o, c);
+
+    let by_size = (variant.band_tiles / tiles_w).max(1);
+    let min_bands = (2 * rayon::current_num_threads()).div_ceil(n.max(1));
+    let bands = tiles_h.div_ceil(by_size).max(min_bands).min(tiles_h);
+    let band_rows = tiles_h.div_ceil(bands);
+    let bands = tiles_h.div_ceil(band_rows);
+
+    // One job per (image, band) with its rows of every output plane: disjoint slices.
+    let plane = out_h * out_w;
+    let mut out = vec![0.0f32; n * o * plane];
+    let mut jobs: Vec<Vec<&mut [f32]>> = (0..n * bands).map(|_| Vec::with_capacity(o)).collect();
+    for (i, dst) in out.chunks_mut(plane).enumerate() {
+        for (band, rows) in dst.chunks_mut(m * band_rows * out_w).enumerate() {
+            jobs[(i / o) * bands + band].push(rows);
+        }
+    }
+    jobs.into_par_iter().enumerate().for_each(|(job, planes)| {
+        let (b, band) = (job / bands, job % bands);
+        let tile_rows = band * band_rows..((band + 1) * band_rows).min(tiles_h);
+        let t = tile_rows.len() * (tiles_w + 1);
+        let image = &x[b * c * h * w..][..c * h * w];
+        BUFFERS.with_borrow_mut(|[v, mm, scratch]| {
+            // Every element of `v` and `mm` is written before it is read (the transform fills
+            // all of `v`, the products write all of `mm`), so stale values never leak.
+            v.resize(k2 * c * t, 0.0);
+            mm.resize(k2 * o * t, 0.0);
+            let (v, mm) = (&mut v[..k2 * c * t], &mut mm[..k2 * o * t]);
+            transform_inputs(variant, v, image, tiling, tile_rows.clone(), scratch);
+            for k in 0..k2 {
+                product(&mut mm[k * o * t..][..o * t], &u[k * c..], k2 * c, &v[k * c * t..][..c * t], [o, t, c]);
+            }
+            transform_outputs(variant, mm, planes, bias, epilogue, tiling, tile_rows.len(), scratch);
+        });
+    });
+    (out, [n, o, out_h, out_w])
+}
+
+/// `dst = lhs · rhs` on the calling thread by the `gemm` crate: `dst` is `rows x cols` (row
+/// stride `cols`), `lhs` `rows x depth` (row stride `lhs_stride`), `rhs` `depth x cols`.
+#[rustfmt::skip]
+fn product(dst: &mut [f32], lhs: &[f32], lhs_stride: usize, rhs: &[f32], [rows, cols, depth]: [usize; 3]) {
+    assert!(dst.len() >= rows * cols && rhs.len() >= depth * cols && depth <= lhs_stride);
+    assert!(rows == 0 || lhs.len() >= (rows - 1) * lhs_stride + depth);
+    // SAFETY: the asserts keep every element the strides reach inside the three slices, which
+    // live through the call; `read_dst` is false, so `dst` is only written.
+    unsafe {
+        gemm::gemm(rows, cols, depth, dst.as_mut_ptr(), 1, cols as isize, false,
+                   lhs.as_ptr(), 1, lhs_stride as isize, rhs.as_ptr(), 1, cols as isize,
+                   0.0f32, 1.0f32, false, false, false, gemm::Parallelism::None);
+    }
+}
+
+/// `dst = Σ coefs[q]·src(q)` over the nonzero coefficients (each `src(q)` at least as long as
+/// `dst`), in one pass for up to 4 terms.
+fn lincomb<'a>(dst: &mut [f32], coefs: &[f32], src: impl Fn(usize) -> &'a [f32]) {
+    let n = dst.len();
+    let mut terms: [(f32, &[f32]); 6] = [(0.0, &[]); 6];
+    let mut len = 0;
+    for (q, &k) in coefs.iter().enumerate().filter(|(_, k)| **k != 0.0) {
+        terms[len] = (k, &src(q)[..n]);
+        len += 1;
+    }
+    let (head, rest) = terms[..len].split_at(len.min(4));
+    let src = |i: usize| head[i];
+    match head.len() {
+        0 => dst.fill(0.0),
+        1 => {
+            let (k0, s0) = src(0);
+            for i in 0..n {
+                dst[i] = k0 * s0[i];
+            }
+        }
+        2 => {
+            let ((k0, s0), (k1, s1)) = (src(0), src(1));
+            for i in 0..n {
+                dst[i] = k0 * s0[i] + k1 * s1[i];
+            }
+        }
+        3 => {
+            let ((k0, s0), (k1, s1), (k2, s2)) = (src(0), src(1), src(2));
+            for i in 0..n {
+                dst[i] = k0 * s0[i] + k1 * s1[i] + k2 * s2[i];
+            }
+        }
+        _ => {
+            let ((k0, s0), (k1, s1), (k2, s2), (k3, s3)) = (src(0), src(1), src(2), src(3));
+            for i in 0..n {
+                dst[i] = k0 * s0[i] + k1 * s1[i] + k2 * s2[i] + k3 * s3[i];
+            }
+        }
+    }
+    for &(k, s) in rest {
+        for (d, s) in dst.iter_mut().zip(&s[..n]) {
+            *d += k * s;
+        }
+    }
+}
+
+/// `U = G g Gᵀ` for every `(o, c)`, laid out `[O][α²][C]` (position `k = α·i + j` of the
+/// transformed kernel). Per output channel the 9 taps are first gathered into vectors over `C`,
+/// so both products with `G` are vector operations.
+fn transform_weights(variant: &Variant, wt: &[f32], o: usize, c: usize) -> Vec<f32> {
+    let alpha = variant.m + 2;
+    let mut u = vec![0.0f32; o * alpha * alpha * c];
+    u.par_chunks_mut(alpha * alpha * c).enumerate().for_each_init(Vec::new, |scratch, (oc, dst)| {
+        // taps[(3·ky + kx)·C + ci], then G g as gg[(α·kx + i)·C + ci].
+        scratch.resize((9 + 3 * alpha) * c, 0.0);
+        let (taps, gg) = scratch.split_at_mut(9 * c);
+        for (ci, g) in wt[oc * c * 9..][..c * 9].chunks_exact(9).enumerate() {
+            for (tap, &value) in g.iter().enumerate() {
+                taps[tap * c + ci] = value;
+            }
+        }
+        for (kx, column) in gg.chunks_exact_mut(alpha * c).enumerate() {
+            for (i, dst) in column.chunks_exact_mut(c).enumerate() {
+                lincomb(dst, &variant.g[i], |ky| &taps[(3 * ky + kx) * c..][..c]);
+            }
+        }
+        let gg = &*gg;
+        for (k, dst) in dst.chunks_exact_mut(c).enumerate() {
+            let (i, j) = (k / alpha, k % alpha);
+            lincomb(dst, &variant.g[j], |kx| &gg[(alpha * kx + i) * c..][..c]);
+        }
+    });
+    u
+}
+
+/// Writes `V = Bᵀ d B` of every tile of `tile_rows` of one image (`image`, CHW) into `v`, laid
+/// out `[α²][C][T]` with `T = tile_rows.len() · (tiles_w + 1)` (tile-row-major, one unused tile
+/// per row), where `d` is the α x α input at rows `m·ty - ph ..`, columns `m·tx - pw ..`, zero
+/// outside the input.
+///
+/// Per channel, every input row of the band is split into its `m` column phases (column
+/// `m·tx + q` is phase `q mod m`, index `tx + q / m`), rows ordered by row phase (row `m·l + p`
+/// at `(p, l)`), so that `d B` of all rows and `Bᵀ` over the rows (tile row `l` has rows
+/// `m·l + r`: phase `r mod m`, index `l + r / m`) are each one combination of long contiguous
+/// vectors. The extra tile per row (`tx = tiles_w`) absorbs the shifted reads across rows; its
+/// values are never written out.
+fn transform_inputs(
+    variant: &Variant,
+    v: &mut [f32],
+    image: &[f32],
+    g: Tiling,
+    tile_rows: Range<usize>,
+    scratch: &mut Vec<f32>,
+) {
+    let (m, alpha) = (g.m, g.m + 2);
+    let (tws, rows) = (g.tiles_w + 1, tile_rows.len());
+    let (t, ct) = (rows * tws, g.c * rows * tws);
+    // Column phases [p][row phase][l][tws] (+1 slack for the last shifted read), then `d B`
+    // [j][row phase][l][tws].
+    let per_phase = m * (rows + 1) * tws;
+    scratch.resize(m * per_phase + 1 + alpha * per_phase, 0.0);
+    let (phases, rows_b) = scratch.split_at_mut(m * per_phase + 1);
+    for ci in 0..g.c {
+        let channel = &image[ci * g.h * g.w..][..g.h * g.w];
+        for (slot, (rp, l)) in (0..m).flat_map(|rp| (0..rows + 1).map(move |l| (rp, l))).enumerate() {
+            let row = (m * (tile_rows.start + l) + rp).checked_sub(g.ph).filter(|&iy| iy < g.h);
+            let line = row.map_or(&[][..], |iy| &channel[iy * g.w..][..g.w]);
+            for (p, dst) in phases.chunks_exact_mut(per_phase).enumerate() {
+                split_row(line, g.pw, m, p, &mut dst[slot * tws..][..tws]);
+            }
+        }
+        let phases = &*phases;
+        for (j, dst) in rows_b.chunks_exact_mut(per_phase).enumerate() {
+            lincomb(dst, &variant.bt[j][..alpha], |q| &phases[(q % m) * per_phase + q / m..][..per_phase]);
+        }
+        let rows_b = &*rows_b;
+        for k in 0..alpha * alpha {
+            let (i, j) = (k / alpha, k % alpha);
+            let lane = |r: usize| &rows_b[j * per_phase + ((r % m) * (rows + 1) + r / m) * tws..][..t];
+            lincomb(&mut v[k * ct + ci * t..][..t], &variant.bt[i][..alpha], lane);
+        }
+    }
+}
+
+/// Column phase `p` of one input row shifted by the left padding `pw`: `dst[i] = line[m·i + p
+/// - pw]`, zeros outside the row (an empty `line` is a row outside the input).
+fn split_row(line: &[f32], pw: usize, m: usize, p: usize, dst: &mut [f32]) {
+    let n = dst.len();
+    // Inside the row: pw ≤ m·i + p < line.len() + pw.
+    let lo = pw.saturating_sub(p).div_ceil(m).min(n);
+    let hi = (line.len() + pw).saturating_sub(p).div_ceil(m).clamp(lo, n);
+    dst[..lo].fill(0.0);
+    dst[hi..].fill(0.0);
+    // (Empty when lo == hi, where the start may lie outside the row.)
+    let src = line.get((m * lo + p).saturating_sub(pw)..).unwrap_or_default();
+    for (i, d) in dst[lo..hi].iter_mut().enumerate() {
+        *d = src[m * i];
+    }
+}
+
+/// Writes `Y = Aᵀ M A` (plus the bias, through `epilogue`) of every tile of a band of
+/// `band_rows` tile rows into the band's rows of each output plane (`planes[o]`, whole output
+/// rows, the last tile row and column clipped to the output), with `mm` laid out `[α²][O][T]`.
+/// Both steps run over the whole band's tiles.
+#[allow(clippy::too_many_arguments)]
+fn transform_outputs(
+    variant: &Variant,
+    mm: &[f32],
+    planes: Vec<&mut [f32]>,
+    bias: Option<&[f32]>,
+    epilogue: Epilogue,
+    g: Tiling,
+    band_rows: usize,
+    scratch: &mut Vec<f32>,
+) {
+    let (m, alpha, tw) = (g.m, g.m + 2, g.tiles_w);
+    let (t, ot) = (band_rows * (tw + 1), g.o * band_rows * (tw + 1));
+    // `M A` per row i of the tile: q[m·i + s] (s = output column), then Y[m·r + s] (r = row).
+    scratch.resize((alpha + m) * m * t, 0.0);
+    let (q, y) = scratch.split_at_mut(alpha * m * t);
+    let finish = |v: f32| if epilogue == Epilogue::Relu { v.max(0.0) } else { v };
+    for (oc, dst) in planes.into_iter().enumerate() {
+        let add = bias.map_or(0.0, |b| b[oc]);
+        for (k, q) in q.chunks_exact_mut(t).enumerate() {
+            lincomb(q, &variant.at[k % m][..alpha], |j| &mm[(alpha * (k / m) + j) * ot + oc * t..][..t]);
+        }
+        let q = &*q;
+        for (k, y) in y.chunks_exact_mut(t).enumerate() {
+            lincomb(y, &variant.at[k / m][..alpha], |i| &q[(m * i + k % m) * t..][..t]);
+        }
+        // Output row m·l + r, column m·tx + s is y[(m·r + s)·T + l·(tw + 1) + tx].
+        for (oy, row) in dst.chunks_exact_mut(g.out_w).enumerate() {
+            let at = (oy / m) * (tw + 1);
+            let r = oy % m;
+            for (s, ys) in y.chunks_exact(t).skip(m * r).take(m).enumerate() {
+                let ys = &ys[at..at + tw];
+                for (d, v) in row.iter_mut().skip(s).step_by(m).zip(ys) {
+                    *d = finish(v + add);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::tensor::module::conv2d;
+    use burn::tensor::{Device, Distribution, Tensor};
+
+    use super::*;
+    use crate::host_conv::im2col_conv_slices;
+    use crate::tensor::to_vec;
+
+    /// Both variants against burn's convolution (the reference) and the im2col path on one
+    /// shape, without and with ReLU; returns each variant's largest error relative to the
+    /// reference output's largest magnitude (F(2x2) within 1e-5, F(4x4) within 4e-5).
+    fn case(n: usize, [c, o]: [usize; 2], [h, w]: [usize; 2], padding: [(usize, usize); 2], bias: bool) -> [f32; 2] {
+        let device = Device::flex();
+        let x = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+        let wt = Tensor::<4>::random([o, c, 3, 3], Distribution::Normal(0.0, 1.0 / (3.0 * c as f64).sqrt()), &device);
+        let b = bias.then(|| Tensor::<1>::random([o], Distribution::Normal(0.0, 1.0), &device));
+        let options = ConvOptions::new_with_padding([1, 1], padding, [1, 1], 1);
+        let reference = conv2d(x.clone(), wt.clone(), b.clone(), options.clone());
+        let dims = reference.dims();
+        let (x, wt, b, expected) = (to_vec(x), to_vec(wt), b.map(to_vec), to_vec(reference));
+        let scale = expected.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
+        let shape = format!("n {n} c {c} o {o} {h}x{w} padding {padding:?} bias {bias}");
+        let mut worst = [0.0f32; 2];
+        for epilogue in [Epilogue::Linear, Epilogue::Relu] {
+            let finish = |v: f32| if epilogue == Epilogue::Relu { v.max(0.0) } else { v };
+            let (im2col, _) = im2col_conv_slices(&x, [n, c, h, w], &wt, [o, c, 3, 3], b.as_deref(), &options, epilogue);
+            for (worst, (variant, bound)) in worst.iter_mut().zip([(&F2, 1e-5), (&F4, 4e-5)]) {
+                let (got, got_dims) = winograd_conv(variant, &x, [n, c, h, w], &wt, o, b.as_deref(), padding, epilogue);
+                assert_eq!(got_dims, dims, "{shape}");
+                for ((g, e), i) in got.iter().zip(&expected).zip(&im2col) {
+                    let (e, err) = (finish(*e), (g - finish(*e)).abs() / scale);
+                    assert!(
+                        err <= bound && (i - e).abs() / scale <= 1e-5,
+                        "{shape} F({m}) {epilogue:?}: winograd {g}, im2col {i}, burn {e} (scale {scale})",
+                        m = variant.m
+                    );
+                    *worst = worst.max(err);
+                }
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn winograd_agrees_with_burn_on_small_and_odd_shapes() {
+        let same = [(1, 1), (1, 1)];
+        for [c, o] in [[1, 1], [2, 3], [3, 2]] {
+            for hw in [[1, 1], [2, 2], [3, 5], [5, 3], [6, 8], [7, 9], [10, 13]] {
+                case(1, [c, o], hw, same, true);
+            }
+        }
+        case(2, [3, 4], [9, 10], same, false);
+        case(1, [2, 2], [3, 3], [(0, 0), (0, 0)], true); // a single output
+        case(1, [3, 5], [8, 11], [(0, 0), (0, 0)], true);
+        case(2, [4, 3], [7, 6], [(1, 0), (0, 2)], true); // asymmetric
+        case(1, [3, 3], [5, 4], [(2, 1), (0, 3)], false);
+        case(1, [2, 3], [1, 2], [(2, 2), (1, 2)], true);
+    }
+
+    #[test]
+    fn winograd_agrees_with_burn_with_many_channels_and_bands() {
+        case(2, [64, 96], [9, 14], [(1, 1), (1, 1)], true);
+        case(1, [96, 64], [10, 7], [(1, 1), (1, 1)], false);
+        case(1, [130, 17], [5, 6], [(0, 1), (1, 0)], true);
+        // Several bands per image: one tile row per band (150 to 300 tiles a row), narrow rows.
+        case(1, [4, 5], [11, 600], [(1, 1), (1, 1)], true);
+        case(2, [3, 4], [71, 9], [(1, 1), (1, 1)], true);
+        // Smaller again after the large bands: the threads' reused buffers hold stale values.
+        case(1, [2, 2], [4, 4], [(1, 1), (1, 1)], true);
+    }
+
+    #[test]
+    fn winograd_error_at_the_gru_size_is_small() {
+        let [f2, f4] = case(1, [384, 128], [12, 14], [(1, 1), (1, 1)], true);
+        println!("C=384, O=128, 12x14: max error F(2x2) {f2:e}, F(4x4) {f4:e} of the output's magnitude");
+        assert!(f2 <= 1e-5 && f4 <= 4e-5, "{f2} {f4}");
+    }
+}
