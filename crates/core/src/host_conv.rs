@@ -17,8 +17,8 @@
 //! `convolution` benchmarks).
 //!
 //! The `gemm` crate's entry point is an `unsafe fn` taking raw pointers and strides; it is called
-//! once, on buffers this module allocates with exactly the dimensions it passes; with the same
-//! call in `host_winograd`, the only `unsafe` in the workspace.
+//! in one place, [`matmul_into`], which both paths use and which asserts that every element its
+//! strides reach lies inside the slices it is given: the only `unsafe` in the workspace.
 #![allow(unsafe_code)]
 
 use burn::nn::PaddingConfig2d;
@@ -235,32 +235,7 @@ pub(crate) fn im2col_conv_slices(
                 col.resize(k * p, 0.0);
                 fill_columns(&mut col[..k * p], &x[b * c * h * w..(b + 1) * c * h * w], geometry, oy0..oy1);
                 let mut block = vec![0.0f32; o * p];
-                // SAFETY: `block` is O x P (row stride P), `wt` is O x K (row stride K) and `col`
-                // holds K x P (row stride P), all contiguous and alive for the call; `read_dst` is
-                // false so `block` is only written.
-                unsafe {
-                    gemm::gemm(
-                        o,
-                        p,
-                        k,
-                        block.as_mut_ptr(),
-                        1,
-                        p as isize,
-                        false,
-                        wt.as_ptr(),
-                        1,
-                        k as isize,
-                        col.as_ptr(),
-                        1,
-                        p as isize,
-                        0.0f32,
-                        1.0f32,
-                        false,
-                        false,
-                        false,
-                        gemm::Parallelism::None,
-                    );
-                }
+                matmul_into(&mut block, wt, k, &col[..k * p], [o, p, k]);
                 block
             })
         })
@@ -283,6 +258,27 @@ pub(crate) fn im2col_conv_slices(
         }
     });
     (out, [n, o, out_h, out_w])
+}
+
+/// `dst = lhs · rhs` on the calling thread by the `gemm` crate: `dst` is `rows x cols` (row
+/// stride `cols`), `lhs` `rows x depth` (row stride `lhs_stride`), `rhs` `depth x cols`.
+pub(crate) fn matmul_into(
+    dst: &mut [f32],
+    lhs: &[f32],
+    lhs_stride: usize,
+    rhs: &[f32],
+    [rows, cols, depth]: [usize; 3],
+) {
+    assert!(dst.len() >= rows * cols && rhs.len() >= depth * cols && depth <= lhs_stride);
+    assert!(rows == 0 || lhs.len() >= (rows - 1) * lhs_stride + depth);
+    // SAFETY: the asserts keep every element the strides reach inside the three slices, which
+    // live through the call; `read_dst` is false, so `dst` is only written.
+    #[rustfmt::skip]
+    unsafe {
+        gemm::gemm(rows, cols, depth, dst.as_mut_ptr(), 1, cols as isize, false,
+                   lhs.as_ptr(), 1, lhs_stride as isize, rhs.as_ptr(), 1, cols as isize,
+                   0.0f32, 1.0f32, false, false, false, gemm::Parallelism::None);
+    };
 }
 
 thread_local! {

@@ -38,10 +38,8 @@
 //! The environment variable `DGSTEREO_NO_WINOGRAD=1` (read once per process) turns the path
 //! off, so whole-pipeline runs can compare it with the im2col path.
 //!
-//! The `gemm` crate's entry point is an `unsafe fn` taking raw pointers and strides; the call
-//! below, on buffers this module sizes to exactly the dimensions it passes, is the only
-//! `unsafe` in the file.
-#![allow(unsafe_code)]
+//! The products go through [`crate::host_conv::matmul_into`], the workspace's one call of the
+//! `gemm` crate's `unsafe` entry point.
 
 use std::ops::Range;
 use std::sync::OnceLock;
@@ -49,7 +47,7 @@ use std::sync::OnceLock;
 use burn::tensor::ops::ConvOptions;
 use rayon::prelude::*;
 
-use crate::host_conv::Epilogue;
+use crate::host_conv::{Epilogue, matmul_into};
 
 /// Fewest input and output channels for which the Winograd path pays. Measured with F(2x2)
 /// against the im2col path at 96x112 (time im2col / time Winograd, two runs): C = O = 8: 0.75
@@ -211,27 +209,12 @@ pub(crate) fn winograd_conv(
             let (v, mm) = (&mut v[..k2 * c * t], &mut mm[..k2 * o * t]);
             transform_inputs(variant, v, image, tiling, tile_rows.clone(), scratch);
             for k in 0..k2 {
-                product(&mut mm[k * o * t..][..o * t], &u[k * c..], k2 * c, &v[k * c * t..][..c * t], [o, t, c]);
+                matmul_into(&mut mm[k * o * t..][..o * t], &u[k * c..], k2 * c, &v[k * c * t..][..c * t], [o, t, c]);
             }
             transform_outputs(variant, mm, planes, bias, epilogue, tiling, tile_rows.len(), scratch);
         });
     });
     (out, [n, o, out_h, out_w])
-}
-
-/// `dst = lhs · rhs` on the calling thread by the `gemm` crate: `dst` is `rows x cols` (row
-/// stride `cols`), `lhs` `rows x depth` (row stride `lhs_stride`), `rhs` `depth x cols`.
-#[rustfmt::skip]
-fn product(dst: &mut [f32], lhs: &[f32], lhs_stride: usize, rhs: &[f32], [rows, cols, depth]: [usize; 3]) {
-    assert!(dst.len() >= rows * cols && rhs.len() >= depth * cols && depth <= lhs_stride);
-    assert!(rows == 0 || lhs.len() >= (rows - 1) * lhs_stride + depth);
-    // SAFETY: the asserts keep every element the strides reach inside the three slices, which
-    // live through the call; `read_dst` is false, so `dst` is only written.
-    unsafe {
-        gemm::gemm(rows, cols, depth, dst.as_mut_ptr(), 1, cols as isize, false,
-                   lhs.as_ptr(), 1, lhs_stride as isize, rhs.as_ptr(), 1, cols as isize,
-                   0.0f32, 1.0f32, false, false, false, gemm::Parallelism::None);
-    }
 }
 
 /// `dst = Σ coefs[q]·src(q)` over the nonzero coefficients (each `src(q)` at least as long as
