@@ -58,7 +58,9 @@ pub fn conv2d_relu_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     match conv_options(conv) {
         Some(options) if host_kernels_apply(&x.device()) => {
             let bias = conv.bias.as_ref().map(|b| b.val());
-            host_tensor_conv(x, conv.weight.val(), bias, &options, Epilogue::Relu)
+            on_host_buffers(x, conv.weight.val(), bias, |x, x_dims, wt, w_dims, bias| {
+                host_conv_slices(x, x_dims, wt, w_dims, bias, &options, Epilogue::Relu)
+            })
         }
         _ => burn::tensor::activation::relu(conv.forward(x)),
     }
@@ -102,7 +104,9 @@ pub fn conv2d_op(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, optio
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`
 /// - output: `[N, O, H_out, W_out]` with `H_out = (H + 2·pad - dil·(kh - 1) - 1) / stride + 1`
 pub fn conv2d_host(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: &ConvOptions<2>) -> Tensor<4> {
-    host_tensor_conv(x, weight, bias, options, Epilogue::Linear)
+    on_host_buffers(x, weight, bias, |x, x_dims, wt, w_dims, bias| {
+        host_conv_slices(x, x_dims, wt, w_dims, bias, options, Epilogue::Linear)
+    })
 }
 
 /// [`conv2d_host`] by the im2col path alone, never Winograd: for benchmarks and tests that
@@ -116,28 +120,24 @@ pub fn conv2d_host_im2col(
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
 ) -> Tensor<4> {
+    on_host_buffers(x, weight, bias, |x, x_dims, wt, w_dims, bias| {
+        im2col_conv_slices(x, x_dims, wt, w_dims, bias, options, Epilogue::Linear)
+    })
+}
+
+/// Runs `conv` (a convolution on host buffers: input, its dims, weight, its dims, bias) on the
+/// tensors' values and returns its output as a tensor on the input's device.
+fn on_host_buffers(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    conv: impl FnOnce(&[f32], [usize; 4], &[f32], [usize; 4], Option<&[f32]>) -> (Vec<f32>, [usize; 4]),
+) -> Tensor<4> {
     let device: Device = x.device();
     let (x_dims, w_dims) = (x.dims(), weight.dims());
     let (x, wt) = (crate::tensor::to_vec(x), crate::tensor::to_vec(weight));
     let bias = bias.map(crate::tensor::to_vec);
-    let (out, dims) = im2col_conv_slices(&x, x_dims, &wt, w_dims, bias.as_deref(), options, Epilogue::Linear);
-    Tensor::from_data(TensorData::new(out, dims), &device)
-}
-
-/// [`conv2d_host`] with an epilogue.
-fn host_tensor_conv(
-    x: Tensor<4>,
-    weight: Tensor<4>,
-    bias: Option<Tensor<1>>,
-    options: &ConvOptions<2>,
-    epilogue: Epilogue,
-) -> Tensor<4> {
-    let device: Device = x.device();
-    let (x_dims, w_dims) = (x.dims(), weight.dims());
-    let x = crate::tensor::to_vec(x);
-    let wt = crate::tensor::to_vec(weight);
-    let bias = bias.map(crate::tensor::to_vec);
-    let (out, dims) = host_conv_slices(&x, x_dims, &wt, w_dims, bias.as_deref(), options, epilogue);
+    let (out, dims) = conv(&x, x_dims, &wt, w_dims, bias.as_deref());
     Tensor::from_data(TensorData::new(out, dims), &device)
 }
 
@@ -176,8 +176,8 @@ fn host_conv_slices(
 }
 
 /// The asserts every path makes: groups = 1, matching channels and buffer lengths, an input
-/// (with its padding) at least as large as the dilated kernel.
-fn check_shapes(x: &[f32], x_dims: [usize; 4], wt: &[f32], w_dims: [usize; 4], options: &ConvOptions<2>) {
+/// (with its padding) at least as large as the dilated kernel. Returns the output's `[H_out, W_out]`.
+fn check_shapes(x: &[f32], x_dims: [usize; 4], wt: &[f32], w_dims: [usize; 4], options: &ConvOptions<2>) -> [usize; 2] {
     let [n, c, h, w] = x_dims;
     let [o, cw, kh, kw] = w_dims;
     assert_eq!(options.groups, 1, "conv2d_host: grouped convolutions are not supported");
@@ -192,6 +192,8 @@ fn check_shapes(x: &[f32], x_dims: [usize; 4], wt: &[f32], w_dims: [usize; 4], o
         "conv2d_host: a {h}x{w} input with padding {:?} is smaller than the {reach_h}x{reach_w} kernel",
         options.padding
     );
+    let [sh, sw] = options.stride;
+    [(h + ph + ph_end - reach_h) / sh + 1, (w + pw + pw_end - reach_w) / sw + 1]
 }
 
 /// [`host_conv_slices`] by im2col tiles and `gemm` for any shape (the path for everything the
@@ -205,15 +207,12 @@ pub(crate) fn im2col_conv_slices(
     options: &ConvOptions<2>,
     epilogue: Epilogue,
 ) -> (Vec<f32>, [usize; 4]) {
-    check_shapes(x, x_dims, wt, w_dims, options);
+    let [out_h, out_w] = check_shapes(x, x_dims, wt, w_dims, options);
     let [n, c, h, w] = x_dims;
     let [o, _, kh, kw] = w_dims;
     let [sh, sw] = options.stride;
-    let [(ph, ph_end), (pw, pw_end)] = options.padding;
+    let [(ph, _), (pw, _)] = options.padding;
     let [dh, dw] = options.dilation;
-    let (reach_h, reach_w) = (dh * (kh - 1) + 1, dw * (kw - 1) + 1);
-    let out_h = (h + ph + ph_end - reach_h) / sh + 1;
-    let out_w = (w + pw + pw_end - reach_w) / sw + 1;
     let k = c * kh * kw;
     let plane = out_h * out_w;
     let rows_per_tile = (TILE_PIXELS / out_w.max(1)).clamp(1, out_h.max(1));
