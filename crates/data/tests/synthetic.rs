@@ -39,6 +39,33 @@ fn right_view_at_the_disparity_reproduces_the_left_view_exactly() {
 }
 
 #[test]
+fn near_scenes_draw_their_smallest_disparity_from_the_range() {
+    let far = small(4.0);
+    let near = SyntheticConfig { min_disparity_range: Some([8.0, 16.0]), ..far.clone() };
+    let mut smallest = Vec::new();
+    for seed in 0..6 {
+        let scene = SyntheticScene::random(&near, seed);
+        let s = scene.render();
+        let low = s.disparity.data.iter().copied().fold(f32::INFINITY, f32::min);
+        let high = s.disparity.data.iter().copied().fold(0f32, f32::max);
+        assert!((8.0 - 1e-4..=16.0 + 0.25 * 24.0).contains(&low), "seed {seed}: smallest disparity {low}");
+        assert!(high <= 24.0 + 1e-4, "seed {seed}: largest disparity {high}");
+        common::assert_right_view_matches_left(&scene, &s, seed);
+        // The scene's layout is drawn from the same stream as without the range.
+        let plain = SyntheticScene::random(&far, seed);
+        assert_eq!(scene.surfaces.len(), plain.surfaces.len(), "seed {seed}");
+        assert!(low > generate(&far, seed).disparity.data.iter().copied().fold(f32::INFINITY, f32::min));
+        smallest.push(low);
+    }
+    let spread = smallest.iter().copied().fold(0f32, f32::max) - smallest.iter().copied().fold(f32::INFINITY, f32::min);
+    assert!(spread > 1.0, "the smallest disparity does not vary across scenes: {smallest:?}");
+    // A degenerate range is a fixed smallest disparity.
+    let fixed = SyntheticConfig { min_disparity_range: Some([12.0, 12.0]), ..far };
+    let low = generate(&fixed, 3).disparity.data.iter().copied().fold(f32::INFINITY, f32::min);
+    assert!((12.0 - 1e-4..=12.0 + 0.05 * 12.0 + 1e-3).contains(&low), "smallest {low}");
+}
+
+#[test]
 fn warping_the_right_image_by_the_left_disparity_reproduces_the_left_image() {
     // Smooth textures (wavelengths >= 16 px): linear interpolation error stays small.
     let cfg = small(16.0);

@@ -155,10 +155,14 @@ pub struct FinishedRun {
 impl FinishedRun {
     /// Loads `out/model.safetensors` into the run's model and builds the run's prior.
     pub fn load(parts: &TrainParts, out: &Path, device: &Device) -> Result<Self> {
-        let weights = out.join("model.safetensors");
+        Self::with_weights(parts, &out.join("model.safetensors"), device)
+    }
+
+    /// Loads `weights` (a dgstereo `.safetensors` of the run's model) and builds the run's prior.
+    pub fn with_weights(parts: &TrainParts, weights: &Path, device: &Device) -> Result<Self> {
         let model = dgstereo_model::checkpoint::load_safetensors(
             crate::trainer::init_model(&parts.model, device, None)?,
-            &weights,
+            weights,
         )?;
         Ok(Self { model, prior: parts.prior.init(device)? })
     }

@@ -135,13 +135,15 @@ impl TrainingData {
             match dataset(s, i)? {
                 Some((name, dataset)) => sources.push(Source::Files { name, dataset, sparse: s.sparse_ground_truth() }),
                 None => {
-                    let DataSource::Synthetic { width, height, max_disparity, count, textures, .. } = s else {
+                    let DataSource::Synthetic { width, height, max_disparity, count, textures, min_disparity, .. } = s
+                    else {
                         unreachable!()
                     };
                     let mut config = SyntheticConfig::with_size(*width, *height).with_textures(*textures);
                     if let Some(m) = max_disparity {
                         config.max_disparity = *m;
                     }
+                    config.min_disparity_range = *min_disparity;
                     sources.push(Source::Synthetic { config, count: *count, base_seed: mix64(train.seed ^ i as u64) });
                 }
             }

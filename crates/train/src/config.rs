@@ -6,6 +6,7 @@
 use std::path::PathBuf;
 
 use dgstereo_core::{Error, Result};
+use dgstereo_data::SyntheticConfig;
 use dgstereo_data::synthetic::TexturePreset;
 use serde::{Deserialize, Serialize};
 
@@ -194,17 +195,21 @@ impl TrainingDataConfig {
             if !(w.is_finite() && w >= 0.0) {
                 return Err(Error::Config(format!("data.sources[{i}].weight = {w}: must be finite and >= 0")));
             }
-            if let DataSource::Synthetic { width, height, count, .. } = s {
+            if let DataSource::Synthetic { width, height, count, max_disparity, min_disparity, .. } = s {
                 if *width < 16 || *height < 16 {
                     return Err(Error::Config(format!(
                         "data.sources[{i}]: synthetic images of {width}x{height} are too small (at least 16x16)"
                     )));
                 }
+                let max = max_disparity.unwrap_or(0.15 * *width as f64);
+                check_min_disparity(*min_disparity, max, &format!("data.sources[{i}].min_disparity"))?;
                 if *count == Some(0) {
                     return Err(Error::Config(format!("data.sources[{i}].count must be at least 1")));
                 }
             }
         }
+        let v = &self.validation;
+        check_min_disparity(v.min_disparity, v.synthetic().max_disparity, "data.validation.min_disparity")?;
         if self.sources.iter().map(DataSource::weight).sum::<f64>() <= 0.0 {
             return Err(Error::Config("data.sources: the weights sum to 0".into()));
         }
@@ -212,6 +217,19 @@ impl TrainingDataConfig {
             return Err(Error::Config(format!("data.spatial_scale = {:?}: expected [min, max]", self.spatial_scale)));
         }
         Ok(())
+    }
+}
+
+/// `[lo, hi]` with `0 < lo <= hi < max_disparity - 1`, or absent.
+fn check_min_disparity(range: Option<[f64; 2]>, max_disparity: f64, key: &str) -> Result<()> {
+    match range {
+        Some([lo, hi]) if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi && hi < max_disparity - 1.0) => {
+            Err(Error::Config(format!(
+                "{key} = [{lo}, {hi}]: expected [lo, hi] with 0 < lo <= hi < max_disparity - 1 ({})",
+                max_disparity - 1.0
+            )))
+        }
+        _ => Ok(()),
     }
 }
 
@@ -251,6 +269,11 @@ pub enum DataSource {
         /// surfaces, and shading; `SyntheticConfig::rich` of the data crate).
         #[serde(default, skip_serializing_if = "is_smooth", deserialize_with = "texture_preset")]
         textures: TexturePreset,
+        /// `[lo, hi]`: each scene draws its smallest disparity from this range (scenes whose far
+        /// end is near, with wide bands at the left border that the right view cannot see);
+        /// default: every scene's far end is at disparity 1.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        min_disparity: Option<[f64; 2]>,
     },
     /// SceneFlow (`root` holds `frames_*pass` and `disparity`).
     Sceneflow {
@@ -351,6 +374,7 @@ impl Default for DataSource {
             max_disparity: None,
             count: None,
             textures: TexturePreset::Smooth,
+            min_disparity: None,
         }
     }
 }
@@ -387,10 +411,37 @@ pub struct ValidationConfig {
     /// keeps validation numbers comparable with earlier runs).
     #[serde(skip_serializing_if = "is_smooth", deserialize_with = "texture_preset")]
     pub textures: TexturePreset,
+    /// Largest disparity, as a synthetic source's `max_disparity` (default `0.15 · width`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_disparity: Option<f64>,
+    /// Range of each scene's smallest disparity, as a synthetic source's `min_disparity`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_disparity: Option<[f64; 2]>,
 }
 
 impl Default for ValidationConfig {
     fn default() -> Self {
-        Self { count: 8, width: 640, height: 384, seed: 1 << 40, iters: 32, textures: TexturePreset::Smooth }
+        Self {
+            count: 8,
+            width: 640,
+            height: 384,
+            seed: 1 << 40,
+            iters: 32,
+            textures: TexturePreset::Smooth,
+            max_disparity: None,
+            min_disparity: None,
+        }
+    }
+}
+
+impl ValidationConfig {
+    /// The generator's settings for the validation pairs.
+    pub fn synthetic(&self) -> SyntheticConfig {
+        let mut config = SyntheticConfig::with_size(self.width, self.height).with_textures(self.textures);
+        if let Some(m) = self.max_disparity {
+            config.max_disparity = m;
+        }
+        config.min_disparity_range = self.min_disparity;
+        config
     }
 }

@@ -2,8 +2,8 @@
 
 use burn::tensor::Device;
 use dgstereo_core::Result;
+use dgstereo_data::DisparityMap;
 use dgstereo_data::synthetic::generate;
-use dgstereo_data::{DisparityMap, SyntheticConfig};
 use dgstereo_eval::{MetricSums, Metrics, ValidOptions, accumulate};
 use dgstereo_model::{ModelConfig, RaftStereo};
 use dgstereo_prior::Prior;
@@ -21,7 +21,7 @@ pub struct ValidationSet {
 impl ValidationSet {
     /// Renders `config.count` synthetic pairs (scene seeds `seed .. seed + count`).
     pub fn new(config: &ValidationConfig) -> Self {
-        let synth = SyntheticConfig::with_size(config.width, config.height).with_textures(config.textures);
+        let synth = config.synthetic();
         let pairs = (0..config.count as u64)
             .map(|i| {
                 let seed = config.seed.wrapping_add(i);

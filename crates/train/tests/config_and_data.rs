@@ -64,6 +64,7 @@ fn augmented_batches_have_the_crop_size_and_both_targets() {
         max_disparity: None,
         count: None,
         textures: Default::default(),
+        min_disparity: None,
     }];
     let data = TrainingData::new(&parts.data, &parts.train).unwrap();
     let pairs = data.batch(3, 2).unwrap();
@@ -115,6 +116,48 @@ fn synthetic_textures_key_selects_the_preset_and_rejects_unknown_values() {
         differ |= a.left != b.left;
     }
     assert!(same_disparity && differ);
+}
+
+#[test]
+fn synthetic_min_disparity_range_raises_the_far_end_and_bad_ranges_name_the_key() {
+    let parse = |extra: &str| {
+        toml::from_str::<TrainingDataConfig>(&format!(
+            "[[sources]]\nkind = \"synthetic\"\nwidth = 96\nheight = 64\nmax_disparity = 24.0\n{extra}"
+        ))
+        .unwrap()
+    };
+    let near = parse("min_disparity = [10.0, 14.0]");
+    near.validate().unwrap();
+    assert!(matches!(near.sources[0], DataSource::Synthetic { min_disparity: Some([10.0, 14.0]), .. }));
+    assert_eq!(toml::from_str::<TrainingDataConfig>(&toml::to_string(&near).unwrap()).unwrap(), near);
+    for bad in ["[0.0, 4.0]", "[8.0, 4.0]", "[4.0, 23.5]", "[nan, 4.0]"] {
+        let e = parse(&format!("min_disparity = {bad}")).validate().unwrap_err().to_string();
+        assert!(e.contains("data.sources[0].min_disparity"), "{bad}: {e}");
+    }
+    let e = toml::from_str::<TrainingDataConfig>("[validation]\nwidth = 100\nmin_disparity = [2.0, 30.0]")
+        .unwrap()
+        .validate()
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("data.validation.min_disparity") && e.contains("14"), "{e}");
+
+    // Training pairs (no augmentation, no crop change) have no disparity below the range.
+    let mut parts = common::tiny_parts(10, 1, 1e-3, None, 2);
+    parts.data.sources = near.sources.clone();
+    let data = TrainingData::new(&parts.data, &parts.train).unwrap();
+    for step in 0..3 {
+        let p = data.pair(step, 0).unwrap();
+        let low = p.disparity.data.iter().copied().fold(f32::INFINITY, f32::min);
+        assert!(low >= 10.0 - 1e-4, "step {step}: smallest disparity {low}");
+    }
+    // The validation set follows its own keys.
+    let v = toml::from_str::<TrainingDataConfig>(
+        "[validation]\nwidth = 96\nheight = 64\nmax_disparity = 30.0\nmin_disparity = [20.0, 20.0]",
+    )
+    .unwrap();
+    v.validate().unwrap();
+    let synth = v.validation.synthetic();
+    assert_eq!((synth.max_disparity, synth.min_disparity_range), (30.0, Some([20.0, 20.0])));
 }
 
 /// A folder source marked `sparse` goes through the sparse augmentor: every supervised pixel

@@ -5,7 +5,9 @@
 //! It prints one line per run and exits with status 1 when any file or run fails; a failing file
 //! does not stop the others from being checked. `samples` writes the training pairs a run draws
 //! (after augmentation, exactly as the trainer sees them) as pictures, to look at the data before
-//! spending hours on it.
+//! spending hours on it. `validate` scores weights on a run's held-out synthetic set, the numbers
+//! its training log would show, so candidates (and the starting point of a run) compare on the set
+//! a ship decision names.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -44,6 +46,14 @@ pub enum ExperimentCommand {
         #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u16).range(1..))]
         count: u16,
     },
+    /// Scores weights on the validation set of an experiment (`[data.validation]`); prints JSON.
+    Validate {
+        /// Experiment file (its first run when the file sweeps).
+        file: PathBuf,
+        /// Weights of the experiment's model (dgstereo `.safetensors`); default: its `train.init`.
+        #[arg(long)]
+        weights: Option<PathBuf>,
+    },
 }
 
 fn parse_size(text: &str) -> Result<[usize; 2], String> {
@@ -59,14 +69,41 @@ pub fn run(command: ExperimentCommand) -> anyhow::Result<ExitCode> {
     match command {
         ExperimentCommand::Check { files, size, iters, show } => check(&files, size, iters as usize, show),
         ExperimentCommand::Samples { file, out, count } => samples(&file, &out, count as usize),
+        ExperimentCommand::Validate { file, weights } => validate(&file, weights.as_deref()),
     }
 }
 
-fn samples(file: &Path, out: &Path, count: usize) -> anyhow::Result<ExitCode> {
-    let run = dgstereo_experiment::load(file)?
+fn validate(file: &Path, weights: Option<&Path>) -> anyhow::Result<ExitCode> {
+    let run = first_run(file)?;
+    let weights = match weights.map(Path::to_path_buf).or_else(|| run.config.train.init.clone()) {
+        Some(w) => w,
+        None => anyhow::bail!("{}: no --weights given and the experiment has no train.init", file.display()),
+    };
+    let parts = crate::commands::train::parts_of(run.config, None);
+    let device = dgstereo_core::default_device();
+    let model = dgstereo_train::ablation::FinishedRun::with_weights(&parts, &weights, &device)
+        .with_context(|| format!("{}: loading {}", file.display(), weights.display()))?;
+    let m = dgstereo_train::ablation::evaluate_finished_run(&parts, &model, &device)
+        .with_context(|| format!("{}: validation", file.display()))?;
+    let v = &parts.data.validation;
+    let report = serde_json::json!({
+        "experiment": parts.name, "weights": weights.display().to_string(),
+        "validation": {"count": v.count, "width": v.width, "height": v.height, "iters": v.iters, "seed": v.seed},
+        "epe": m.epe, "bad-1": m.bad_1, "bad-2": m.bad_2, "bad-3": m.bad_3, "valid_pixels": m.valid_pixels,
+    });
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    Ok(ExitCode::SUCCESS)
+}
+
+fn first_run(file: &Path) -> anyhow::Result<dgstereo_experiment::ResolvedRun> {
+    dgstereo_experiment::load(file)?
         .into_iter()
         .next()
-        .ok_or_else(|| anyhow::anyhow!("{}: the file defines no run", file.display()))?;
+        .ok_or_else(|| anyhow::anyhow!("{}: the file defines no run", file.display()))
+}
+
+fn samples(file: &Path, out: &Path, count: usize) -> anyhow::Result<ExitCode> {
+    let run = first_run(file)?;
     let (data_config, train) = (&run.config.data, &run.config.train);
     let data = dgstereo_train::batch::TrainingData::new(data_config, train)
         .with_context(|| format!("{}: training data", file.display()))?;

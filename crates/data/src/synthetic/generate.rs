@@ -44,6 +44,12 @@ pub struct SyntheticConfig {
     /// Probability that a surface gets a smooth brightness gain ([`super::Shading`]). Default 0.
     #[serde(default)]
     pub shading_prob: f64,
+    /// When set, each scene draws its smallest disparity from `[lo, hi]` instead of using
+    /// `min_disparity`: scenes whose far end is near (rooms, table tops, Middlebury), where every
+    /// point has a large disparity and the band of the left view that the right view cannot see is
+    /// wide. Drawn from a stream of its own, so the scene's other draws are the same. Default: unset.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_disparity_range: Option<[f64; 2]>,
 }
 
 fn gratings_only() -> [f64; 4] {
@@ -79,6 +85,7 @@ impl Default for SyntheticConfig {
             texture_weights: gratings_only(),
             background_texture_weights: gratings_only(),
             shading_prob: 0.0,
+            min_disparity_range: None,
         }
     }
 }
@@ -126,7 +133,16 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
     let mut style = ChaCha8Rng::seed_from_u64(seed);
     style.set_stream(1);
     let (w, h) = (cfg.width as f64, cfg.height as f64);
-    let (dmin, dmax) = (cfg.min_disparity, cfg.max_disparity.max(cfg.min_disparity + 1.0));
+    let min_disparity = match cfg.min_disparity_range {
+        Some([lo, hi]) if hi > lo => {
+            let mut near = ChaCha8Rng::seed_from_u64(seed);
+            near.set_stream(2);
+            near.gen_range(lo..=hi)
+        }
+        Some([lo, _]) => lo,
+        None => cfg.min_disparity,
+    };
+    let (dmin, dmax) = (min_disparity, cfg.max_disparity.max(min_disparity + 1.0));
     let range = dmax - dmin;
     let slant = cfg.max_slant.clamp(0.0, 0.9);
 

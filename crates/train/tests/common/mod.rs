@@ -42,6 +42,7 @@ pub fn tiny_parts(steps: usize, iters: usize, lr: f64, count: Option<usize>, bat
             max_disparity: Some(5.0),
             count,
             textures: Default::default(),
+            min_disparity: None,
         }],
         augment: false,
         validation: ValidationConfig { count: 0, ..ValidationConfig::default() },
