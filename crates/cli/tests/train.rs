@@ -73,6 +73,22 @@ fn train_writes_model_log_plot_and_checkpoints() {
         .collect();
     assert_eq!(steps, vec![1, 2, 3], "one log line per step with log_every = 1");
     assert!(log.contains(r#""kind":"validation""#), "validation at step 2 is logged");
+    // `experiment validate` scores the final weights on the same set: the log's last validation.
+    let last_validation = log
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|v| v["kind"] == "validation")
+        .last()
+        .unwrap();
+    assert_eq!(last_validation["step"], 3);
+    let weights = out.join("model.safetensors");
+    let o = dgstereo(&["experiment", "validate", exp.to_str().unwrap(), "--weights", weights.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (a, b) = (report["epe"].as_f64().unwrap(), last_validation["epe"].as_f64().unwrap());
+    assert!((a - b).abs() <= 1e-6 * b.abs().max(1.0), "validate {a} vs the log's {b}");
+    let o = dgstereo(&["experiment", "validate", exp.to_str().unwrap()]);
+    assert!(!o.status.success() && text(&o).contains("train.init"), "{}", text(&o));
     // The trained weights carry their config: `infer` loads them without an experiment file.
     let pred = dir.path().join("pred");
     let o = infer_cones(&[
