@@ -321,8 +321,11 @@ fn transform_inputs(
     let (phases, rows_b) = scratch.split_at_mut(m * per_phase + 1);
     for ci in 0..g.c {
         let channel = &image[ci * g.h * g.w..][..g.h * g.w];
-        for (slot, (rp, l)) in (0..m).flat_map(|rp| (0..rows + 1).map(move |l| (rp, l))).enumerate() {
-            let row = (m * (tile_rows.start + l) + rp).checked_sub(g.ph).filter(|&iy| iy < g.h);
+        // Input rows in memory order (row `m·l + rp` of the band goes to slot `(rp, l)`): reading
+        // them by row phase instead (every m-th row first) cost 3-4 % of CPU inference.
+        for r in 0..m * (rows + 1) {
+            let slot = (r % m) * (rows + 1) + r / m;
+            let row = (m * tile_rows.start + r).checked_sub(g.ph).filter(|&iy| iy < g.h);
             let line = row.map_or(&[][..], |iy| &channel[iy * g.w..][..g.w]);
             for (p, dst) in phases.chunks_exact_mut(per_phase).enumerate() {
                 split_row(line, g.pw, m, p, &mut dst[slot * tws..][..tws]);
