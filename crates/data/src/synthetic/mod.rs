@@ -32,6 +32,11 @@
 //! background 25/35/20/20 %, half the surfaces shaded). The texture choices are drawn from a
 //! second random stream of the seed, so a seed gives the same geometry under every mix.
 //!
+//! The far end of a scene is at `min_disparity` (default 1: a distant background), or, with
+//! [`SyntheticConfig::min_disparity_range`], at a disparity drawn per scene: near scenes (rooms,
+//! table tops, Middlebury's) where every point has a large disparity and the band of the left
+//! view that the right view cannot see is wide.
+//!
 //! Pixel centres are at integer coordinates. Disparity is positive, `x_right = x_left - d`.
 
 mod dead_leaves;
