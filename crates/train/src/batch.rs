@@ -17,7 +17,7 @@ use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use crate::config::{DataSource, TrainingConfig, TrainingDataConfig};
+use crate::config::{DataSource, TrainingConfig, TrainingDataConfig, synthetic_config};
 
 /// SplitMix64 finaliser: a well-mixed 64-bit hash of `x`.
 pub fn mix64(mut x: u64) -> u64 {
@@ -139,11 +139,7 @@ impl TrainingData {
                     else {
                         unreachable!()
                     };
-                    let mut config = SyntheticConfig::with_size(*width, *height).with_textures(*textures);
-                    if let Some(m) = max_disparity {
-                        config.max_disparity = *m;
-                    }
-                    config.min_disparity_range = *min_disparity;
+                    let config = synthetic_config([*width, *height], *textures, *max_disparity, *min_disparity);
                     sources.push(Source::Synthetic { config, count: *count, base_seed: mix64(train.seed ^ i as u64) });
                 }
             }

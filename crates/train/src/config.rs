@@ -201,15 +201,14 @@ impl TrainingDataConfig {
                         "data.sources[{i}]: synthetic images of {width}x{height} are too small (at least 16x16)"
                     )));
                 }
-                let max = max_disparity.unwrap_or(0.15 * *width as f64);
-                check_min_disparity(*min_disparity, max, &format!("data.sources[{i}].min_disparity"))?;
+                check_disparities(*max_disparity, *min_disparity, *width, &format!("data.sources[{i}]"))?;
                 if *count == Some(0) {
                     return Err(Error::Config(format!("data.sources[{i}].count must be at least 1")));
                 }
             }
         }
         let v = &self.validation;
-        check_min_disparity(v.min_disparity, v.synthetic().max_disparity, "data.validation.min_disparity")?;
+        check_disparities(v.max_disparity, v.min_disparity, v.width, "data.validation")?;
         if self.sources.iter().map(DataSource::weight).sum::<f64>() <= 0.0 {
             return Err(Error::Config("data.sources: the weights sum to 0".into()));
         }
@@ -220,13 +219,19 @@ impl TrainingDataConfig {
     }
 }
 
-/// `[lo, hi]` with `0 < lo <= hi < max_disparity - 1`, or absent.
-fn check_min_disparity(range: Option<[f64; 2]>, max_disparity: f64, key: &str) -> Result<()> {
-    match range {
-        Some([lo, hi]) if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi && hi < max_disparity - 1.0) => {
+/// The disparity keys of a synthetic source or the validation set (`table`): `max_disparity`
+/// finite and > 1 (default `0.15 · width`), `min_disparity` `[lo, hi]` with
+/// `0 < lo <= hi < max_disparity - 1`.
+fn check_disparities(max: Option<f64>, min: Option<[f64; 2]>, width: usize, table: &str) -> Result<()> {
+    if let Some(m) = max.filter(|m| !(m.is_finite() && *m > 1.0)) {
+        return Err(Error::Config(format!("{table}.max_disparity = {m}: must be a finite value > 1")));
+    }
+    let max = max.unwrap_or(0.15 * width as f64);
+    match min {
+        Some([lo, hi]) if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi && hi < max - 1.0) => {
             Err(Error::Config(format!(
-                "{key} = [{lo}, {hi}]: expected [lo, hi] with 0 < lo <= hi < max_disparity - 1 ({})",
-                max_disparity - 1.0
+                "{table}.min_disparity = [{lo}, {hi}]: expected [lo, hi] with 0 < lo <= hi < max_disparity - 1 ({})",
+                max - 1.0
             )))
         }
         _ => Ok(()),
@@ -437,11 +442,22 @@ impl Default for ValidationConfig {
 impl ValidationConfig {
     /// The generator's settings for the validation pairs.
     pub fn synthetic(&self) -> SyntheticConfig {
-        let mut config = SyntheticConfig::with_size(self.width, self.height).with_textures(self.textures);
-        if let Some(m) = self.max_disparity {
-            config.max_disparity = m;
-        }
-        config.min_disparity_range = self.min_disparity;
-        config
+        synthetic_config([self.width, self.height], self.textures, self.max_disparity, self.min_disparity)
     }
+}
+
+/// The generator's settings from a synthetic source's (or the validation set's) keys: the
+/// default scene mix at `[width, height]`, the texture preset and the disparity range.
+pub(crate) fn synthetic_config(
+    [width, height]: [usize; 2],
+    textures: TexturePreset,
+    max_disparity: Option<f64>,
+    min_disparity: Option<[f64; 2]>,
+) -> SyntheticConfig {
+    let mut config = SyntheticConfig::with_size(width, height).with_textures(textures);
+    if let Some(m) = max_disparity {
+        config.max_disparity = m;
+    }
+    config.min_disparity_range = min_disparity;
+    config
 }

@@ -134,6 +134,12 @@ fn synthetic_min_disparity_range_raises_the_far_end_and_bad_ranges_name_the_key(
         let e = parse(&format!("min_disparity = {bad}")).validate().unwrap_err().to_string();
         assert!(e.contains("data.sources[0].min_disparity"), "{bad}: {e}");
     }
+    let e = toml::from_str::<TrainingDataConfig>("[[sources]]\nkind = \"synthetic\"\nmax_disparity = -3.0")
+        .unwrap()
+        .validate()
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("data.sources[0].max_disparity") && e.contains("-3"), "{e}");
     let e = toml::from_str::<TrainingDataConfig>("[validation]\nwidth = 100\nmin_disparity = [2.0, 30.0]")
         .unwrap()
         .validate()
