@@ -85,10 +85,9 @@ fn validate(file: &Path, weights: Option<&Path>) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("{}: loading {}", file.display(), weights.display()))?;
     let m = dgstereo_train::ablation::evaluate_finished_run(&parts, &model, &device)
         .with_context(|| format!("{}: validation", file.display()))?;
-    let v = &parts.data.validation;
     let report = serde_json::json!({
         "experiment": parts.name, "weights": weights.display().to_string(),
-        "validation": {"count": v.count, "width": v.width, "height": v.height, "iters": v.iters, "seed": v.seed},
+        "validation": serde_json::to_value(&parts.data.validation)?,
         "epe": m.epe, "bad-1": m.bad_1, "bad-2": m.bad_2, "bad-3": m.bad_3, "valid_pixels": m.valid_pixels,
     });
     println!("{}", serde_json::to_string_pretty(&report)?);
