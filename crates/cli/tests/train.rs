@@ -77,8 +77,7 @@ fn train_writes_model_log_plot_and_checkpoints() {
     let last_validation = log
         .lines()
         .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
-        .filter(|v| v["kind"] == "validation")
-        .last()
+        .rfind(|v| v["kind"] == "validation")
         .unwrap();
     assert_eq!(last_validation["step"], 3);
     let weights = out.join("model.safetensors");
