@@ -29,18 +29,9 @@ fn tanh_fast(x: f32) -> f32 {
     const B: [f32; 4] = [4.893_525e-3, 2.268_434_6e-3, 1.185_347_1e-4, 1.198_258_4e-6];
     let x = x.clamp(-CLAMP, CLAMP);
     let x2 = x * x;
-    let p = A[6];
-    let p = p * x2 + A[5];
-    let p = p * x2 + A[4];
-    let p = p * x2 + A[3];
-    let p = p * x2 + A[2];
-    let p = p * x2 + A[1];
-    let p = (p * x2 + A[0]) * x;
-    let q = B[3];
-    let q = q * x2 + B[2];
-    let q = q * x2 + B[1];
-    let q = q * x2 + B[0];
-    p / q
+    // Horner's scheme in x², highest coefficient first.
+    let polynomial = |coefficients: &[f32]| coefficients.iter().rev().fold(0.0, |acc, &k| acc * x2 + k);
+    x * polynomial(&A) / polynomial(&B)
 }
 
 /// `σ(v) = (1 + tanh(v / 2)) / 2`, exactly the logistic function, through [`tanh_fast`].
