@@ -126,6 +126,7 @@ fn synthetic_min_disparity_range_raises_the_far_end_and_bad_ranges_name_the_key(
         ))
         .unwrap()
     };
+    let error = |text: &str| toml::from_str::<TrainingDataConfig>(text).unwrap().validate().unwrap_err().to_string();
     let near = parse("min_disparity = [10.0, 14.0]");
     near.validate().unwrap();
     assert!(matches!(near.sources[0], DataSource::Synthetic { min_disparity: Some([10.0, 14.0]), .. }));
@@ -134,17 +135,9 @@ fn synthetic_min_disparity_range_raises_the_far_end_and_bad_ranges_name_the_key(
         let e = parse(&format!("min_disparity = {bad}")).validate().unwrap_err().to_string();
         assert!(e.contains("data.sources[0].min_disparity"), "{bad}: {e}");
     }
-    let e = toml::from_str::<TrainingDataConfig>("[[sources]]\nkind = \"synthetic\"\nmax_disparity = -3.0")
-        .unwrap()
-        .validate()
-        .unwrap_err()
-        .to_string();
+    let e = error("[[sources]]\nkind = \"synthetic\"\nmax_disparity = -3.0");
     assert!(e.contains("data.sources[0].max_disparity") && e.contains("-3"), "{e}");
-    let e = toml::from_str::<TrainingDataConfig>("[validation]\nwidth = 100\nmin_disparity = [2.0, 30.0]")
-        .unwrap()
-        .validate()
-        .unwrap_err()
-        .to_string();
+    let e = error("[validation]\nwidth = 100\nmin_disparity = [2.0, 30.0]");
     assert!(e.contains("data.validation.min_disparity") && e.contains("14"), "{e}");
 
     // Training pairs (no augmentation, no crop change) have no disparity below the range.
