@@ -2,8 +2,10 @@
 //! ([`ModelArgs`]) and the [`Engine`] they build.
 //!
 //! The engine owns the network, the prior provider and the per-pair policy:
-//! - `--max-size N` downscales both views so the longer side is at most `N` pixels, and the
-//!   disparity is resized back to the input size and multiplied by the inverse scale;
+//! - `--max-size N` downscales both views so the longer side is at most `N` pixels, and
+//!   `--min-size` (default `auto`) upscales small pairs for 1/8-resolution models
+//!   ([`crate::working_size`]); the disparity is resized back to the input size and multiplied
+//!   by the inverse scale;
 //! - the cost volume is the materialised pyramid ("reg", fast) unless its estimated size
 //!   ([`CorrelationConfig::pyramid_bytes`] at the padded feature resolution) exceeds
 //!   `--memory-budget`, then the on-the-fly volume ("alt", memory linear in the width) is used;
@@ -20,13 +22,14 @@ use burn::tensor::Device;
 use clap::{Args, ValueEnum};
 use dgstereo_core::DeviceChoice;
 use dgstereo_costvolume::CorrelationImplementation;
-use dgstereo_data::resize::{disparity_to_size, fit_scale, resize_rgb};
+use dgstereo_data::resize::{disparity_to_size, resize_rgb};
 use dgstereo_data::{DisparityMap, RgbImage};
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
 use crate::convert::{disparity_map, image_tensor};
 use crate::models::{default_weights, load_model};
+use crate::working_size::{MinSize, working_scale};
 
 /// Which cost volume to build.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -69,6 +72,11 @@ pub struct ModelArgs {
     /// Downscale pairs whose longer side exceeds this many pixels (disparity is rescaled back).
     #[arg(long)]
     pub max_size: Option<usize>,
+    /// Upscale pairs whose longer side is under this many pixels (disparity is rescaled back):
+    /// `auto` (900 for models at 1/8 resolution such as the bundled default, which lose fine
+    /// structure on small pairs; off for 1/4-resolution models and with --max-size), `off`, or pixels.
+    #[arg(long, default_value = "auto")]
+    pub min_size: MinSize,
     /// Memory allowed for the materialised cost volume, e.g. `4GiB`, `512MiB` (`--corr auto`).
     #[arg(long, default_value = "4GiB")]
     pub memory_budget: String,
@@ -190,7 +198,7 @@ pub fn corr_for(
 /// What happened on one pair.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunInfo {
-    /// Size the network saw (after `--max-size`).
+    /// Size the network saw (after `--max-size` / `--min-size`).
     pub network_size: (usize, usize),
     /// Cost volume used.
     pub corr: CorrelationImplementation,
@@ -202,6 +210,8 @@ pub struct Engine {
     prior: Option<Prior>,
     iters: usize,
     max_size: Option<usize>,
+    /// Pairs whose longer side is under this are upscaled to it (`--min-size`, resolved).
+    pub min_size: Option<usize>,
     budget: u64,
     corr: CorrChoice,
     /// The weights file.
@@ -260,7 +270,13 @@ impl Engine {
                 "this model uses a depth prior (fusion or guidance): pass --prior (e.g. depth-anything-v2:WEIGHTS or file:DIR)"
             );
         }
-        Ok(Self { model, prior, iters: a.iters, max_size: a.max_size, budget, corr: a.corr, weights, device })
+        let min_size = a.min_size.resolve(model.config.factor(), a.max_size);
+        match (min_size, a.max_size) {
+            (Some(lo), Some(hi)) if lo > hi => bail!("--min-size {lo} is larger than --max-size {hi}"),
+            (Some(lo), _) if lo < 32 => bail!("--min-size must be at least 32 pixels (or `off`)"),
+            _ => {}
+        }
+        Ok(Self { model, prior, iters: a.iters, max_size: a.max_size, min_size, budget, corr: a.corr, weights, device })
     }
 
     /// The cost volume for a network input of `width x height` (before padding).
@@ -280,8 +296,8 @@ impl Engine {
             );
         }
         let (w, h) = (left.width, left.height);
-        let scale = fit_scale(w, h, self.max_size);
-        let (l, r) = if scale < 1.0 {
+        let scale = working_scale(w, h, self.min_size, self.max_size);
+        let (l, r) = if scale != 1.0 {
             (resize_rgb(left, scale, scale), resize_rgb(right, scale, scale))
         } else {
             (left.clone(), right.clone())

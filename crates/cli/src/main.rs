@@ -12,6 +12,7 @@ mod models;
 mod outputs;
 mod pointcloud;
 mod visualize;
+mod working_size;
 
 use std::process::ExitCode;
 

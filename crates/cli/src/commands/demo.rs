@@ -9,9 +9,10 @@ use clap::Args;
 use dgstereo_data::{load_mask, load_rgb, read_disparity, save_rgb, write_disparity};
 use dgstereo_eval::{ValidOptions, evaluate};
 
-use crate::convert::{disparity_map, image_tensor};
-use crate::models::{asset, default_weights, load_model};
+use crate::engine::{CorrChoice, Engine, ModelArgs};
+use crate::models::asset;
 use crate::visualize::{colorize, error_image, side_by_side};
+use crate::working_size::MinSize;
 
 /// Options of the demo.
 #[derive(Args)]
@@ -25,29 +26,40 @@ pub struct DemoArgs {
     /// Update iterations.
     #[arg(long, default_value_t = 32)]
     iters: usize,
+    /// Upscale the pair when its longer side is under this many pixels: `auto` (900 for models at
+    /// 1/8 resolution such as the bundled default), `off`, or pixels.
+    #[arg(long, default_value = "auto")]
+    min_size: MinSize,
 }
 
 pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
-    let device = dgstereo_core::default_device();
     let left_path = asset("cones/left_rgb.png")?;
     let dir = left_path.parent().context("asset folder")?.to_path_buf();
     let left = load_rgb(&left_path)?;
     let right = load_rgb(dir.join("right_rgb.png"))?;
     let gt = read_disparity(dir.join("disp_left.pfm"))?;
     let visible = load_mask(dir.join("occlusion.png"))?;
-    let weights = match a.weights {
-        Some(w) => w,
-        None => default_weights(false)?,
-    };
-    println!("weights: {}", weights.display());
-    let model = load_model(&weights, None, &device)?;
+    let engine = Engine::new(&ModelArgs {
+        weights: a.weights,
+        experiment: None,
+        run: None,
+        iters: a.iters,
+        prior: None,
+        prior_weights: None,
+        device: "cpu".into(),
+        max_size: None,
+        min_size: a.min_size,
+        memory_budget: "4GiB".into(),
+        corr: CorrChoice::Auto,
+    })?;
+    println!("weights: {}", engine.weights.display());
 
     let start = Instant::now();
-    let pred =
-        model.predict(image_tensor(&left, &device), image_tensor(&right, &device), None, a.iters, false, None)?;
-    let disp = disparity_map(pred.last());
+    let (disp, info) = engine.disparity(&left, &right, "cones")?;
     let seconds = start.elapsed().as_secs_f64();
-    println!("Cones {}x{}, {} iterations: {seconds:.2} s", left.width, left.height, a.iters);
+    let (nw, nh) = info.network_size;
+    let network = if (nw, nh) == (left.width, left.height) { String::new() } else { format!(" (network {nw}x{nh})") };
+    println!("Cones {}x{}{network}, {} iterations: {seconds:.2} s", left.width, left.height, a.iters);
 
     std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create {}", a.out.display()))?;
     write_disparity(a.out.join("cones_disparity.pfm"), &disp)?;

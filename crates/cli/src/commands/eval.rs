@@ -72,10 +72,11 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
         protocol.name(),
         engine.weights.display(),
         a.model.iters,
-        a.model
-            .max_size
-            .map(|m| format!(", downscaled to at most {m} px (not the benchmark's protocol)"))
-            .unwrap_or_default()
+        match (a.model.max_size, engine.min_size) {
+            (Some(m), _) => format!(", downscaled to at most {m} px (not the benchmark's protocol)"),
+            (None, Some(m)) => format!(", pairs under {m} px upscaled to it (--min-size)"),
+            (None, None) => String::new(),
+        }
     );
     let mut k = 0;
     let result = evaluate_dataset(
