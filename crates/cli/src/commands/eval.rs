@@ -5,8 +5,10 @@
 //! ones where a mask exists) into a table printed as text and written as `eval.csv` and
 //! `eval.json` in `--out`. The protocol follows the data set (KITTI: bad-3 pooled; Middlebury:
 //! bad-2 per image; ETH3D: bad-1 per image; SceneFlow: FlyingThings3D finalpass TEST, bad-1
-//! pooled; DrivingStereo: EPE and bad-3 per weather; folder: generic). `--max-size` makes the numbers differ from the benchmark's (it is for quick looks
-//! and tests) and is reported in the output.
+//! pooled; DrivingStereo: EPE and bad-3 per weather; folder: generic). `--max-size` makes the
+//! numbers differ from the benchmark's (it is for quick looks and tests) and is reported in the
+//! output, as is the upscaling of small pairs that `--min-size` (default `auto`) applies to
+//! 1/8-resolution models: the predictions are scored at the data set's size either way.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
