@@ -66,6 +66,34 @@ fn near_scenes_draw_their_smallest_disparity_from_the_range() {
 }
 
 #[test]
+fn lattices_stand_in_front_with_holes_and_leave_the_other_draws_alone() {
+    // A bar at u = 0..2 of a period-10 lattice: points on bars are inside, points in holes not.
+    let grid = Outline::Lattice { cx: 50.0, cy: 50.0, hw: 40.0, hh: 40.0, cos: 1.0, sin: 0.0, period: 10.0, bar: 2.0 };
+    assert!(grid.contains(10.5, 17.0) && grid.contains(15.0, 20.5));
+    assert!(!grid.contains(15.0, 15.0) && !grid.contains(95.0, 50.0));
+    let plain = SyntheticConfig { max_disparity: 40.0, ..small(4.0) };
+    let with = SyntheticConfig { lattice_prob: 1.0, ..plain.clone() };
+    let mut occluded = [0usize; 2];
+    for seed in 0..4 {
+        let (a, b) = (SyntheticScene::random(&plain, seed), SyntheticScene::random(&with, seed));
+        // The lattice is one more surface after the same ones.
+        assert_eq!(b.surfaces.len(), a.surfaces.len() + 1, "seed {seed}");
+        assert_eq!(b.surfaces[..a.surfaces.len()], a.surfaces[..], "seed {seed}");
+        let Outline::Lattice { period, bar, .. } = b.surfaces.last().unwrap().outline else {
+            panic!("seed {seed}: the last surface is not a lattice")
+        };
+        assert!(bar >= 1.5 && bar < period, "seed {seed}: bar {bar}, period {period}");
+        let (ra, rb) = (a.render(), b.render());
+        common::assert_right_view_matches_left(&b, &rb, seed);
+        occluded[0] += ra.occlusion.data.iter().filter(|v| **v).count();
+        occluded[1] += rb.occlusion.data.iter().filter(|v| **v).count();
+    }
+    assert!(occluded[1] > occluded[0], "the lattices add no occlusions: {occluded:?}");
+    // The default draws none.
+    assert_eq!(SyntheticConfig::default().lattice_prob, 0.0);
+}
+
+#[test]
 fn warping_the_right_image_by_the_left_disparity_reproduces_the_left_image() {
     // Smooth textures (wavelengths >= 16 px): linear interpolation error stays small.
     let cfg = small(16.0);

@@ -135,11 +135,21 @@ impl TrainingData {
             match dataset(s, i)? {
                 Some((name, dataset)) => sources.push(Source::Files { name, dataset, sparse: s.sparse_ground_truth() }),
                 None => {
-                    let DataSource::Synthetic { width, height, max_disparity, count, textures, min_disparity, .. } = s
+                    let DataSource::Synthetic {
+                        width,
+                        height,
+                        max_disparity,
+                        count,
+                        textures,
+                        min_disparity,
+                        lattices,
+                        ..
+                    } = s
                     else {
                         unreachable!()
                     };
-                    let config = synthetic_config([*width, *height], *textures, *max_disparity, *min_disparity);
+                    let config =
+                        synthetic_config([*width, *height], *textures, *max_disparity, *min_disparity, *lattices);
                     sources.push(Source::Synthetic { config, count: *count, base_seed: mix64(train.seed ^ i as u64) });
                 }
             }

@@ -195,7 +195,10 @@ impl TrainingDataConfig {
             if !(w.is_finite() && w >= 0.0) {
                 return Err(Error::Config(format!("data.sources[{i}].weight = {w}: must be finite and >= 0")));
             }
-            if let DataSource::Synthetic { width, height, count, max_disparity, min_disparity, .. } = s {
+            if let DataSource::Synthetic { width, height, count, max_disparity, min_disparity, lattices, .. } = s {
+                if let Some(p) = lattices.filter(|p| !(0.0..=1.0).contains(p)) {
+                    return Err(Error::Config(format!("data.sources[{i}].lattices = {p}: must be a share in [0, 1]")));
+                }
                 if *width < 16 || *height < 16 {
                     return Err(Error::Config(format!(
                         "data.sources[{i}]: synthetic images of {width}x{height} are too small (at least 16x16)"
@@ -279,6 +282,10 @@ pub enum DataSource {
         /// default: every scene's far end is at disparity 1.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         min_disparity: Option<[f64; 2]>,
+        /// Share of scenes with a lattice in front (a trellis or fence: thin bars, a repetitive
+        /// pattern, the scene seen through its holes), in [0, 1]; default 0.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        lattices: Option<f64>,
     },
     /// SceneFlow (`root` holds `frames_*pass` and `disparity`).
     Sceneflow {
@@ -380,6 +387,7 @@ impl Default for DataSource {
             count: None,
             textures: TexturePreset::Smooth,
             min_disparity: None,
+            lattices: None,
         }
     }
 }
@@ -442,22 +450,25 @@ impl Default for ValidationConfig {
 impl ValidationConfig {
     /// The generator's settings for the validation pairs.
     pub fn synthetic(&self) -> SyntheticConfig {
-        synthetic_config([self.width, self.height], self.textures, self.max_disparity, self.min_disparity)
+        synthetic_config([self.width, self.height], self.textures, self.max_disparity, self.min_disparity, None)
     }
 }
 
 /// The generator's settings from a synthetic source's (or the validation set's) keys: the
-/// default scene mix at `[width, height]`, the texture preset and the disparity range.
+/// default scene mix at `[width, height]`, the texture preset, the disparity range and the share
+/// of scenes with a lattice.
 pub(crate) fn synthetic_config(
     [width, height]: [usize; 2],
     textures: TexturePreset,
     max_disparity: Option<f64>,
     min_disparity: Option<[f64; 2]>,
+    lattices: Option<f64>,
 ) -> SyntheticConfig {
     let mut config = SyntheticConfig::with_size(width, height).with_textures(textures);
     if let Some(m) = max_disparity {
         config.max_disparity = m;
     }
     config.min_disparity_range = min_disparity;
+    config.lattice_prob = lattices.unwrap_or(0.0);
     config
 }

@@ -65,6 +65,7 @@ fn augmented_batches_have_the_crop_size_and_both_targets() {
         count: None,
         textures: Default::default(),
         min_disparity: None,
+        lattices: None,
     }];
     let data = TrainingData::new(&parts.data, &parts.train).unwrap();
     let pairs = data.batch(3, 2).unwrap();
@@ -157,6 +158,33 @@ fn synthetic_min_disparity_range_raises_the_far_end_and_bad_ranges_name_the_key(
     v.validate().unwrap();
     let synth = v.validation.synthetic();
     assert_eq!((synth.max_disparity, synth.min_disparity_range), (30.0, Some([20.0, 20.0])));
+}
+
+#[test]
+fn synthetic_lattices_key_sets_the_share_and_bad_shares_name_the_key() {
+    let parse = |value: &str| {
+        toml::from_str::<TrainingDataConfig>(&format!(
+            "[[sources]]\nkind = \"synthetic\"\nwidth = 96\nheight = 64\nmax_disparity = 24.0\nlattices = {value}"
+        ))
+        .unwrap()
+    };
+    let all = parse("1.0");
+    all.validate().unwrap();
+    assert_eq!(toml::from_str::<TrainingDataConfig>(&toml::to_string(&all).unwrap()).unwrap(), all);
+    for bad in ["1.5", "-0.1", "nan"] {
+        let e = parse(bad).validate().unwrap_err().to_string();
+        assert!(e.contains("data.sources[0].lattices"), "{bad}: {e}");
+    }
+    // With every scene latticed, the training pairs differ from the same seeds without.
+    let mut parts = common::tiny_parts(10, 1, 1e-3, None, 2);
+    parts.data.augment = false;
+    parts.data.sources = all.sources.clone();
+    let with = TrainingData::new(&parts.data, &parts.train).unwrap();
+    parts.data.sources = parse("0.0").sources;
+    let without = TrainingData::new(&parts.data, &parts.train).unwrap();
+    let differ =
+        (0..3).filter(|&s| with.pair(s, 0).unwrap().disparity != without.pair(s, 0).unwrap().disparity).count();
+    assert!(differ >= 2, "only {differ} of 3 pairs changed");
 }
 
 /// A folder source marked `sparse` goes through the sparse augmentor: every supervised pixel

@@ -50,6 +50,15 @@ pub struct SyntheticConfig {
     /// wide. Drawn from a stream of its own, so the scene's other draws are the same. Default: unset.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_disparity_range: Option<[f64; 2]>,
+    /// Probability that a scene gets a lattice ([`Outline::Lattice`]: a trellis or fence in front,
+    /// the scene seen through its holes). Drawn from a stream of its own, so the scene's other
+    /// draws are the same. Default 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub lattice_prob: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 fn gratings_only() -> [f64; 4] {
@@ -86,6 +95,7 @@ impl Default for SyntheticConfig {
             background_texture_weights: gratings_only(),
             shading_prob: 0.0,
             min_disparity_range: None,
+            lattice_prob: 0.0,
         }
     }
 }
@@ -239,5 +249,47 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
         let texture = styled_texture(&mut style, cfg, smooth, &cfg.texture_weights, bb);
         surfaces.push(Surface::new(outline, field, texture));
     }
+    if cfg.lattice_prob > 0.0 {
+        surfaces.extend(lattice(cfg, seed, [dmin, dmax], slant));
+    }
     SyntheticScene { width: cfg.width, height: cfg.height, surfaces }
+}
+
+/// With probability `cfg.lattice_prob`, a lattice in the nearer part of `[dmin, dmax]` over a
+/// large part of the view: bars 1.5-8 px wide, 6-40 px apart, at any angle, nearly
+/// fronto-parallel. All of it from random stream 3 of the seed.
+fn lattice(cfg: &SyntheticConfig, seed: u64, [dmin, dmax]: [f64; 2], slant: f64) -> Option<Surface> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(3);
+    if !rng.gen_bool(cfg.lattice_prob.min(1.0)) {
+        return None;
+    }
+    let mut style = ChaCha8Rng::seed_from_u64(seed);
+    style.set_stream(4);
+    let (w, h) = (cfg.width as f64, cfg.height as f64);
+    let side = w.min(h).max(4.0);
+    let (cos, sin) = angle(&mut rng);
+    let period = rng.gen_range(6.0..40.0f64).min(side / 2.0);
+    let bar = (period * rng.gen_range(0.15..0.45)).max(1.5);
+    let outline = Outline::Lattice {
+        cx: rng.gen_range(0.2 * w..0.8 * w + 0.5 * dmax),
+        cy: rng.gen_range(0.2 * h..0.8 * h),
+        hw: rng.gen_range(0.2..0.6) * w,
+        hh: rng.gen_range(0.2..0.6) * h,
+        cos,
+        sin,
+        period,
+        bar,
+    };
+    let bb = outline.bounds();
+    let range = dmax - dmin;
+    let c = rng.gen_range(dmin + 0.5 * range..=dmax - 0.05 * range);
+    // A gentle slant that stays within the range over the lattice's box.
+    let radius = ((bb[1] - bb[0]).max(bb[3] - bb[2]) / 2.0).max(1.0);
+    let smax = ((c - dmin).min(dmax - c) * 0.9 / (2.0 * radius)).min(slant).min(0.05);
+    let (a, b) = (rng.gen_range(-1.0..=1.0) * smax, rng.gen_range(-1.0..=1.0) * smax);
+    let field = DisparityField { c, a, b, kx: 0.0, ky: 0.0, x0: (bb[0] + bb[1]) / 2.0, y0: (bb[2] + bb[3]) / 2.0 };
+    let smooth = smooth_texture(&mut rng, cfg);
+    let texture = styled_texture(&mut style, cfg, smooth, &cfg.texture_weights, bb);
+    Some(Surface::new(outline, field, texture))
 }

@@ -37,6 +37,10 @@
 //! table tops, Middlebury's) where every point has a large disparity and the band of the left
 //! view that the right view cannot see is wide.
 //!
+//! With [`SyntheticConfig::lattice_prob`], a share of the scenes gets a lattice in front
+//! ([`Outline::Lattice`]: a trellis, fence or grille of thin bars, the scene seen through its
+//! holes), from random streams of its own: thin repetitive structures with many small occlusions.
+//!
 //! Pixel centres are at integer coordinates. Disparity is positive, `x_right = x_left - d`.
 
 mod dead_leaves;

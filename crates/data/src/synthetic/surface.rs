@@ -39,6 +39,28 @@ pub enum Outline {
         /// Sine of the rotation.
         sin: f64,
     },
+    /// A trellis, fence or grille: the points of the rotated rectangle `hw x hh` that lie on a bar
+    /// (`bar` pixels wide, one every `period` pixels along both rotated axes). Through its holes
+    /// the surfaces behind it are seen, so both views have many small occlusions and a repetitive
+    /// pattern whose wrong matches are a period away.
+    Lattice {
+        /// Centre x.
+        cx: f64,
+        /// Centre y.
+        cy: f64,
+        /// Half width (along the rotated x axis).
+        hw: f64,
+        /// Half height (along the rotated y axis).
+        hh: f64,
+        /// Cosine of the rotation.
+        cos: f64,
+        /// Sine of the rotation.
+        sin: f64,
+        /// Distance between neighbouring bars.
+        period: f64,
+        /// Width of a bar (< `period`).
+        bar: f64,
+    },
     /// A star-shaped blob: radius `r0 · (1 + Σ amp_k cos(k θ + phase_k))` for `k = 2, 3, 4`.
     Blob {
         /// Centre x.
@@ -60,6 +82,13 @@ impl Outline {
             Outline::Rect { cx, cy, hw, hh, cos, sin } => {
                 let (dx, dy) = (x - cx, y - cy);
                 (dx * cos + dy * sin).abs() <= hw && (-dx * sin + dy * cos).abs() <= hh
+            }
+            Outline::Lattice { cx, cy, hw, hh, cos, sin, period, bar } => {
+                let (dx, dy) = (x - cx, y - cy);
+                let (u, v) = (dx * cos + dy * sin, -dx * sin + dy * cos);
+                u.abs() <= hw
+                    && v.abs() <= hh
+                    && ((u + hw).rem_euclid(period) < bar || (v + hh).rem_euclid(period) < bar)
             }
             Outline::Ellipse { cx, cy, rx, ry, cos, sin } => {
                 let (dx, dy) = (x - cx, y - cy);
@@ -86,7 +115,7 @@ impl Outline {
     pub fn bounds(&self) -> [f64; 4] {
         match *self {
             Outline::Everything => [f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY],
-            Outline::Rect { cx, cy, hw, hh, cos, sin } => {
+            Outline::Rect { cx, cy, hw, hh, cos, sin } | Outline::Lattice { cx, cy, hw, hh, cos, sin, .. } => {
                 let ex = hw * cos.abs() + hh * sin.abs();
                 let ey = hw * sin.abs() + hh * cos.abs();
                 [cx - ex, cx + ex, cy - ey, cy + ey]

@@ -43,6 +43,7 @@ pub fn tiny_parts(steps: usize, iters: usize, lr: f64, count: Option<usize>, bat
             count,
             textures: Default::default(),
             min_disparity: None,
+            lattices: None,
         }],
         augment: false,
         validation: ValidationConfig { count: 0, ..ValidationConfig::default() },
