@@ -229,6 +229,13 @@ impl Engine {
         if a.max_size == Some(0) || a.max_size.is_some_and(|m| m < 32) {
             bail!("--max-size must be at least 32 pixels");
         }
+        // An explicit lower bound is checked before the weights load (`auto` never conflicts:
+        // it is off with --max-size).
+        match (a.min_size, a.max_size) {
+            (MinSize::Pixels(lo), Some(hi)) if lo > hi => bail!("--min-size {lo} is larger than --max-size {hi}"),
+            (MinSize::Pixels(lo), _) if lo < 32 => bail!("--min-size must be at least 32 pixels (or `off`)"),
+            _ => {}
+        }
         let budget = parse_bytes(&a.memory_budget)?;
         let choice: DeviceChoice = a.device.parse()?;
         let device = choice.device()?;
@@ -271,11 +278,6 @@ impl Engine {
             );
         }
         let min_size = a.min_size.resolve(model.config.factor(), a.max_size);
-        match (min_size, a.max_size) {
-            (Some(lo), Some(hi)) if lo > hi => bail!("--min-size {lo} is larger than --max-size {hi}"),
-            (Some(lo), _) if lo < 32 => bail!("--min-size must be at least 32 pixels (or `off`)"),
-            _ => {}
-        }
         Ok(Self { model, prior, iters: a.iters, max_size: a.max_size, min_size, budget, corr: a.corr, weights, device })
     }
 
