@@ -256,7 +256,7 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
 }
 
 /// With probability `cfg.lattice_prob`, a lattice in the nearer part of `[dmin, dmax]` over a
-/// large part of the view: bars 1.5-8 px wide, 6-40 px apart, at any angle, nearly
+/// large part of the view: bars 6-40 px apart and 15-45 % of that wide (at least 1.5 px), at any angle, nearly
 /// fronto-parallel. All of it from random stream 3 of the seed.
 fn lattice(cfg: &SyntheticConfig, seed: u64, [dmin, dmax]: [f64; 2], slant: f64) -> Option<Surface> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
