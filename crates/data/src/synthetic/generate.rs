@@ -256,8 +256,8 @@ pub(super) fn random_scene(cfg: &SyntheticConfig, seed: u64) -> SyntheticScene {
 }
 
 /// With probability `cfg.lattice_prob`, a lattice in the nearer part of `[dmin, dmax]` over a
-/// large part of the view: bars 6-40 px apart and 15-45 % of that wide (at least 1.5 px), at any angle, nearly
-/// fronto-parallel. All of it from random stream 3 of the seed.
+/// large part of the view: bars 6-40 px apart and 15-45 % of that wide (at least 1.5 px), at any
+/// angle, nearly fronto-parallel. Geometry from random stream 3 of the seed, texture style from 4.
 fn lattice(cfg: &SyntheticConfig, seed: u64, [dmin, dmax]: [f64; 2], slant: f64) -> Option<Surface> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     rng.set_stream(3);
