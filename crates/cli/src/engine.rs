@@ -85,6 +85,19 @@ pub struct ModelArgs {
     pub corr: CorrChoice,
 }
 
+impl ModelArgs {
+    /// The options as the command line gives them without any flag (clap's defaults, declared
+    /// once on the fields above), for commands that fix some of them.
+    pub fn defaults() -> Self {
+        #[derive(clap::Parser)]
+        struct Only {
+            #[command(flatten)]
+            args: ModelArgs,
+        }
+        <Only as clap::Parser>::parse_from(["dgstereo"]).args
+    }
+}
+
 /// An error and its causes on one line, without repeating a cause its parent already quotes
 /// (the library errors embed their I/O cause in their own message).
 pub fn error_line(e: &anyhow::Error) -> String {

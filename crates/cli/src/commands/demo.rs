@@ -9,7 +9,7 @@ use clap::Args;
 use dgstereo_data::{load_mask, load_rgb, read_disparity, save_rgb, write_disparity};
 use dgstereo_eval::{ValidOptions, evaluate};
 
-use crate::engine::{CorrChoice, Engine, ModelArgs};
+use crate::engine::{Engine, ModelArgs};
 use crate::models::asset;
 use crate::visualize::{colorize, error_image, side_by_side};
 use crate::working_size::MinSize;
@@ -39,19 +39,8 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     let right = load_rgb(dir.join("right_rgb.png"))?;
     let gt = read_disparity(dir.join("disp_left.pfm"))?;
     let visible = load_mask(dir.join("occlusion.png"))?;
-    let engine = Engine::new(&ModelArgs {
-        weights: a.weights,
-        experiment: None,
-        run: None,
-        iters: a.iters,
-        prior: None,
-        prior_weights: None,
-        device: "cpu".into(),
-        max_size: None,
-        min_size: a.min_size,
-        memory_budget: "4GiB".into(),
-        corr: CorrChoice::Auto,
-    })?;
+    let engine =
+        Engine::new(&ModelArgs { weights: a.weights, iters: a.iters, min_size: a.min_size, ..ModelArgs::defaults() })?;
     println!("weights: {}", engine.weights.display());
 
     let start = Instant::now();
