@@ -80,19 +80,18 @@ impl Outline {
         match *self {
             Outline::Everything => true,
             Outline::Rect { cx, cy, hw, hh, cos, sin } => {
-                let (dx, dy) = (x - cx, y - cy);
-                (dx * cos + dy * sin).abs() <= hw && (-dx * sin + dy * cos).abs() <= hh
+                let (u, v) = rotated(x - cx, y - cy, cos, sin);
+                u.abs() <= hw && v.abs() <= hh
             }
             Outline::Lattice { cx, cy, hw, hh, cos, sin, period, bar } => {
-                let (dx, dy) = (x - cx, y - cy);
-                let (u, v) = (dx * cos + dy * sin, -dx * sin + dy * cos);
+                let (u, v) = rotated(x - cx, y - cy, cos, sin);
                 u.abs() <= hw
                     && v.abs() <= hh
                     && ((u + hw).rem_euclid(period) < bar || (v + hh).rem_euclid(period) < bar)
             }
             Outline::Ellipse { cx, cy, rx, ry, cos, sin } => {
-                let (dx, dy) = (x - cx, y - cy);
-                let (u, v) = ((dx * cos + dy * sin) / rx, (-dx * sin + dy * cos) / ry);
+                let (u, v) = rotated(x - cx, y - cy, cos, sin);
+                let (u, v) = (u / rx, v / ry);
                 u * u + v * v <= 1.0
             }
             Outline::Blob { cx, cy, r0, harmonics } => {
@@ -130,6 +129,12 @@ impl Outline {
             }
         }
     }
+}
+
+/// The offset `(dx, dy)` from a shape's centre in the shape's rotated axes (the rotation whose
+/// cosine and sine are given).
+fn rotated(dx: f64, dy: f64, cos: f64, sin: f64) -> (f64, f64) {
+    (dx * cos + dy * sin, -dx * sin + dy * cos)
 }
 
 /// Disparity over a surface, in left-view coordinates:
