@@ -119,21 +119,23 @@ fn synthetic_textures_key_selects_the_preset_and_rejects_unknown_values() {
     assert!(same_disparity && differ);
 }
 
+/// A `[data]` table with one synthetic source of 96x64 up to 24 px, plus the `extra` key lines.
+fn synthetic_source(extra: &str) -> TrainingDataConfig {
+    toml::from_str(&format!(
+        "[[sources]]\nkind = \"synthetic\"\nwidth = 96\nheight = 64\nmax_disparity = 24.0\n{extra}"
+    ))
+    .unwrap()
+}
+
 #[test]
 fn synthetic_min_disparity_range_raises_the_far_end_and_bad_ranges_name_the_key() {
-    let parse = |extra: &str| {
-        toml::from_str::<TrainingDataConfig>(&format!(
-            "[[sources]]\nkind = \"synthetic\"\nwidth = 96\nheight = 64\nmax_disparity = 24.0\n{extra}"
-        ))
-        .unwrap()
-    };
     let error = |text: &str| toml::from_str::<TrainingDataConfig>(text).unwrap().validate().unwrap_err().to_string();
-    let near = parse("min_disparity = [10.0, 14.0]");
+    let near = synthetic_source("min_disparity = [10.0, 14.0]");
     near.validate().unwrap();
     assert!(matches!(near.sources[0], DataSource::Synthetic { min_disparity: Some([10.0, 14.0]), .. }));
     assert_eq!(toml::from_str::<TrainingDataConfig>(&toml::to_string(&near).unwrap()).unwrap(), near);
     for bad in ["[0.0, 4.0]", "[8.0, 4.0]", "[4.0, 23.5]", "[nan, 4.0]"] {
-        let e = parse(&format!("min_disparity = {bad}")).validate().unwrap_err().to_string();
+        let e = synthetic_source(&format!("min_disparity = {bad}")).validate().unwrap_err().to_string();
         assert!(e.contains("data.sources[0].min_disparity"), "{bad}: {e}");
     }
     let e = error("[[sources]]\nkind = \"synthetic\"\nmax_disparity = -3.0");
@@ -162,12 +164,7 @@ fn synthetic_min_disparity_range_raises_the_far_end_and_bad_ranges_name_the_key(
 
 #[test]
 fn synthetic_lattices_key_sets_the_share_and_bad_shares_name_the_key() {
-    let parse = |value: &str| {
-        toml::from_str::<TrainingDataConfig>(&format!(
-            "[[sources]]\nkind = \"synthetic\"\nwidth = 96\nheight = 64\nmax_disparity = 24.0\nlattices = {value}"
-        ))
-        .unwrap()
-    };
+    let parse = |value: &str| synthetic_source(&format!("lattices = {value}"));
     let all = parse("1.0");
     all.validate().unwrap();
     assert_eq!(toml::from_str::<TrainingDataConfig>(&toml::to_string(&all).unwrap()).unwrap(), all);
