@@ -9,7 +9,9 @@
 //! - the cost volume is the materialised pyramid ("reg", fast) unless its estimated size
 //!   ([`CorrelationConfig::pyramid_bytes`] at the padded feature resolution) exceeds
 //!   `--memory-budget`, then the on-the-fly volume ("alt", memory linear in the width) is used;
-//!   `--corr reg|alt` forces one.
+//!   `--corr reg|alt` forces one;
+//! - `--lr-check` also runs the mirrored pair and fills the pixels the right view does not
+//!   confirm ([`crate::consistency`]).
 //!
 //! Design decision: every whole-run problem (weights that do not load or do not match the
 //! experiment, a prior that cannot be built, a device that does not exist) is found here, once,
@@ -23,10 +25,11 @@ use clap::{Args, ValueEnum};
 use dgstereo_core::DeviceChoice;
 use dgstereo_costvolume::CorrelationImplementation;
 use dgstereo_data::resize::{disparity_to_size, resize_rgb};
-use dgstereo_data::{DisparityMap, RgbImage};
+use dgstereo_data::{DisparityMap, Mask, RgbImage};
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
+use crate::consistency::{fill_rejected, mirror_disparity, mirror_rgb, rejected_pixels};
 use crate::convert::{disparity_map, image_tensor};
 use crate::models::{default_weights, load_model};
 use crate::working_size::{MinSize, working_scale};
@@ -83,6 +86,12 @@ pub struct ModelArgs {
     /// Cost volume implementation.
     #[arg(long, value_enum, default_value_t = CorrChoice::Auto)]
     pub corr: CorrChoice,
+    /// Left-right consistency check: also run the mirrored pair for the right view's disparity,
+    /// and replace the pixels where the two disagree by more than PX pixels (2 when no value is
+    /// given; occlusions, mostly) with their row's nearest confirmed background. Doubles the time;
+    /// `--save mask` writes which pixels were replaced.
+    #[arg(long, value_name = "PX", num_args = 0..=1, default_missing_value = "2")]
+    pub lr_check: Option<f32>,
 }
 
 impl ModelArgs {
@@ -215,6 +224,16 @@ pub struct RunInfo {
     pub network_size: (usize, usize),
     /// Cost volume used.
     pub corr: CorrelationImplementation,
+    /// With `--lr-check`: the pixels the right view did not confirm (row-major, at the input's
+    /// size), which the returned disparity has filled.
+    pub rejected: Option<Mask>,
+}
+
+impl RunInfo {
+    /// With `--lr-check`, the share of the pixels it replaced (0 to 1).
+    pub fn rejected_share(&self) -> Option<f64> {
+        self.rejected.as_ref().map(|m| m.data.iter().filter(|&&r| r).count() as f64 / m.data.len().max(1) as f64)
+    }
 }
 
 /// A loaded model with its prior and per-pair policy.
@@ -227,6 +246,7 @@ pub struct Engine {
     pub min_size: Option<usize>,
     budget: u64,
     corr: CorrChoice,
+    lr_check: Option<f32>,
     /// The weights file.
     pub weights: PathBuf,
     /// The device.
@@ -248,6 +268,11 @@ impl Engine {
             (MinSize::Pixels(lo), Some(hi)) if lo > hi => bail!("--min-size {lo} is larger than --max-size {hi}"),
             (MinSize::Pixels(lo), _) if lo < 32 => bail!("--min-size must be at least 32 pixels (or `off`)"),
             _ => {}
+        }
+        if let Some(t) = a.lr_check
+            && !(t.is_finite() && t > 0.0)
+        {
+            bail!("--lr-check {t}: the threshold must be a positive number of pixels");
         }
         let budget = parse_bytes(&a.memory_budget)?;
         let choice: DeviceChoice = a.device.parse()?;
@@ -285,13 +310,29 @@ impl Engine {
         } else {
             None
         };
+        if a.lr_check.is_some() && prior.is_some() && matches!(prior_config, PriorConfig::File { .. }) {
+            bail!(
+                "--lr-check runs the mirrored pair, and a precomputed (file:) prior has no mirrored views: use a depth-anything-v2 prior or leave out --lr-check"
+            );
+        }
         if model.config.needs_prior() && prior.is_none() {
             bail!(
                 "this model uses a depth prior (fusion or guidance): pass --prior (e.g. depth-anything-v2:WEIGHTS or file:DIR)"
             );
         }
         let min_size = a.min_size.resolve(model.config.factor(), a.max_size);
-        Ok(Self { model, prior, iters: a.iters, max_size: a.max_size, min_size, budget, corr: a.corr, weights, device })
+        Ok(Self {
+            model,
+            prior,
+            iters: a.iters,
+            max_size: a.max_size,
+            min_size,
+            budget,
+            corr: a.corr,
+            lr_check: a.lr_check,
+            weights,
+            device,
+        })
     }
 
     /// The cost volume for a network input of `width x height` (before padding).
@@ -299,7 +340,8 @@ impl Engine {
         corr_for(&self.model.config, self.corr, self.budget, width, height)
     }
 
-    /// The disparity of a rectified pair at the left image's size.
+    /// The disparity of a rectified pair at the left image's size (with `--lr-check`, the pixels
+    /// the right view does not confirm filled, and named in [`RunInfo::rejected`]).
     pub fn disparity(&self, left: &RgbImage, right: &RgbImage, name: &str) -> anyhow::Result<(DisparityMap, RunInfo)> {
         if (left.width, left.height) != (right.width, right.height) {
             bail!(
@@ -310,6 +352,24 @@ impl Engine {
                 right.height
             );
         }
+        let (disparity, info) = self.network_disparity(left, right, name)?;
+        let Some(threshold) = self.lr_check else {
+            return Ok((disparity, info));
+        };
+        // The right view's disparity is the left one of the mirrored, swapped pair.
+        let (mirrored, _) = self.network_disparity(&mirror_rgb(right), &mirror_rgb(left), name)?;
+        let rejected = rejected_pixels(&disparity, &mirror_disparity(&mirrored), threshold);
+        let filled = fill_rejected(&disparity, &rejected);
+        Ok((filled, RunInfo { rejected: Some(rejected), ..info }))
+    }
+
+    /// The network's disparity of a pair of one size, at that size.
+    fn network_disparity(
+        &self,
+        left: &RgbImage,
+        right: &RgbImage,
+        name: &str,
+    ) -> anyhow::Result<(DisparityMap, RunInfo)> {
         let (w, h) = (left.width, left.height);
         let scale = working_scale(w, h, self.min_size, self.max_size);
         let (l, r) = if scale != 1.0 {
@@ -330,7 +390,7 @@ impl Engine {
         };
         let pred = self.model.predict(lt, rt, prior.as_ref(), self.iters, false, Some(corr))?;
         let small = disparity_map(pred.last());
-        let info = RunInfo { network_size: (l.width, l.height), corr };
+        let info = RunInfo { network_size: (l.width, l.height), corr, rejected: None };
         Ok((disparity_to_size(&small, w, h)?, info))
     }
 }

@@ -5,6 +5,7 @@
 
 mod calib;
 mod commands;
+mod consistency;
 mod convert;
 mod engine;
 mod inputs;

@@ -8,6 +8,7 @@
 //! | `color` | `NAME_disparity_color.png` | turbo colour map with a legend of its range (px) |
 //! | `depth` | `NAME_depth.pfm` | float32 depth in metres, `inf` where unknown (needs calibration) |
 //! | `ply` | `NAME_points.ply` | coloured point cloud, see [`crate::pointcloud`] (needs calibration) |
+//! | `rejected` | `NAME_rejected.png` | 255 where `--lr-check` replaced the disparity, else 0 (needs `--lr-check`) |
 //!
 //! Design decision: the kind decides the suffix, the pair decides `NAME` (see [`crate::inputs`]),
 //! so two kinds or two pairs never write the same file.
@@ -16,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::ValueEnum;
-use dgstereo_data::{DisparityMap, RgbImage, save_rgb, write_disparity};
+use dgstereo_data::{DisparityMap, Mask, RgbImage, save_mask, save_rgb, write_disparity};
 
 use crate::calib::Calibration;
 use crate::pointcloud::{PlyEncoding, depth_map, point_cloud, write_ply};
@@ -39,6 +40,8 @@ pub enum SaveKind {
     Depth,
     /// Coloured point cloud as PLY (needs calibration).
     Ply,
+    /// The pixels the left-right check replaced, as a PNG mask (needs --lr-check).
+    Rejected,
 }
 
 impl SaveKind {
@@ -57,6 +60,7 @@ impl SaveKind {
             SaveKind::Preview => format!("{name}_preview.png"),
             SaveKind::Depth => format!("{name}_depth.pfm"),
             SaveKind::Ply => format!("{name}_points.ply"),
+            SaveKind::Rejected => format!("{name}_rejected.png"),
         }
     }
 }
@@ -83,13 +87,15 @@ impl OutputOptions {
 }
 
 /// Writes the requested outputs of one pair; returns the files written. `calib` must be given
-/// (already sized to the image, see [`Calibration::for_size`]) when a kind needs it.
+/// (already sized to the image, see [`Calibration::for_size`]) when a kind needs it, and
+/// `rejected` (the left-right check's mask) for `rejected`.
 pub fn write_outputs(
     opts: &OutputOptions,
     name: &str,
     left: &RgbImage,
     disp: &DisparityMap,
     calib: Option<&Calibration>,
+    rejected: Option<&Mask>,
 ) -> anyhow::Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     let mut depth: Option<DisparityMap> = None;
@@ -99,6 +105,9 @@ pub fn write_outputs(
             SaveKind::Pfm | SaveKind::Npy | SaveKind::Png16 => write_disparity(&path, disp)?,
             SaveKind::Color => save_rgb(&path, &colorize(disp, display_range(disp), true))?,
             SaveKind::Preview => save_rgb(&path, &side_by_side(&[left, &colorize(disp, display_range(disp), false)]))?,
+            SaveKind::Rejected => {
+                save_mask(&path, rejected.context("the rejected mask needs --lr-check")?)?;
+            }
             SaveKind::Depth | SaveKind::Ply => {
                 let calib = calib.context("depth and point clouds need a calibration: pass --calib FILE")?;
                 let depth = depth.get_or_insert_with(|| depth_map(disp, calib));

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{assets, dgstereo, infer_cones, text};
+use common::{assets, cones_dir, dgstereo, infer_cones, text};
 use dgstereo_core::shared::shared_dir_for_test;
 
 /// The demo's metric `key` on all pixels with ground truth (its JSON line).
@@ -104,4 +104,56 @@ fn small_pairs_are_upscaled_for_the_eighth_resolution_default() {
     let o = dgstereo(&[&pair[..], &["--min-size", "300", "--max-size", "200"]].concat());
     assert!(!o.status.success());
     assert!(text(&o).contains("--min-size 300 is larger than --max-size 200"), "{}", text(&o));
+}
+
+#[test]
+fn the_left_right_check_fills_what_the_right_view_cannot_see() {
+    use dgstereo_data::{load_mask, read_disparity};
+    use dgstereo_eval::{ValidOptions, evaluate};
+    // Cones at its bundled size, run at that size (cheap) with and without `--lr-check`. Its
+    // nearest-to-the-left surface is ~16 px away, so the band of columns 0-15 has no match in
+    // the right view: the check must reject most of it, fill only what it rejects, and lower the
+    // error against the ground truth.
+    let dir = tempfile::tempdir().unwrap();
+    let run = |extra: &[&str], out: &str| {
+        let out = dir.path().join(out);
+        let args = [&["--iters", "8", "--min-size", "off", "--out", out.to_str().unwrap()], extra].concat();
+        let o = infer_cones(&args);
+        assert!(o.status.success(), "{}", text(&o));
+        (o, out)
+    };
+    let (_, plain) = run(&["--save", "pfm"], "plain");
+    let (o, checked) = run(&["--save", "pfm,rejected", "--lr-check"], "checked");
+    assert!(text(&o).contains("left-right check replaced"), "{}", text(&o));
+    let before = read_disparity(plain.join("rgb_disparity.pfm")).unwrap();
+    let after = read_disparity(checked.join("rgb_disparity.pfm")).unwrap();
+    let rejected = load_mask(checked.join("rgb_rejected.png")).unwrap();
+    assert_eq!((rejected.width, rejected.height), (450, 375));
+    let share = |cols: std::ops::Range<usize>| {
+        let n = (0..375).flat_map(|y| cols.clone().map(move |x| y * 450 + x)).filter(|&i| rejected.data[i]).count();
+        n as f64 / (375 * cols.len()) as f64
+    };
+    let (band, rest) = (share(0..12), share(12..450));
+    assert!(band > 0.8 && rest < 0.35, "rejected: {band:.2} of the band, {rest:.2} elsewhere");
+    for i in 0..after.data.len() {
+        if !rejected.data[i] {
+            assert_eq!(after.data[i], before.data[i], "pixel {i} was accepted but changed");
+        }
+    }
+    let gt = read_disparity(cones_dir().join("disp_left.pfm")).unwrap();
+    let epe = |d| evaluate(d, &gt, None, ValidOptions { max_disp: None }).unwrap().epe;
+    let (e0, e1) = (epe(&before), epe(&after));
+    eprintln!(
+        "Cones 450x375, 8 iterations: EPE {e0:.3} -> {e1:.3} px with the check; rejected {band:.2} of the band, {rest:.2} elsewhere"
+    );
+    assert!(e1 < e0, "EPE {e0} -> {e1}");
+    // Wrong uses are refused before any pair runs.
+    for (args, message) in [
+        (&["--save", "rejected"][..], "--save rejected writes the pixels the left-right check replaced"),
+        (&["--lr-check", "0"][..], "--lr-check 0: the threshold must be a positive number"),
+    ] {
+        let o = infer_cones(args);
+        assert!(!o.status.success());
+        assert!(text(&o).contains(message), "{}", text(&o));
+    }
 }

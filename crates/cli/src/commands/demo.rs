@@ -30,6 +30,10 @@ pub struct DemoArgs {
     /// 1/8 resolution such as the bundled default), `off`, or pixels.
     #[arg(long, default_value = "auto")]
     min_size: MinSize,
+    /// Left-right consistency check (see `dgstereo infer --help`): fill the pixels the right view
+    /// does not confirm, at this threshold in pixels (2 when no value is given).
+    #[arg(long, value_name = "PX", num_args = 0..=1, default_missing_value = "2")]
+    lr_check: Option<f32>,
 }
 
 pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
@@ -39,8 +43,13 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     let right = load_rgb(dir.join("right_rgb.png"))?;
     let gt = read_disparity(dir.join("disp_left.pfm"))?;
     let visible = load_mask(dir.join("occlusion.png"))?;
-    let engine =
-        Engine::new(&ModelArgs { weights: a.weights, iters: a.iters, min_size: a.min_size, ..ModelArgs::defaults() })?;
+    let engine = Engine::new(&ModelArgs {
+        weights: a.weights,
+        iters: a.iters,
+        min_size: a.min_size,
+        lr_check: a.lr_check,
+        ..ModelArgs::defaults()
+    })?;
     println!("weights: {}", engine.weights.display());
 
     let start = Instant::now();
@@ -48,7 +57,10 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     let seconds = start.elapsed().as_secs_f64();
     let (nw, nh) = info.network_size;
     let network = if (nw, nh) == (left.width, left.height) { String::new() } else { format!(" (network {nw}x{nh})") };
-    println!("Cones {}x{}{network}, {} iterations: {seconds:.2} s", left.width, left.height, a.iters);
+    let checked = info
+        .rejected_share()
+        .map_or(String::new(), |s| format!(", left-right check replaced {:.1} % of the pixels", 100.0 * s));
+    println!("Cones {}x{}{network}, {} iterations{checked}: {seconds:.2} s", left.width, left.height, a.iters);
 
     std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create {}", a.out.display()))?;
     write_disparity(a.out.join("cones_disparity.pfm"), &disp)?;

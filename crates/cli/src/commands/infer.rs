@@ -41,7 +41,7 @@ pub struct InferArgs {
     #[arg(long, default_value = "out/infer")]
     out: PathBuf,
     /// Outputs, comma-separated: pfm, npy, png16, color, preview (left image and colour map side
-    /// by side), depth, ply.
+    /// by side), depth, ply, rejected (the pixels --lr-check replaced).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "pfm,color")]
     save: Vec<SaveKind>,
     /// Calibration for depth and ply: Middlebury calib.txt, JSON (fx, fy, cx, cy, baseline) or
@@ -98,6 +98,9 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
         bail!("--max-depth must be a positive number of metres");
     }
     let kinds = dedup(&a.save);
+    if kinds.contains(&SaveKind::Rejected) && a.model.lr_check.is_none() {
+        bail!("--save rejected writes the pixels the left-right check replaced: add --lr-check");
+    }
     if global_calib.is_none() && kinds.iter().any(|k| k.needs_calibration()) {
         // A whole-run problem: found before the model loads, not once per pair.
         let missing: Vec<String> = list
@@ -231,11 +234,13 @@ fn process_pair(
     let (disp, info) = engine
         .disparity(&left, &right, &pair.name)
         .with_context(|| format!("{} + {}", pair.left.display(), pair.right.display()))?;
-    let written = write_outputs(opts, &pair.name, &left, &disp, calib.as_ref())?;
+    let written = write_outputs(opts, &pair.name, &left, &disp, calib.as_ref(), info.rejected.as_ref())?;
     let files: Vec<String> =
         written.iter().map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()).collect();
+    let checked =
+        info.rejected_share().map_or(String::new(), |s| format!(", left-right check replaced {:.1} %", 100.0 * s));
     Ok(format!(
-        "{}: {}x{} (network {}x{}, {:?} volume) {:.2} s -> {}",
+        "{}: {}x{} (network {}x{}, {:?} volume{checked}) {:.2} s -> {}",
         pair.name,
         left.width,
         left.height,
