@@ -68,7 +68,7 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
     std::fs::create_dir_all(&a.out)
         .map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", a.out.display()))?;
     eprintln!(
-        "{:?}: {n} of {} sample(s), protocol {}, weights {}, {} iterations{}",
+        "{:?}: {n} of {} sample(s), protocol {}, weights {}, {} iterations{}{}",
         a.dataset,
         dataset.len(),
         protocol.name(),
@@ -78,7 +78,8 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
             (Some(m), _) => format!(", downscaled to at most {m} px (not the benchmark's protocol)"),
             (None, Some(m)) => format!(", pairs under {m} px upscaled to it (--min-size)"),
             (None, None) => String::new(),
-        }
+        },
+        a.model.lr_check.map_or(String::new(), |t| format!(", left-right check at {t} px (--lr-check)"))
     );
     let mut k = 0;
     let result = evaluate_dataset(
