@@ -23,6 +23,7 @@ use anyhow::{Context, bail};
 use burn::tensor::Device;
 use clap::{Args, ValueEnum};
 use dgstereo_core::DeviceChoice;
+use dgstereo_core::device::Precision;
 use dgstereo_costvolume::CorrelationImplementation;
 use dgstereo_data::resize::{disparity_to_size, resize_rgb};
 use dgstereo_data::{DisparityMap, Mask, RgbImage};
@@ -72,6 +73,11 @@ pub struct ModelArgs {
     /// Device: `cpu` or `gpu` (the GPU needs a build with `--features gpu`).
     #[arg(long, default_value = "cpu")]
     pub device: String,
+    /// Float precision of the network: `f32`, or `f16` / `bf16` (weights cast after loading;
+    /// for GPUs, whose tensor cores multiply half precision; slower on the CPU, where the
+    /// hand-written f32 kernels stand aside). Not with a depth prior.
+    #[arg(long, default_value = "f32")]
+    pub precision: Precision,
     /// Downscale pairs whose longer side exceeds this many pixels (disparity is rescaled back).
     #[arg(long)]
     pub max_size: Option<usize>,
@@ -276,7 +282,7 @@ impl Engine {
         }
         let budget = parse_bytes(&a.memory_budget)?;
         let choice: DeviceChoice = a.device.parse()?;
-        let device = choice.device()?;
+        let device = choice.device_with_precision(a.precision)?;
         let (config, experiment_prior) = match &a.experiment {
             Some(p) => {
                 let (m, pr) = experiment_configs(p, a.run.as_deref())?;
@@ -289,6 +295,9 @@ impl Engine {
             (None, Some(w)) => with_prior_weights(experiment_prior, w),
             (None, None) => experiment_prior,
         };
+        if a.precision != Precision::F32 && prior_config.gives_prior() {
+            bail!("--precision {}: the depth prior runs in f32 only; leave out --precision or the prior", a.precision);
+        }
         let weights = match &a.weights {
             Some(w) => w.clone(),
             None => default_weights(prior_config.gives_prior() && a.experiment.is_none())?,

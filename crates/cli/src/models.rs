@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use burn::tensor::Device;
+use dgstereo_core::device::{cast_float_params, float_dtype};
 use dgstereo_model::{ModelConfig, StereoModel, checkpoint};
 
 /// Folders that may hold the repository's `assets/`: beside the binary (installed layouts),
@@ -79,5 +80,7 @@ pub fn load_model(weights: &Path, config: Option<ModelConfig>, device: &Device) 
         "safetensors" => checkpoint::load_safetensors(network, weights)?,
         _ => bail!("{}: unknown weights format (expected .pth or .safetensors)", weights.display()),
     };
+    // The stores keep the file's dtype: bring the weights to the device's (see `--precision`).
+    let network = cast_float_params(network, float_dtype(device));
     Ok(StereoModel::new(network, config, device.clone()))
 }

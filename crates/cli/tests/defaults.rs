@@ -157,3 +157,30 @@ fn the_left_right_check_fills_what_the_right_view_cannot_see() {
         assert!(text(&o).contains(message), "{}", text(&o));
     }
 }
+
+#[test]
+fn half_precision_inference_loads_f32_weights_and_agrees_with_f32() {
+    use dgstereo_data::read_disparity;
+    // The bundled weights are stored in f32; `--precision f16` must cast them after loading (the
+    // backends do not mix f32 weights with f16 activations) and give nearly the f32 map: f16
+    // rounds a 30 px disparity to ~0.015 px.
+    let dir = tempfile::tempdir().unwrap();
+    let mut maps = Vec::new();
+    for precision in ["f32", "f16"] {
+        let out = dir.path().join(precision);
+        let args = ["--iters", "4", "--min-size", "off", "--save", "pfm", "--precision", precision];
+        let o = infer_cones(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
+        assert!(o.status.success(), "{}", text(&o));
+        maps.push(read_disparity(out.join("rgb_disparity.pfm")).unwrap());
+    }
+    let n = maps[0].data.len() as f64;
+    let diffs: Vec<f64> = maps[0].data.iter().zip(&maps[1].data).map(|(a, b)| (a - b).abs() as f64).collect();
+    let mean = diffs.iter().sum::<f64>() / n;
+    let mean_disparity = maps[0].data.iter().map(|&v| v as f64).sum::<f64>() / n;
+    assert!(mean_disparity > 10.0, "the f32 map is not a Cones disparity: mean {mean_disparity}");
+    assert!(mean > 0.0 && mean < 0.1, "mean |f16 - f32| = {mean} px");
+    // Half precision with a depth prior is refused before anything loads.
+    let o = infer_cones(&["--precision", "f16", "--prior", "file:."]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("the depth prior runs in f32 only"), "{}", text(&o));
+}

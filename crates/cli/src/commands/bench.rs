@@ -9,6 +9,10 @@
 //! a 3x3 convolution by Winograd's algorithm (fewer multiplications) the rate is an effective
 //! one, and can exceed what the arithmetic units do. `--stages` adds a per-stage table
 //! ([`dgstereo_model::profile::profile_forward`]) with each stage's share of the machine's peak.
+//! `--precision f16|bf16` makes that dtype the device's default before anything is created
+//! ([`DeviceChoice::device_with_precision`]), so weights, inputs and every activation of the
+//! forward pass are half precision (what GPU tensor cores multiply); on the CPU the f32-only
+//! host kernels then stand aside for burn's operations.
 
 use std::process::ExitCode;
 use std::time::Instant;
@@ -16,6 +20,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use burn::tensor::{Distribution, Tensor};
 use clap::Args;
+use dgstereo_core::device::{Precision, host_kernels_apply};
 use dgstereo_core::{DepthPrior, DeviceChoice, InputPadder};
 use dgstereo_costvolume::CorrelationImplementation;
 use dgstereo_model::flops::StageMacs;
@@ -56,6 +61,10 @@ pub struct BenchArgs {
     /// `stock` (burn's operations only, the reference), to measure what the kernels gain.
     #[arg(long, default_value = "host", value_parser = ["host", "stock"])]
     pub kernels: String,
+    /// Float precision of the whole forward pass: `f32`, `f16` or `bf16` (the host kernels are
+    /// f32-only, so a half precision on the CPU runs burn's operations).
+    #[arg(long, default_value = "f32")]
+    pub precision: String,
 }
 
 /// Parses `HxW`.
@@ -110,8 +119,10 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         "alt" => CorrelationImplementation::Alt,
         other => bail!("--corr '{other}': expected reg or alt"),
     };
+    let precision = a.precision.parse::<Precision>()?;
     dgstereo_core::device::set_host_kernels(a.kernels == "host");
-    let device = a.device.parse::<DeviceChoice>()?.device()?;
+    // The precision is set before the device's first tensor: burn fixes it there.
+    let device = a.device.parse::<DeviceChoice>()?.device_with_precision(precision)?;
     let config = match &a.config {
         Some(p) => {
             let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
@@ -131,32 +142,42 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let padder = InputPadder::new(h, w, config.pad_divisor());
     let padded = padder.padded();
     let macs = StageMacs::new(&config, padded).forward(a.iters, 1);
+    // What runs: the host kernels only on f32 CPU inference, whatever `--kernels` asked.
+    let kernels =
+        if a.kernels == "host" && !host_kernels_apply(&device) { "stock (host kernels inactive)" } else { &a.kernels };
 
-    let predict = || -> anyhow::Result<(f64, f64)> {
+    let mut non_finite = 0;
+    let mut predict = || -> anyhow::Result<(f64, f64)> {
         let cpu = process_cpu_seconds();
         let start = Instant::now();
         let out = model.predict(left.clone(), right.clone(), prior.as_ref(), a.iters, false, Some(implementation))?;
-        let _ = out.last().into_data(); // waits for asynchronous backends
+        let data = out.last().into_data(); // waits for asynchronous backends
         let wall = start.elapsed().as_secs_f64();
+        // Outside the timed span: a narrow precision that overflowed times a meaningless map.
+        non_finite = data.convert::<f32>().iter::<f32>().filter(|v| !v.is_finite()).count();
         Ok((wall, process_cpu_seconds().zip(cpu).map_or(f64::NAN, |(b, a)| b - a)))
     };
     for _ in 0..a.warmup {
         predict()?;
     }
     let runs = (0..a.runs).map(|_| predict()).collect::<anyhow::Result<Vec<(f64, f64)>>>()?;
+    if non_finite > 0 {
+        bail!(
+            "the disparity has {non_finite} non-finite values in {precision}: the forward pass overflowed, so its time means nothing"
+        );
+    }
     let mut times: Vec<f64> = runs.iter().map(|r| r.0).collect();
     let mut cpu: Vec<f64> = runs.iter().map(|r| r.1).collect();
     let min = times.iter().copied().fold(f64::INFINITY, f64::min);
     let med = median(&mut times);
     let gflops = 2.0 * macs as f64 / med / 1e9;
     println!(
-        "size {h}x{w} (padded {}x{}), {} iterations, {} cost volume, device {}, {} kernels, {} threads",
+        "size {h}x{w} (padded {}x{}), {} iterations, {} cost volume, device {}, {precision}, {kernels} kernels, {} threads",
         padded[0],
         padded[1],
         a.iters,
         a.corr,
         a.device,
-        a.kernels,
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );
     println!("runs {} after {} warm-up: median {med:.3} s, min {min:.3} s", a.runs, a.warmup);
