@@ -95,7 +95,7 @@ pub struct ModelArgs {
     /// Left-right consistency check: also run the mirrored pair for the right view's disparity,
     /// and replace the pixels where the two disagree by more than PX pixels (2 when no value is
     /// given; occlusions, mostly) with their row's nearest confirmed background. Doubles the time;
-    /// `--save mask` writes which pixels were replaced.
+    /// `--save rejected` writes which pixels were replaced.
     #[arg(long, value_name = "PX", num_args = 0..=1, default_missing_value = "2")]
     pub lr_check: Option<f32>,
 }
