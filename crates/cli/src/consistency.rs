@@ -12,6 +12,10 @@
 
 use dgstereo_data::{DisparityMap, Mask, RgbImage};
 
+/// The threshold of `--lr-check` given without a value, in pixels: the two views' disparities
+/// may differ by this much before a pixel is rejected.
+pub const DEFAULT_THRESHOLD: &str = "2";
+
 /// The image mirrored left to right.
 pub fn mirror_rgb(image: &RgbImage) -> RgbImage {
     let (w, h) = (image.width, image.height);

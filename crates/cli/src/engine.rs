@@ -30,7 +30,7 @@ use dgstereo_data::{DisparityMap, Mask, RgbImage};
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
-use crate::consistency::{fill_rejected, mirror_disparity, mirror_rgb, rejected_pixels};
+use crate::consistency::{self, fill_rejected, mirror_disparity, mirror_rgb, rejected_pixels};
 use crate::convert::{disparity_map, image_tensor};
 use crate::models::{default_weights, load_model};
 use crate::working_size::{MinSize, working_scale};
@@ -96,7 +96,7 @@ pub struct ModelArgs {
     /// and replace the pixels where the two disagree by more than PX pixels (2 when no value is
     /// given; occlusions, mostly) with their row's nearest confirmed background. Doubles the time;
     /// `--save rejected` writes which pixels were replaced.
-    #[arg(long, value_name = "PX", num_args = 0..=1, default_missing_value = "2")]
+    #[arg(long, value_name = "PX", num_args = 0..=1, default_missing_value = consistency::DEFAULT_THRESHOLD)]
     pub lr_check: Option<f32>,
 }
 
