@@ -238,7 +238,7 @@ pub struct RunInfo {
 impl RunInfo {
     /// With `--lr-check`, the share of the pixels it replaced (0 to 1).
     pub fn rejected_share(&self) -> Option<f64> {
-        self.rejected.as_ref().map(|m| m.data.iter().filter(|&&r| r).count() as f64 / m.data.len().max(1) as f64)
+        self.rejected.as_ref().map(|m| m.count() as f64 / m.data.len().max(1) as f64)
     }
 }
 
