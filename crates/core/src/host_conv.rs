@@ -135,8 +135,8 @@ fn on_host_buffers(
 ) -> Tensor<4> {
     let device: Device = x.device();
     let (x_dims, w_dims) = (x.dims(), weight.dims());
-    let (x, wt) = (crate::tensor::to_vec(x), crate::tensor::to_vec(weight));
-    let bias = bias.map(crate::tensor::to_vec);
+    let (x, wt) = (crate::tensor::host_values(x), crate::tensor::host_values(weight));
+    let bias = bias.map(crate::tensor::host_values);
     let (out, dims) = conv(&x, x_dims, &wt, w_dims, bias.as_deref());
     Tensor::from_data(TensorData::new(out, dims), &device)
 }
@@ -241,7 +241,7 @@ pub(crate) fn im2col_conv_slices(
         .collect();
 
     // Scatter the blocks into NCHW planes, adding the bias.
-    let mut out = vec![0.0f32; n * o * plane];
+    let mut out = crate::tensor::zeros_parallel(n * o * plane);
     out.par_chunks_mut(plane.max(1)).enumerate().for_each(|(i, dst)| {
         let (b, oc) = (i / o, i % o);
         let add = bias.map_or(0.0, |v| v[oc]);

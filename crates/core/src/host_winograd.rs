@@ -189,7 +189,7 @@ pub(crate) fn winograd_conv(
 
     // One job per (image, band) with its rows of every output plane: disjoint slices.
     let plane = out_h * out_w;
-    let mut out = vec![0.0f32; n * o * plane];
+    let mut out = crate::tensor::zeros_parallel(n * o * plane);
     let mut jobs: Vec<Vec<&mut [f32]>> = (0..n * bands).map(|_| Vec::with_capacity(o)).collect();
     for (i, dst) in out.chunks_mut(plane).enumerate() {
         for (band, rows) in dst.chunks_mut(m * band_rows * out_w).enumerate() {

@@ -11,6 +11,7 @@
 
 use std::sync::Arc;
 
+use dgstereo_core::tensor::zeros_parallel;
 use rayon::prelude::*;
 
 /// One pyramid level on the host: `rows` rows of `width` correlations.
@@ -51,7 +52,7 @@ pub fn lookup(levels: &[HostLevel], coords: &[f32], [n, h, w1]: [usize; 3], radi
     }
     // Pixel-major first, so each pixel's pyramid rows are read once for all their taps (the
     // rows do not fit in cache; plane by plane they were re-read `2r + 1` times).
-    let mut by_pixel = vec![0f32; n * plane * channels];
+    let mut by_pixel = zeros_parallel(n * plane * channels);
     by_pixel.par_chunks_mut(channels * w1.max(1)).enumerate().for_each(|(chunk, dst)| {
         for (i, out) in dst.chunks_exact_mut(channels).enumerate() {
             let m = chunk * w1 + i;
@@ -81,7 +82,7 @@ pub fn lookup(levels: &[HostLevel], coords: &[f32], [n, h, w1]: [usize; 3], radi
 /// # Shapes
 /// - `by_pixel`: `[N, plane, channels]` row-major; output `[N, channels, plane]`
 pub(crate) fn pixels_to_planes(by_pixel: &[f32], n: usize, plane: usize, channels: usize) -> Vec<f32> {
-    let mut out = vec![0f32; n * channels * plane];
+    let mut out = zeros_parallel(n * channels * plane);
     if plane == 0 || channels == 0 {
         return out;
     }

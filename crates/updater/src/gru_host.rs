@@ -12,7 +12,7 @@
 
 use burn::tensor::{Tensor, TensorData};
 use dgstereo_core::host_conv::{conv_options, conv2d_host_slices};
-use dgstereo_core::tensor::to_vec;
+use dgstereo_core::tensor::{host_values, zeros_parallel};
 use rayon::prelude::*;
 
 use super::gru::{ConvGru, GateContext};
@@ -56,11 +56,11 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, x: Tensor<4>)
     let cx = x.dims()[1];
     let plane = hh * ww;
     let channels = c + cx;
-    let hv = to_vec(h);
-    let xv = to_vec(x);
+    let hv = host_values(h);
+    let xv = host_values(x);
 
     // [h, x] per image, the gates' input; later reused as [r·h, x], the candidate's input.
-    let mut hx = vec![0.0f32; n * channels * plane];
+    let mut hx = zeros_parallel(n * channels * plane);
     hx.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
         let (b, ch) = (i / channels, i % channels);
         let src = if ch < c { &hv[(b * c + ch) * plane..] } else { &xv[(b * cx + ch - c) * plane..] };
@@ -68,7 +68,7 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, x: Tensor<4>)
     });
 
     let (zr_weight, zr_bias) = gru.gate_weights();
-    let (zr_weight, zr_bias) = (to_vec(zr_weight), zr_bias.map(to_vec));
+    let (zr_weight, zr_bias) = (host_values(zr_weight), zr_bias.map(host_values));
     let [_, _, kh, kw] = gru.convz.weight.dims();
     let [_, _, qh, qw] = gru.convq.weight.dims();
     let (gates, _) = conv2d_host_slices(
@@ -79,10 +79,10 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, x: Tensor<4>)
         zr_bias.as_deref(),
         &zr_options,
     );
-    let zr_ctx = to_vec(ctx.zr.clone());
+    let zr_ctx = host_values(ctx.zr.clone());
 
     // Pass one: z (kept) and r·h (over h's planes of the buffer; the x planes stay).
-    let mut z = vec![0.0f32; n * c * plane];
+    let mut z = zeros_parallel(n * c * plane);
     z.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
         let (b, ch) = (i / c, i % c);
         let g = &gates[(b * 2 * c + ch) * plane..][..plane];
@@ -100,14 +100,14 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, x: Tensor<4>)
         }
     });
 
-    let q_weight = to_vec(gru.convq.weight.val());
-    let q_bias = gru.convq.bias.as_ref().map(|b| to_vec(b.val()));
+    let q_weight = host_values(gru.convq.weight.val());
+    let q_bias = gru.convq.bias.as_ref().map(|b| host_values(b.val()));
     let (q, _) =
         conv2d_host_slices(&hx, [n, channels, hh, ww], &q_weight, [c, channels, qh, qw], q_bias.as_deref(), &q_options);
-    let q_ctx = to_vec(ctx.q.clone());
+    let q_ctx = host_values(ctx.q.clone());
 
     // Pass two: the new state.
-    let mut out = vec![0.0f32; n * c * plane];
+    let mut out = zeros_parallel(n * c * plane);
     out.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
         let s = i * plane;
         let (z, h, q, k) = (&z[s..s + plane], &hv[s..s + plane], &q[s..s + plane], &q_ctx[s..s + plane]);
