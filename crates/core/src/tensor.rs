@@ -43,12 +43,13 @@ impl HostValues {
 /// tensor on the Flex device (no autodiff), copied through [`to_vec`] otherwise.
 pub fn host_values<const D: usize>(t: Tensor<D>) -> HostValues {
     let device = t.device();
-    if device == Device::flex() && !device.is_autodiff() && t.dtype() == DType::F32 {
-        if let Ok(flex) = t.clone().try_into_primitive::<Flex>() {
-            if flex.as_slice::<f32>().is_some() {
-                return HostValues(HostStorage::Borrowed(flex));
-            }
-        }
+    if device == Device::flex()
+        && !device.is_autodiff()
+        && t.dtype() == DType::F32
+        && let Ok(flex) = t.clone().try_into_primitive::<Flex>()
+        && flex.as_slice::<f32>().is_some()
+    {
+        return HostValues(HostStorage::Borrowed(flex));
     }
     HostValues(HostStorage::Owned(to_vec(t)))
 }
