@@ -268,7 +268,7 @@ fn lincomb<'a>(dst: &mut [f32], coefs: &[f32], src: impl Fn(usize) -> &'a [f32])
 /// so both products with `G` are vector operations.
 fn transform_weights(variant: &Variant, wt: &[f32], o: usize, c: usize) -> Vec<f32> {
     let alpha = variant.m + 2;
-    let mut u = vec![0.0f32; o * alpha * alpha * c];
+    let mut u = crate::tensor::zeros_parallel(o * alpha * alpha * c);
     u.par_chunks_mut(alpha * alpha * c).enumerate().for_each_init(Vec::new, |scratch, (oc, dst)| {
         // taps[(3·ky + kx)·C + ci], then G g as gg[(α·kx + i)·C + ci].
         scratch.resize((9 + 3 * alpha) * c, 0.0);
