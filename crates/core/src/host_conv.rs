@@ -268,14 +268,31 @@ pub(crate) fn matmul_into(
     rhs: &[f32],
     [rows, cols, depth]: [usize; 3],
 ) {
-    assert!(dst.len() >= rows * cols && rhs.len() >= depth * cols && depth <= lhs_stride);
-    assert!(rows == 0 || lhs.len() >= (rows - 1) * lhs_stride + depth);
+    matmul_strided(dst, cols, lhs, lhs_stride, rhs, cols, [rows, cols, depth]);
+}
+
+/// [`matmul_into`] with row strides for all three: `dst` `rows x cols` (row stride
+/// `dst_stride`), `lhs` `rows x depth` (`lhs_stride`), `rhs` `depth x cols` (`rhs_stride`).
+pub(crate) fn matmul_strided(
+    dst: &mut [f32],
+    dst_stride: usize,
+    lhs: &[f32],
+    lhs_stride: usize,
+    rhs: &[f32],
+    rhs_stride: usize,
+    [rows, cols, depth]: [usize; 3],
+) {
+    // The last row of each operand reaches `(rows - 1)·stride + width` elements.
+    let reach = |count: usize, stride: usize, width: usize| count.checked_sub(1).map_or(0, |c| c * stride + width);
+    assert!(cols <= dst_stride && cols <= rhs_stride && depth <= lhs_stride);
+    assert!(dst.len() >= reach(rows, dst_stride, cols) && rhs.len() >= reach(depth, rhs_stride, cols));
+    assert!(lhs.len() >= reach(rows, lhs_stride, depth));
     // SAFETY: the asserts keep every element the strides reach inside the three slices, which
     // live through the call; `read_dst` is false, so `dst` is only written.
     #[rustfmt::skip]
     unsafe {
-        gemm::gemm(rows, cols, depth, dst.as_mut_ptr(), 1, cols as isize, false,
-                   lhs.as_ptr(), 1, lhs_stride as isize, rhs.as_ptr(), 1, cols as isize,
+        gemm::gemm(rows, cols, depth, dst.as_mut_ptr(), 1, dst_stride as isize, false,
+                   lhs.as_ptr(), 1, lhs_stride as isize, rhs.as_ptr(), 1, rhs_stride as isize,
                    0.0f32, 1.0f32, false, false, false, gemm::Parallelism::None);
     };
 }
