@@ -472,4 +472,26 @@ mod tests {
             assert_eq!(variant(x, w, &options), None, "{x:?} {w:?} {options:?}");
         }
     }
+
+    /// The strided product against a plain triple loop, with padding between rows of every
+    /// operand (the layout the Winograd path uses); the padding of `dst` stays untouched.
+    #[test]
+    fn strided_matmul_matches_a_plain_loop() {
+        let [rows, cols, depth] = [5, 7, 3];
+        let [dst_stride, lhs_stride, rhs_stride] = [11, 4, 9];
+        let lhs: Vec<f32> = (0..rows * lhs_stride).map(|i| (i % 13) as f32 - 6.0).collect();
+        let rhs: Vec<f32> = (0..depth * rhs_stride).map(|i| (i % 7) as f32 * 0.5 - 1.0).collect();
+        let mut dst = vec![-99.0f32; (rows - 1) * dst_stride + cols];
+        matmul_strided(&mut dst, dst_stride, &lhs, lhs_stride, &rhs, rhs_stride, [rows, cols, depth]);
+        for (i, &got) in dst.iter().enumerate() {
+            let (r, c) = (i / dst_stride, i % dst_stride);
+            if c >= cols {
+                assert_eq!(got, -99.0, "padding at {i} was written");
+                continue;
+            }
+            let expected: f32 = (0..depth).map(|k| lhs[r * lhs_stride + k] * rhs[k * rhs_stride + c]).sum();
+            assert_eq!(got, expected, "row {r} column {c}");
+        }
+    }
+
 }
