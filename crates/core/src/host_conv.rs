@@ -493,5 +493,4 @@ mod tests {
             assert_eq!(got, expected, "row {r} column {c}");
         }
     }
-
 }
