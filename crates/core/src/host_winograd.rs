@@ -394,15 +394,40 @@ fn transform_outputs(
         }
         // Output row m·l + r, column m·tx + s is y[(m·r + s)·T + l·(tw + 1) + tx].
         for (oy, row) in dst.chunks_exact_mut(g.out_w).enumerate() {
-            let at = (oy / m) * (tw + 1);
-            let r = oy % m;
-            for (s, ys) in y.chunks_exact(t).skip(m * r).take(m).enumerate() {
-                let ys = &ys[at..at + tw];
-                for (d, v) in row.iter_mut().skip(s).step_by(m).zip(ys) {
-                    *d = finish(v + add);
+            let stream = |s: usize| &y[(m * (oy % m) + s) * t + (oy / m) * (tw + 1)..][..tw];
+            match (m, epilogue) {
+                (2, Epilogue::Linear) => interleave::<2, false>(row, [stream(0), stream(1)], add),
+                (2, Epilogue::Relu) => interleave::<2, true>(row, [stream(0), stream(1)], add),
+                (4, Epilogue::Linear) => interleave::<4, false>(row, [0, 1, 2, 3].map(stream), add),
+                (4, Epilogue::Relu) => interleave::<4, true>(row, [0, 1, 2, 3].map(stream), add),
+                _ => {
+                    for s in 0..m {
+                        for (d, v) in row.iter_mut().skip(s).step_by(m).zip(stream(s)) {
+                            *d = finish(v + add);
+                        }
+                    }
                 }
             }
         }
+    }
+}
+
+/// Writes one output row from its `M` column streams (`row[M·tx + s] = streams[s][tx] + add`,
+/// then ReLU when `RELU`), in row order: `M` is known at compile time, so the interleaving
+/// compiles to vector shuffles and contiguous stores instead of `M` strided scalar passes.
+#[inline(always)]
+fn interleave<const M: usize, const RELU: bool>(row: &mut [f32], streams: [&[f32]; M], add: f32) {
+    let finish = |v: f32| if RELU { (v + add).max(0.0) } else { v + add };
+    let whole = row.len() / M;
+    let streams = streams.map(|s| &s[..whole.max(row.len().div_ceil(M))]);
+    let (body, tail) = row.split_at_mut(whole * M);
+    for (tx, out) in body.chunks_exact_mut(M).enumerate() {
+        for s in 0..M {
+            out[s] = finish(streams[s][tx]);
+        }
+    }
+    for (s, d) in tail.iter_mut().enumerate() {
+        *d = finish(streams[s][whole]);
     }
 }
 
