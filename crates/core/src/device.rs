@@ -113,7 +113,7 @@ impl Precision {
 /// (burn's default is f32, and a process configures a device once) is returned as it is.
 fn configured(mut device: Device, precision: Precision) -> crate::Result<Device> {
     let wanted = precision.float_dtype();
-    if device.settings().float_dtype == wanted {
+    if float_dtype(&device) == wanted {
         return Ok(device);
     }
     let result = device.configure(wanted);

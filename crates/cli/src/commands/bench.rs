@@ -153,9 +153,10 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         let out = model.predict(left.clone(), right.clone(), prior.as_ref(), a.iters, false, Some(implementation))?;
         let data = out.last().into_data(); // waits for asynchronous backends
         let wall = start.elapsed().as_secs_f64();
-        // Outside the timed span: a narrow precision that overflowed times a meaningless map.
+        let cpu = process_cpu_seconds().zip(cpu).map_or(f64::NAN, |(b, a)| b - a);
+        // Outside both timed spans: a narrow precision that overflowed times a meaningless map.
         non_finite = data.convert::<f32>().iter::<f32>().filter(|v| !v.is_finite()).count();
-        Ok((wall, process_cpu_seconds().zip(cpu).map_or(f64::NAN, |(b, a)| b - a)))
+        Ok((wall, cpu))
     };
     for _ in 0..a.warmup {
         predict()?;
