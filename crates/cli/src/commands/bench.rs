@@ -100,6 +100,39 @@ pub fn process_cpu_seconds() -> Option<f64> {
     Some(ticks / 100.0)
 }
 
+/// The processor's name from the first `model name` line of a `/proc/cpuinfo` text.
+fn cpu_model_name(cpuinfo: &str) -> Option<&str> {
+    let line = cpuinfo.lines().find(|l| l.starts_with("model name"))?;
+    Some(line.split_once(':')?.1.trim()).filter(|name| !name.is_empty())
+}
+
+/// The widest vector instructions the matrix products use on this CPU: the `gemm` crate picks
+/// its AVX-512 kernels where the CPU has them (its `x86-v4` feature), else its AVX2/FMA ones.
+fn vector_level() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            return "AVX-512";
+        }
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            return "AVX2+FMA";
+        }
+    }
+    "no AVX2"
+}
+
+/// One line naming the machine, so that timings from different machines are not compared by
+/// mistake: the processor (Linux), its vector level, the threads rayon runs.
+pub fn machine_line() -> String {
+    let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    format!(
+        "machine: {}, {}, {} threads",
+        cpu_model_name(&cpuinfo).unwrap_or("processor not reported"),
+        vector_level(),
+        rayon::current_num_threads()
+    )
+}
+
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     let m = v.len() / 2;
@@ -181,6 +214,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         a.device,
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );
+    println!("{}", machine_line());
     println!("runs {} after {} warm-up: median {med:.3} s, min {min:.3} s", a.runs, a.warmup);
     println!("CPU time per run (all threads): median {:.2} s", median(&mut cpu));
     println!("throughput {:.3} megapixels/s", (h * w) as f64 / 1e6 / med);
@@ -229,6 +263,15 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_processor_is_named_from_cpuinfo() {
+        let cpuinfo = "processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R) Xeon(R) Processor @ 2.50GHz\n\nprocessor\t: 1\nmodel name\t: other\n";
+        assert_eq!(cpu_model_name(cpuinfo), Some("Intel(R) Xeon(R) Processor @ 2.50GHz"));
+        assert_eq!(cpu_model_name("processor\t: 0\n"), None);
+        assert_eq!(cpu_model_name("model name\t:   \n"), None);
+        assert!(machine_line().starts_with("machine: "));
+    }
 
     #[test]
     fn sizes_parse_and_bad_ones_are_named() {
