@@ -12,6 +12,7 @@ mod inputs;
 mod models;
 mod outputs;
 mod pointcloud;
+mod sigpipe;
 mod visualize;
 mod working_size;
 
@@ -52,6 +53,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    sigpipe::restore_default_sigpipe();
     let cli = Cli::parse();
     dgstereo_core::allocator::retain_freed_memory();
     let result = match cli.command {

@@ -339,3 +339,24 @@ fn eval_reads_a_middlebury_layout_and_honours_limit() {
     assert_eq!(rows[0]["name"], "Cones");
     assert!(rows[0]["noc"].is_null(), "no mask0nocc.png, no non-occluded scores");
 }
+
+/// Output into a pipe whose reader has gone (`dgstereo bench | head -1`) ends the process by
+/// SIGPIPE, quietly, instead of a panic with a backtrace.
+#[cfg(unix)]
+#[test]
+fn a_closed_pipe_ends_the_command_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_dgstereo"))
+        .args(["bench", "--size", "32x32", "--iters", "1", "--runs", "1", "--warmup", "0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the dgstereo binary runs");
+    // Close the reading end before the bench prints its first line (after a whole pass).
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.signal(), Some(libc::SIGPIPE), "{:?}: {stderr}", out.status);
+}
