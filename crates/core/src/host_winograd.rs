@@ -110,7 +110,12 @@ pub(crate) struct Variant {
     /// Target tiles per band (rounded to whole tile rows). Measured on the GRU 1/4 convolution
     /// (C=384, O=128, 96x112, 2 cores under a shared load): F(2x2) 56 tiles 68 ms, 128 to 512
     /// within 62 to 65 ms; F(4x4) 32 tiles 96 to 115 ms, 64: 85 to 94, 128: 73 to 81, 192: 79
-    /// to 80, 256: 77 ms (few input rows per band read each row twice).
+    /// to 80, 256: 77 ms (few input rows per band read each row twice). F(4x4) 384 rather than
+    /// 192 since session 11, on the Intel Xeon (AVX-512 products, 1 MiB L2 per core): criterion
+    /// layer1 64->64 at 160x368 -15 % (GRU convolutions within the noise: at the 1/4 grid of
+    /// 384x448 the two-bands-per-thread rule sets the band either way), whole passes 384x448 x 12
+    /// median of 5 rounds 7.97 -> 7.51 s, KITTI x 12 -7 and -10 % (2 rounds), bit-identical; on the
+    /// AMD machine 384 showed no consistent difference (session 10).
     band_tiles: usize,
 }
 
@@ -132,7 +137,7 @@ pub(crate) const F4: Variant = Variant {
     g: &[[1. / 4., 0., 0.], [-1. / 6., -1. / 6., -1. / 6.], [-1. / 6., 1. / 6., -1. / 6.],
          [1. / 24., 1. / 12., 1. / 6.], [1. / 24., -1. / 12., 1. / 6.], [0., 0., 1.]],
     at: &[[1., 1., 1., 1., 1., 0.], [0., 1., -1., 2., -2., 0.], [0., 1., 1., 4., 4., 0.], [0., 1., -1., 8., -8., 1.]],
-    band_tiles: 192,
+    band_tiles: 384,
 };
 
 /// Tile grid of one convolution: channels, input size, leading padding, output width, tile
