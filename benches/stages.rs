@@ -97,7 +97,8 @@ fn correlation(c: &mut Criterion) {
 
 /// The host convolution kernel against burn's on the largest convolutions of a pass: the
 /// GRU-1/4 candidate (384 -> 128 channels at the 1/4 grid, of 320x736 and of a 384x448 pair)
-/// and a feature-encoder layer1 convolution (64 -> 64 at 1/2 resolution). `3x3 Host` is the
+/// and a feature-encoder layer1 convolution (64 -> 64; the default model runs layer1 at full
+/// resolution, here it runs at half of 320x736 to keep the bench short). `3x3 Host` is the
 /// dispatching kernel (Winograd F(4x4, 3x3) at these sizes unless `DGSTEREO_NO_WINOGRAD=1`),
 /// `3x3 Host im2col` its im2col path alone.
 fn convolution(c: &mut Criterion) {
