@@ -107,30 +107,30 @@ fn cpu_model_name(cpuinfo: &str) -> Option<&str> {
 }
 
 /// The widest vector instructions the matrix products use on this CPU: the `gemm` crate picks
-/// its AVX-512 kernels where the CPU has them (its `x86-v4` feature), else its AVX2/FMA ones.
+/// its AVX-512 kernels where the CPU has them (its `x86-v4` feature), else its AVX2/FMA ones,
+/// else scalar code; on other architectures, the architecture's name.
 fn vector_level() -> &'static str {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f") {
-            return "AVX-512";
-        }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-            return "AVX2+FMA";
+            "AVX-512"
+        } else if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            "AVX2+FMA"
+        } else {
+            "x86-64 without AVX2"
         }
     }
-    "no AVX2"
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        std::env::consts::ARCH
+    }
 }
 
 /// One line naming the machine, so that timings from different machines are not compared by
-/// mistake: the processor (Linux), its vector level, the threads rayon runs.
+/// mistake: the processor (Linux) and the vector level of the products.
 pub fn machine_line() -> String {
     let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-    format!(
-        "machine: {}, {}, {} threads",
-        cpu_model_name(&cpuinfo).unwrap_or("processor not reported"),
-        vector_level(),
-        rayon::current_num_threads()
-    )
+    format!("machine: {}, {}", cpu_model_name(&cpuinfo).unwrap_or("processor not reported"), vector_level())
 }
 
 fn median(v: &mut [f64]) -> f64 {
