@@ -387,7 +387,6 @@ fn transform_outputs(
     // `M A` per row i of the tile: q[m·i + s] (s = output column), then Y[m·r + s] (r = row).
     scratch.resize((alpha + m) * m * t, 0.0);
     let (q, y) = scratch.split_at_mut(alpha * m * t);
-    let finish = |v: f32| if epilogue == Epilogue::Relu { v.max(0.0) } else { v };
     for (oc, dst) in planes.into_iter().enumerate() {
         let add = bias.map_or(0.0, |b| b[oc]);
         for (k, q) in q.chunks_exact_mut(t).enumerate() {
@@ -401,17 +400,11 @@ fn transform_outputs(
         for (oy, row) in dst.chunks_exact_mut(g.out_w).enumerate() {
             let stream = |s: usize| &y[(m * (oy % m) + s) * t + (oy / m) * (tw + 1)..][..tw];
             match (m, epilogue) {
-                (2, Epilogue::Linear) => interleave::<2, false>(row, [stream(0), stream(1)], add),
-                (2, Epilogue::Relu) => interleave::<2, true>(row, [stream(0), stream(1)], add),
+                (2, Epilogue::Linear) => interleave::<2, false>(row, [0, 1].map(stream), add),
+                (2, Epilogue::Relu) => interleave::<2, true>(row, [0, 1].map(stream), add),
                 (4, Epilogue::Linear) => interleave::<4, false>(row, [0, 1, 2, 3].map(stream), add),
                 (4, Epilogue::Relu) => interleave::<4, true>(row, [0, 1, 2, 3].map(stream), add),
-                _ => {
-                    for s in 0..m {
-                        for (d, v) in row.iter_mut().skip(s).step_by(m).zip(stream(s)) {
-                            *d = finish(v + add);
-                        }
-                    }
-                }
+                _ => unreachable!("the Winograd variants are F(2x2) and F(4x4), not m = {m}"),
             }
         }
     }
