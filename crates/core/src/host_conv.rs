@@ -30,27 +30,27 @@ use rayon::prelude::*;
 
 use crate::device::host_kernels_apply;
 use crate::host_winograd::{winograd_conv, winograd_disabled, winograd_variant};
+use crate::matmul_conv::{conv2d_by_matmul, matmul_conv_applies};
 
 /// Output pixels per tile (whole output rows, at least one): enough columns for an efficient
 /// product, few enough for many tiles and small column buffers. 128, 256, 512 and 1024 ran within
 /// the noise of each other; 128 needs the least memory (283 against 310 MiB peak at 384x448).
 const TILE_PIXELS: usize = 128;
 
-/// `conv.forward(x)`: the host kernel for CPU inference, burn's convolution elsewhere.
+/// `conv.forward(x)`: the host kernel for CPU inference, one matrix product for stride-1
+/// convolutions in GPU inference ([`crate::matmul_conv`]), burn's convolution elsewhere.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output `[N, O, H_out, W_out]`
 pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     match conv_options(conv) {
-        Some(options) if host_kernels_apply(&x.device()) => {
-            conv2d_host(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options)
-        }
-        _ => conv.forward(x),
+        Some(options) => conv2d_op(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), options),
+        None => conv.forward(x),
     }
 }
 
 /// `relu(conv.forward(x))`: on CPU inference the host kernel applies the ReLU while it writes
-/// the output (no extra pass), elsewhere burn's convolution and ReLU.
+/// the output (no extra pass), elsewhere [`conv2d_forward`] and a ReLU.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output `[N, O, H_out, W_out]`
@@ -62,7 +62,7 @@ pub fn conv2d_relu_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
                 host_conv_slices(x, x_dims, wt, w_dims, bias, &options, Epilogue::Relu)
             })
         }
-        _ => burn::tensor::activation::relu(conv.forward(x)),
+        _ => burn::tensor::activation::relu(conv2d_forward(conv, x)),
     }
 }
 
@@ -87,15 +87,21 @@ pub fn conv_options(conv: &Conv2d) -> Option<ConvOptions<2>> {
 }
 
 /// burn's `conv2d(x, weight, bias, options)` as [`conv2d_forward`] chooses: the host kernel for
-/// CPU inference (groups = 1), burn's operation elsewhere.
+/// CPU inference (groups = 1), one matrix product for stride-1 convolutions in GPU inference
+/// ([`crate::matmul_conv`]), burn's operation elsewhere.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`; output `[N, O, H_out, W_out]`
 pub fn conv2d_op(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: ConvOptions<2>) -> Tensor<4> {
-    if options.groups != 1 || !host_kernels_apply(&x.device()) {
-        return conv2d(x, weight, bias, options);
+    let device = x.device();
+    let [_, _, kh, kw] = weight.dims();
+    if options.groups == 1 && host_kernels_apply(&device) {
+        conv2d_host(x, weight, bias, &options)
+    } else if matmul_conv_applies(&device, &options, [kh, kw]) {
+        conv2d_by_matmul(x, weight, bias, &options)
+    } else {
+        conv2d(x, weight, bias, options)
     }
-    conv2d_host(x, weight, bias, &options)
 }
 
 /// `conv2d(x, weight, bias)` with `options` (groups = 1), computed on the host.

@@ -16,6 +16,7 @@ pub mod host_conv;
 pub mod host_norm;
 mod host_winograd;
 pub mod layers;
+pub mod matmul_conv;
 pub mod padding;
 pub mod resample;
 pub mod shared;
