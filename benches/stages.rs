@@ -112,6 +112,7 @@ fn convolution(c: &mut Criterion) {
         (384, 128, [h / 4, w / 4], "GRU 1/4 384->128 80x184"),
         (384, 128, [96, 112], "GRU 1/4 384->128 96x112"),
         (64, 64, [h / 2, w / 2], "layer1 64->64 160x368"),
+        (256, 2, [96, 112], "flow head 256->2 96x112"),
     ] {
         let x = random([1, cin, ch, cw]);
         let weight = random([cout, cin, 3, 3]).mul_scalar(0.05);

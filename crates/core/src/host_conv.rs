@@ -29,6 +29,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::device::host_kernels_apply;
+use crate::host_few_outputs::{self, few_outputs_conv};
 use crate::host_winograd::{winograd_conv, winograd_disabled, winograd_variant};
 use crate::matmul_conv::{conv2d_by_matmul, matmul_conv_applies};
 
@@ -177,6 +178,10 @@ fn host_conv_slices(
     if let Some(variant) = winograd_variant(x_dims, w_dims, options).filter(|_| !winograd_disabled()) {
         check_shapes(x, x_dims, wt, w_dims, options);
         return winograd_conv(variant, x, x_dims, wt, w_dims[0], bias, options.padding, epilogue);
+    }
+    if host_few_outputs::suits(x_dims[1], w_dims[0], options.stride, options.groups) {
+        check_shapes(x, x_dims, wt, w_dims, options);
+        return few_outputs_conv(x, x_dims, wt, w_dims, bias, options.padding, options.dilation, epilogue);
     }
     im2col_conv_slices(x, x_dims, wt, w_dims, bias, options, epilogue)
 }

@@ -13,6 +13,7 @@ pub mod allocator;
 pub mod device;
 pub mod error;
 pub mod host_conv;
+mod host_few_outputs;
 pub mod host_norm;
 mod host_winograd;
 pub mod layers;
