@@ -30,7 +30,7 @@ use rayon::prelude::*;
 
 use crate::device::host_kernels_apply;
 use crate::host_few_outputs::{self, few_outputs_conv};
-use crate::host_winograd::{winograd_conv, winograd_disabled, winograd_variant};
+use crate::host_winograd::{split_first, split_second, winograd_conv, winograd_disabled, winograd_variant};
 use crate::matmul_conv::{conv2d_by_matmul, matmul_conv_applies};
 
 /// Output pixels per tile (whole output rows, at least one): enough columns for an efficient
@@ -164,6 +164,64 @@ pub fn conv2d_host_slices(
     host_conv_slices(x, x_dims, wt, w_dims, bias, options, Epilogue::Linear)
 }
 
+/// The second of two host convolutions that share input channels, waiting for the rest of its
+/// input ([`conv2d_host_shared_first`]).
+pub struct PendingConv(crate::host_winograd::Pending);
+
+/// Two 3x3 convolutions whose inputs share channels, the shared ones transformed once (the
+/// ConvGRU's gates over `[h, x]` and candidate over `[r·h, x]`, module `host_winograd`'s
+/// `split`): returns the first convolution's output (weight `wt_first` over all of `x`, bias
+/// `bias_first`) and the second's products over the shared channels, the last `shared` of `x`
+/// and of the second's input, whose weight `wt_second` has `c2` input channels. `None` (nothing
+/// computed) where the Winograd path would not run both convolutions.
+///
+/// # Shapes
+/// - `x`: `x_dims = [N, C, H, W]`; `wt_first`: `[O1, C, 3, 3]`; `wt_second`: `[O2, c2, 3, 3]`
+/// - output (returned without its dimensions) `[N, O1, H_out, W_out]`
+#[allow(clippy::too_many_arguments)]
+pub fn conv2d_host_shared_first(
+    x: &[f32],
+    x_dims: [usize; 4],
+    [wt_first, wt_second]: [&[f32]; 2],
+    [o1, o2]: [usize; 2],
+    c2: usize,
+    shared: usize,
+    bias_first: Option<&[f32]>,
+    options: &ConvOptions<2>,
+) -> Option<(Vec<f32>, PendingConv)> {
+    let [n, c, h, w] = x_dims;
+    let variant = winograd_variant(x_dims, [o1, c, 3, 3], options)
+        .filter(|_| winograd_variant([n, c2, h, w], [o2, c2, 3, 3], options).is_some() && !winograd_disabled())?;
+    check_shapes(x, x_dims, wt_first, [o1, c, 3, 3], options);
+    let (out, pending) = split_first(
+        variant,
+        x,
+        x_dims,
+        [wt_first, wt_second],
+        [o1, o2],
+        c2,
+        shared,
+        bias_first,
+        options.padding,
+        Epilogue::Linear,
+    );
+    Some((out.0, PendingConv(pending)))
+}
+
+/// The second convolution of [`conv2d_host_shared_first`]: its own input channels `x` (the first
+/// `c2 - shared`), with its bias.
+///
+/// # Shapes
+/// - `x`: `x_dims = [N, c2 - shared, H, W]`; output `[N, O2, H_out, W_out]`
+pub fn conv2d_host_shared_second(
+    pending: PendingConv,
+    x: &[f32],
+    x_dims: [usize; 4],
+    bias: Option<&[f32]>,
+) -> (Vec<f32>, [usize; 4]) {
+    split_second(pending.0, x, x_dims, bias, Epilogue::Linear)
+}
+
 /// [`conv2d_host_slices`] with an epilogue: Winograd F(4x4, 3x3) or F(2x2, 3x3) for the 3x3
 /// stride-1 convolutions they suit ([`crate::host_winograd`]), im2col tiles otherwise.
 fn host_conv_slices(
@@ -291,7 +349,35 @@ pub(crate) fn matmul_strided(
     lhs_stride: usize,
     rhs: &[f32],
     rhs_stride: usize,
+    dims: [usize; 3],
+) {
+    strided_product(dst, dst_stride, lhs, lhs_stride, rhs, rhs_stride, dims, false);
+}
+
+/// [`matmul_strided`] adding the product to what `dst` holds: `dst += lhs · rhs`.
+pub(crate) fn matmul_strided_add(
+    dst: &mut [f32],
+    dst_stride: usize,
+    lhs: &[f32],
+    lhs_stride: usize,
+    rhs: &[f32],
+    rhs_stride: usize,
+    dims: [usize; 3],
+) {
+    strided_product(dst, dst_stride, lhs, lhs_stride, rhs, rhs_stride, dims, true);
+}
+
+/// The one call of the `gemm` crate: `dst = lhs · rhs`, or `dst += lhs · rhs` when `accumulate`.
+#[allow(clippy::too_many_arguments)]
+fn strided_product(
+    dst: &mut [f32],
+    dst_stride: usize,
+    lhs: &[f32],
+    lhs_stride: usize,
+    rhs: &[f32],
+    rhs_stride: usize,
     [rows, cols, depth]: [usize; 3],
+    accumulate: bool,
 ) {
     // The last row of each operand reaches `(rows - 1)·stride + width` elements.
     let reach = |count: usize, stride: usize, width: usize| count.checked_sub(1).map_or(0, |c| c * stride + width);
@@ -299,12 +385,12 @@ pub(crate) fn matmul_strided(
     assert!(dst.len() >= reach(rows, dst_stride, cols) && rhs.len() >= reach(depth, rhs_stride, cols));
     assert!(lhs.len() >= reach(rows, lhs_stride, depth));
     // SAFETY: the asserts keep every element the strides reach inside the three slices, which
-    // live through the call; `read_dst` is false, so `dst` is only written.
+    // live through the call; `dst` is read (when `accumulate`) and written only there.
     #[rustfmt::skip]
     unsafe {
-        gemm::gemm(rows, cols, depth, dst.as_mut_ptr(), 1, dst_stride as isize, false,
+        gemm::gemm(rows, cols, depth, dst.as_mut_ptr(), 1, dst_stride as isize, accumulate,
                    lhs.as_ptr(), 1, lhs_stride as isize, rhs.as_ptr(), 1, rhs_stride as isize,
-                   0.0f32, 1.0f32, false, false, false, gemm::Parallelism::None);
+                   if accumulate { 1.0f32 } else { 0.0 }, 1.0f32, false, false, false, gemm::Parallelism::None);
     };
 }
 

@@ -44,6 +44,8 @@
 //! The products go through [`crate::host_conv::matmul_into`], the workspace's one call of the
 //! `gemm` crate's `unsafe` entry point.
 
+mod split;
+
 use std::ops::Range;
 use std::sync::OnceLock;
 
@@ -51,6 +53,7 @@ use burn::tensor::ops::ConvOptions;
 use rayon::prelude::*;
 
 use crate::host_conv::{Epilogue, matmul_strided};
+pub(crate) use split::{Pending, first as split_first, second as split_second};
 
 /// Fewest input and output channels for which the Winograd path pays. Measured with F(2x2)
 /// against the im2col path at 96x112 (time im2col / time Winograd, two runs): C = O = 8: 0.75
@@ -178,50 +181,100 @@ pub(crate) fn winograd_conv(
     padding: [(usize, usize); 2],
     epilogue: Epilogue,
 ) -> (Vec<f32>, [usize; 4]) {
-    let [n, c, h, w] = x_dims;
-    let [(ph, ph_end), (pw, pw_end)] = padding;
+    let c = x_dims[1];
     assert_eq!(wt.len(), o * c * 9, "winograd_conv: the weight is not [{o}, {c}, 3, 3]");
-    assert!(h + ph + ph_end >= 3 && w + pw + pw_end >= 3, "winograd_conv: input smaller than the kernel");
-    let (m, k2) = (variant.m, (variant.m + 2) * (variant.m + 2));
-    let (out_h, out_w) = (h + ph + ph_end - 2, w + pw + pw_end - 2);
-    let (tiles_h, tiles_w) = (out_h.div_ceil(m), out_w.div_ceil(m));
-    let tiling = Tiling { c, h, w, ph, pw, out_w, m, tiles_w };
+    let plan = Plan::new(variant, x_dims, padding);
     let u = transform_weights(variant, wt, o, c);
-
-    let by_size = (variant.band_tiles / tiles_w).max(1);
-    let min_bands = (2 * rayon::current_num_threads()).div_ceil(n.max(1));
-    let bands = tiles_h.div_ceil(by_size).max(min_bands).min(tiles_h);
-    let band_rows = tiles_h.div_ceil(bands);
-    let bands = tiles_h.div_ceil(band_rows);
-
-    // One job per (image, band) with its rows of every output plane: disjoint slices.
-    let plane = out_h * out_w;
-    let mut out = crate::tensor::zeros_parallel(n * o * plane);
-    let mut jobs: Vec<Vec<&mut [f32]>> = (0..n * bands).map(|_| Vec::with_capacity(o)).collect();
-    for (i, dst) in out.chunks_mut(plane).enumerate() {
-        for (band, rows) in dst.chunks_mut(m * band_rows * out_w).enumerate() {
-            jobs[(i / o) * bands + band].push(rows);
+    let k2 = plan.k2;
+    plan.run(x, o, &mut vec![(); plan.jobs()], |job, image, planes, _, [v, mm, scratch]| {
+        let (tile_rows, t) = (plan.tile_rows(job), plan.tiles(job));
+        // Every element of `v` and `mm` is written before it is read (the transform fills all of
+        // `v`, the products write all of `mm`), so stale values never leak.
+        v.resize(k2 * c * t, 0.0);
+        mm.resize(k2 * o * t, 0.0);
+        let (v, mm) = (&mut v[..k2 * c * t], &mut mm[..k2 * o * t]);
+        transform_inputs(variant, v, image, plan.tiling, tile_rows.clone(), scratch);
+        for k in 0..k2 {
+            matmul_strided(&mut mm[k * t..], k2 * t, &u[k * c..], k2 * c, &v[k * t..], k2 * t, [o, t, c]);
         }
+        transform_outputs(variant, mm, planes, bias, epilogue, plan.tiling, tile_rows.len(), scratch);
+    })
+}
+
+/// The geometry of one Winograd convolution: its tile grid, output size and bands (whole tile
+/// rows of one image, processed in parallel).
+#[derive(Clone, Copy)]
+struct Plan {
+    tiling: Tiling,
+    n: usize,
+    k2: usize,
+    out_h: usize,
+    tiles_h: usize,
+    bands: usize,
+    band_rows: usize,
+}
+
+impl Plan {
+    fn new(variant: &Variant, [n, c, h, w]: [usize; 4], padding: [(usize, usize); 2]) -> Self {
+        let [(ph, ph_end), (pw, pw_end)] = padding;
+        assert!(h + ph + ph_end >= 3 && w + pw + pw_end >= 3, "winograd_conv: input smaller than the kernel");
+        let m = variant.m;
+        let (out_h, out_w) = (h + ph + ph_end - 2, w + pw + pw_end - 2);
+        let (tiles_h, tiles_w) = (out_h.div_ceil(m), out_w.div_ceil(m));
+        let by_size = (variant.band_tiles / tiles_w).max(1);
+        let min_bands = (2 * rayon::current_num_threads()).div_ceil(n.max(1));
+        let bands = tiles_h.div_ceil(by_size).max(min_bands).min(tiles_h);
+        let band_rows = tiles_h.div_ceil(bands);
+        let bands = tiles_h.div_ceil(band_rows);
+        let tiling = Tiling { c, h, w, ph, pw, out_w, m, tiles_w };
+        Self { tiling, n, k2: (m + 2) * (m + 2), out_h, tiles_h, bands, band_rows }
     }
-    jobs.into_par_iter().enumerate().for_each(|(job, planes)| {
-        let (b, band) = (job / bands, job % bands);
-        let tile_rows = band * band_rows..((band + 1) * band_rows).min(tiles_h);
-        let t = tile_rows.len() * (tiles_w + 1);
-        let image = &x[b * c * h * w..][..c * h * w];
-        BUFFERS.with_borrow_mut(|[v, mm, scratch]| {
-            // Every element of `v` and `mm` is written before it is read (the transform fills
-            // all of `v`, the products write all of `mm`), so stale values never leak.
-            v.resize(k2 * c * t, 0.0);
-            mm.resize(k2 * o * t, 0.0);
-            let (v, mm) = (&mut v[..k2 * c * t], &mut mm[..k2 * o * t]);
-            transform_inputs(variant, v, image, tiling, tile_rows.clone(), scratch);
-            for k in 0..k2 {
-                matmul_strided(&mut mm[k * t..], k2 * t, &u[k * c..], k2 * c, &v[k * t..], k2 * t, [o, t, c]);
+
+    /// (Image, band) jobs.
+    fn jobs(&self) -> usize {
+        self.n * self.bands
+    }
+
+    /// The tile rows of `job`'s band.
+    fn tile_rows(&self, job: usize) -> Range<usize> {
+        let band = job % self.bands;
+        band * self.band_rows..((band + 1) * self.band_rows).min(self.tiles_h)
+    }
+
+    /// Tiles of `job`'s band, one unused tile per row included ([`transform_inputs`]).
+    fn tiles(&self, job: usize) -> usize {
+        self.tile_rows(job).len() * (self.tiling.tiles_w + 1)
+    }
+
+    /// Runs `body(job, image, planes, extra, buffers)` for every job in parallel and returns the
+    /// output `[N, o, H_out, W_out]` and its dimensions: `image` is the job's input image (`[C,
+    /// H, W]` of `x`), `planes` the band's rows of each of the `o` output planes of its image,
+    /// `extra` the job's element of `extras`, `buffers` the worker thread's reusable band buffers.
+    fn run<E: Send>(
+        &self,
+        x: &[f32],
+        o: usize,
+        extras: &mut [E],
+        body: impl Fn(usize, &[f32], Vec<&mut [f32]>, &mut E, &mut [Vec<f32>; 3]) + Sync,
+    ) -> (Vec<f32>, [usize; 4]) {
+        let (c, h, w) = (self.tiling.c, self.tiling.h, self.tiling.w);
+        assert_eq!(x.len(), self.n * c * h * w, "winograd_conv: the input is not [{}, {c}, {h}, {w}]", self.n);
+        assert_eq!(extras.len(), self.jobs());
+        let plane = self.out_h * self.tiling.out_w;
+        let mut out = crate::tensor::zeros_parallel(self.n * o * plane);
+        // One job per (image, band) with its rows of every output plane: disjoint slices.
+        let mut jobs: Vec<Vec<&mut [f32]>> = (0..self.jobs()).map(|_| Vec::with_capacity(o)).collect();
+        for (i, dst) in out.chunks_mut(plane).enumerate() {
+            for (band, rows) in dst.chunks_mut(self.tiling.m * self.band_rows * self.tiling.out_w).enumerate() {
+                jobs[(i / o) * self.bands + band].push(rows);
             }
-            transform_outputs(variant, mm, planes, bias, epilogue, tiling, tile_rows.len(), scratch);
+        }
+        jobs.into_par_iter().zip(extras.par_iter_mut()).enumerate().for_each(|(job, (planes, extra))| {
+            let image = &x[(job / self.bands) * c * h * w..][..c * h * w];
+            BUFFERS.with_borrow_mut(|buffers| body(job, image, planes, extra, buffers));
         });
-    });
-    (out, [n, o, out_h, out_w])
+        (out, [self.n, o, self.out_h, self.tiling.out_w])
+    }
 }
 
 /// `dst = Σ coefs[q]·src(q)` over the nonzero coefficients (each `src(q)` at least as long as

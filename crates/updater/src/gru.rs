@@ -138,22 +138,39 @@ mod tests {
         assert!(max_abs_diff(gru.forward(h, &ctx, vec![x]), expected) < 1e-5);
     }
 
-    /// The fused host step (CPU inference) equals the tensor-op step (run here on the autodiff
-    /// device, where the host kernels never apply), with several inputs and a batch of two.
-    #[test]
-    fn host_step_equals_the_tensor_step() {
+    /// The fused host step (CPU inference) equals the tensor-op step (run on the autodiff
+    /// device, where the host kernels never apply); returns the largest difference.
+    fn host_and_tensor_steps_differ_by(n: usize, hidden: usize, inputs: [usize; 2], [h, w]: [usize; 2]) -> f32 {
         use burn::module::Module;
         let device = default_device();
         let ad = device.clone().autodiff();
-        let gru = ConvGru::new(16, 12, &device);
+        let gru = ConvGru::new(hidden, inputs[0] + inputs[1], &device);
         let gru_ad = gru.clone().fork(&ad);
         assert!(host_kernels_apply(&device) && !host_kernels_apply(&ad), "one path each");
-        let rand = |c: usize| Tensor::<4>::random([2, c, 9, 13], Distribution::Normal(0.0, 1.0), &device);
-        let (h, x1, x2, zqr) = (rand(16), rand(5), rand(7), rand(48));
+        let rand = |c: usize| Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+        let (hidden_state, x1, x2, zqr) = (rand(hidden), rand(inputs[0]), rand(inputs[1]), rand(3 * hidden));
         let on_ad = |t: &Tensor<4>| Tensor::<4>::from_data(t.to_data(), &ad);
-        let host = gru.forward(h.clone(), &GateContext::from_zqr(zqr.clone()), vec![x1.clone(), x2.clone()]);
-        let stock = gru_ad.forward(on_ad(&h), &GateContext::from_zqr(on_ad(&zqr)), vec![on_ad(&x1), on_ad(&x2)]);
-        let diff = max_abs_diff(host, Tensor::from_data(stock.into_data(), &device));
+        let host = gru.forward(hidden_state.clone(), &GateContext::from_zqr(zqr.clone()), vec![x1.clone(), x2.clone()]);
+        let stock =
+            gru_ad.forward(on_ad(&hidden_state), &GateContext::from_zqr(on_ad(&zqr)), vec![on_ad(&x1), on_ad(&x2)]);
+        max_abs_diff(host, Tensor::from_data(stock.into_data(), &device))
+    }
+
+    /// Few channels (the im2col path), several inputs and a batch of two.
+    #[test]
+    fn host_step_equals_the_tensor_step() {
+        let diff = host_and_tensor_steps_differ_by(2, 16, [5, 7], [9, 13]);
         assert!(diff < 1e-5, "{diff}");
+    }
+
+    /// The GRUs' channel counts scaled down but past the Winograd thresholds, on a grid for
+    /// F(2x2) and one for F(4x4): the candidate's x channels are transformed once, by the gates'
+    /// convolution (`conv2d_host_shared_first`).
+    #[test]
+    fn host_step_with_shared_transforms_equals_the_tensor_step() {
+        for size in [[20, 26], [44, 48]] {
+            let diff = host_and_tensor_steps_differ_by(1, 32, [24, 24], size);
+            assert!(diff < 1e-4, "{size:?}: {diff}");
+        }
     }
 }

@@ -6,12 +6,15 @@
 //! buffers from the concatenated input to the new state: the fused-gate convolution and the
 //! candidate convolution run the workspace's host convolution on those buffers, pass one computes
 //! both gates and writes `[r·h, x]` straight into the candidate's input, pass two computes the
-//! candidate's `tanh` and the blend, both in parallel over channel planes. Used only where the
+//! candidate's `tanh` and the blend, both in parallel over channel planes. Where both
+//! convolutions take the Winograd path (the GRUs' sizes), the candidate's `x` channels are not
+//! transformed a second time: the gates' convolution keeps the candidate's products over them
+//! (`conv2d_host_shared_first`) and pass one writes `r·h` alone. Used only where the
 //! host kernels apply (CPU inference, [`dgstereo_core::device::host_kernels_apply`]); the
 //! tensor-op step in [`super::gru`] stays the reference and the tests check both agree.
 
 use burn::tensor::{Tensor, TensorData};
-use dgstereo_core::host_conv::{conv_options, conv2d_host_slices};
+use dgstereo_core::host_conv::{conv_options, conv2d_host_shared_first, conv2d_host_shared_second, conv2d_host_slices};
 use dgstereo_core::tensor::{host_values, zeros_parallel};
 use rayon::prelude::*;
 
@@ -71,17 +74,29 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, x: Tensor<4>)
     let (zr_weight, zr_bias) = (host_values(zr_weight), zr_bias.map(host_values));
     let [_, _, kh, kw] = gru.convz.weight.dims();
     let [_, _, qh, qw] = gru.convq.weight.dims();
-    let (gates, _) = conv2d_host_slices(
-        &hx,
-        [n, channels, hh, ww],
-        &zr_weight,
-        [2 * c, channels, kh, kw],
-        zr_bias.as_deref(),
-        &zr_options,
-    );
+    let q_weight = host_values(gru.convq.weight.val());
+    let q_bias = gru.convq.bias.as_ref().map(|b| host_values(b.val()));
+    let dims = [n, channels, hh, ww];
+    // With Winograd (the GRUs' sizes) the candidate's x channels are transformed once, by the
+    // gates' convolution, which keeps the candidate's products over them.
+    let shared = (zr_options == q_options && [kh, kw, qh, qw] == [3; 4])
+        .then(|| {
+            let weights = [&zr_weight[..], &q_weight[..]];
+            conv2d_host_shared_first(&hx, dims, weights, [2 * c, c], channels, cx, zr_bias.as_deref(), &zr_options)
+        })
+        .flatten();
+    let (gates, pending) = match shared {
+        Some((gates, pending)) => (gates, Some(pending)),
+        None => {
+            let (gates, _) =
+                conv2d_host_slices(&hx, dims, &zr_weight, [2 * c, channels, kh, kw], zr_bias.as_deref(), &zr_options);
+            (gates, None)
+        }
+    };
     let zr_ctx = host_values(ctx.zr.clone());
 
-    // Pass one: z (kept) and r·h (over h's planes of the buffer; the x planes stay).
+    // Pass one: z (kept) and r·h: into its own buffer where the candidate's x channels are
+    // pending, else over h's planes of `hx` (the x planes stay).
     let mut z = zeros_parallel(n * c * plane);
     z.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
         let (b, ch) = (i / c, i % c);
@@ -91,19 +106,32 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, x: Tensor<4>)
             *d = sigmoid(g + k);
         }
     });
-    hx.par_chunks_mut(plane).enumerate().filter(|(i, _)| i % channels < c).for_each(|(i, dst)| {
-        let (b, ch) = (i / channels, i % channels);
-        let g = &gates[(b * 2 * c + c + ch) * plane..][..plane];
-        let k = &zr_ctx[(b * 2 * c + c + ch) * plane..][..plane];
-        for ((d, g), k) in dst.iter_mut().zip(g).zip(k) {
-            *d *= sigmoid(g + k);
+    // The reset gate's pre-activation and context of h's channel plane `i` (image-major).
+    let reset = |i: usize| {
+        let at = ((i / c) * 2 * c + c + i % c) * plane;
+        (&gates[at..][..plane], &zr_ctx[at..][..plane])
+    };
+    let q = match pending {
+        Some(pending) => {
+            let mut rh = zeros_parallel(n * c * plane);
+            rh.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
+                let ((g, k), h) = (reset(i), &hv[i * plane..][..plane]);
+                for (((d, h), g), k) in dst.iter_mut().zip(h).zip(g).zip(k) {
+                    *d = h * sigmoid(g + k);
+                }
+            });
+            conv2d_host_shared_second(pending, &rh, [n, c, hh, ww], q_bias.as_deref()).0
         }
-    });
-
-    let q_weight = host_values(gru.convq.weight.val());
-    let q_bias = gru.convq.bias.as_ref().map(|b| host_values(b.val()));
-    let (q, _) =
-        conv2d_host_slices(&hx, [n, channels, hh, ww], &q_weight, [c, channels, qh, qw], q_bias.as_deref(), &q_options);
+        None => {
+            hx.par_chunks_mut(plane).enumerate().filter(|(i, _)| i % channels < c).for_each(|(i, dst)| {
+                let (g, k) = reset((i / channels) * c + i % channels);
+                for ((d, g), k) in dst.iter_mut().zip(g).zip(k) {
+                    *d *= sigmoid(g + k);
+                }
+            });
+            conv2d_host_slices(&hx, dims, &q_weight, [c, channels, qh, qw], q_bias.as_deref(), &q_options).0
+        }
+    };
     let q_ctx = host_values(ctx.q.clone());
 
     // Pass two: the new state.
