@@ -17,8 +17,9 @@
 //! `convolution` benchmarks).
 //!
 //! The `gemm` crate's entry point is an `unsafe fn` taking raw pointers and strides; it is called
-//! in one place, [`matmul_into`], which both paths use and which asserts that every element its
-//! strides reach lies inside the slices it is given: the only `unsafe` in the workspace.
+//! in one place, [`matmul_strided_with`], which every path's products go through and which
+//! asserts that every element its strides reach lies inside the slices it is given (the
+//! workspace's other `unsafe` blocks are the allocator setting and the SIGPIPE restore).
 #![allow(unsafe_code)]
 
 use burn::nn::PaddingConfig2d;
@@ -351,25 +352,13 @@ pub(crate) fn matmul_strided(
     rhs_stride: usize,
     dims: [usize; 3],
 ) {
-    strided_product(dst, dst_stride, lhs, lhs_stride, rhs, rhs_stride, dims, false);
+    matmul_strided_with(dst, dst_stride, lhs, lhs_stride, rhs, rhs_stride, dims, false);
 }
 
-/// [`matmul_strided`] adding the product to what `dst` holds: `dst += lhs · rhs`.
-pub(crate) fn matmul_strided_add(
-    dst: &mut [f32],
-    dst_stride: usize,
-    lhs: &[f32],
-    lhs_stride: usize,
-    rhs: &[f32],
-    rhs_stride: usize,
-    dims: [usize; 3],
-) {
-    strided_product(dst, dst_stride, lhs, lhs_stride, rhs, rhs_stride, dims, true);
-}
-
-/// The one call of the `gemm` crate: `dst = lhs · rhs`, or `dst += lhs · rhs` when `accumulate`.
+/// [`matmul_strided`], or `dst += lhs · rhs` (adding to what `dst` holds) when `accumulate`:
+/// the one call of the `gemm` crate.
 #[allow(clippy::too_many_arguments)]
-fn strided_product(
+pub(crate) fn matmul_strided_with(
     dst: &mut [f32],
     dst_stride: usize,
     lhs: &[f32],
@@ -471,12 +460,15 @@ mod tests {
         let stock = conv2d(x.clone(), wt.clone(), Some(b.clone()), options.clone());
         let host = conv2d_host(x.clone(), wt.clone(), Some(b.clone()), &options);
         assert_eq!(stock.dims(), host.dims());
-        let diff = crate::tensor::max_abs_diff(stock.clone(), host);
-        assert!(diff < 1e-4, "n {n} c {c} o {o} {hw:?} k {k:?} s {stride} p {pad:?} d {dil}: {diff}");
+        // Relative to the output's largest magnitude: Winograd F(4x4) (taken from 128 tiles)
+        // errs by up to ~1e-5 of it, which in absolute terms depends on the random draw.
+        let scale = stock.clone().abs().max().into_scalar::<f32>().max(1.0);
+        let diff = crate::tensor::max_abs_diff(stock.clone(), host) / scale;
+        assert!(diff < 4e-5, "n {n} c {c} o {o} {hw:?} k {k:?} s {stride} p {pad:?} d {dil}: {diff}");
         // Without a bias: the stock result minus the bias it added.
         let unbiased = conv2d_host(x, wt, None, &options);
-        let diff = crate::tensor::max_abs_diff(stock - b.reshape([1, o as i32, 1, 1]), unbiased);
-        assert!(diff < 1e-4, "no bias: n {n} c {c} o {o} {hw:?} k {k:?}: {diff}");
+        let diff = crate::tensor::max_abs_diff(stock - b.reshape([1, o as i32, 1, 1]), unbiased) / scale;
+        assert!(diff < 4e-5, "no bias: n {n} c {c} o {o} {hw:?} k {k:?}: {diff}");
     }
 
     #[test]

@@ -12,7 +12,7 @@
 //! a KITTI frame).
 
 use super::*;
-use crate::host_conv::matmul_strided_add;
+use crate::host_conv::matmul_strided_with;
 
 /// The second convolution's products over the shared channels, band by band, waiting for the
 /// rest of its input.
@@ -57,7 +57,17 @@ pub(crate) fn first(
     let plan = Plan::new(variant, x_dims, padding);
     let (u1, u2) = (transform_weights(variant, wt_first, o1, c), transform_weights(variant, wt_second, o2, c2));
     let k2 = plan.k2;
-    let mut sums: Vec<Vec<f32>> = (0..plan.jobs()).map(|job| vec![0.0; o2 * k2 * plan.tiles(job)]).collect();
+    // Every element of a job's sums is written by its first product (no accumulation), so the
+    // buffers come from the calling thread's pool without being cleared.
+    let mut sums: Vec<Vec<f32>> = SUMS.with_borrow_mut(|pool| {
+        (0..plan.jobs())
+            .map(|job| {
+                let mut sum = pool.pop().unwrap_or_default();
+                sum.resize(o2 * k2 * plan.tiles(job), 0.0);
+                sum
+            })
+            .collect()
+    });
     let out = plan.run(x, o1, &mut sums, |job, image, planes, sum, [v, mm, scratch]| {
         let (tile_rows, t) = (plan.tile_rows(job), plan.tiles(job));
         v.resize(k2 * c * t, 0.0);
@@ -96,16 +106,26 @@ pub(crate) fn second(
     assert!(same(&plan) == same(&first_plan), "split winograd: the second input's size differs from the first's");
     assert!(own <= c2, "split winograd: {own} channels of the second convolution's {c2}");
     let k2 = plan.k2;
-    plan.run(x, o, &mut sums, |job, image, planes, sum, [v, _, scratch]| {
+    let out = plan.run(x, o, &mut sums, |job, image, planes, sum, [v, _, scratch]| {
         let (tile_rows, t) = (plan.tile_rows(job), plan.tiles(job));
         v.resize(k2 * own * t, 0.0);
         let v = &mut v[..k2 * own * t];
         transform_inputs(variant, v, image, plan.tiling, tile_rows.clone(), scratch);
         for k in 0..k2 {
-            matmul_strided_add(&mut sum[k * t..], k2 * t, &u[k * c2..], k2 * c2, &v[k * t..], k2 * t, [o, t, own]);
+            let (lhs, rhs) = (&u[k * c2..], &v[k * t..]);
+            matmul_strided_with(&mut sum[k * t..], k2 * t, lhs, k2 * c2, rhs, k2 * t, [o, t, own], true);
         }
         transform_outputs(variant, sum, planes, bias, epilogue, plan.tiling, tile_rows.len(), scratch);
-    })
+    });
+    SUMS.with_borrow_mut(|pool| pool.extend(sums));
+    out
+}
+
+thread_local! {
+    /// The calling thread's pending-sum buffers, returned by [`second`] for the next pair (a GRU
+    /// step runs one pair per level per iteration; clearing fresh buffers each time cost a
+    /// memory pass over them).
+    static SUMS: std::cell::RefCell<Vec<Vec<f32>>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 #[cfg(test)]
