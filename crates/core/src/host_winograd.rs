@@ -41,8 +41,8 @@
 //! The environment variable `DGSTEREO_NO_WINOGRAD=1` (read once per process) turns the path
 //! off, so whole-pipeline runs can compare it with the im2col path.
 //!
-//! The products go through [`crate::host_conv::matmul_into`], the workspace's one call of the
-//! `gemm` crate's `unsafe` entry point.
+//! The products go through [`crate::host_conv::matmul_strided_with`], the workspace's one call
+//! of the `gemm` crate's `unsafe` entry point.
 
 mod split;
 

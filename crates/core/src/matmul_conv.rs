@@ -51,7 +51,8 @@ fn suits(on_cpu: bool, autodiff: bool, options: &ConvOptions<2>, [kh, kw]: [usiz
 /// - output `[N, O, H_out, W_out]`, `H_out = H + top + bottom - dil·(kh - 1)` (likewise `W_out`)
 ///
 /// # Panics
-/// Where `options` has a stride other than 1 or groups, or the channels do not match.
+/// Where `options` has a stride other than 1 or groups, the channels do not match, or the padded
+/// input is smaller than the (dilated) kernel.
 pub fn conv2d_by_matmul(
     x: Tensor<4>,
     weight: Tensor<4>,
@@ -64,7 +65,13 @@ pub fn conv2d_by_matmul(
     assert_eq!(c, cw, "conv2d_by_matmul: input has {c} channels, the weight expects {cw}");
     let [(top, bottom), (left, right)] = options.padding;
     let [dh, dw] = options.dilation;
-    let (out_h, out_w) = (h + top + bottom - dh * (kh - 1), w + left + right - dw * (kw - 1));
+    let (reach_h, reach_w) = (dh * (kh - 1) + 1, dw * (kw - 1) + 1);
+    assert!(
+        h + top + bottom >= reach_h && w + left + right >= reach_w,
+        "conv2d_by_matmul: a {h}x{w} input with padding {:?} is smaller than the {reach_h}x{reach_w} kernel",
+        options.padding
+    );
+    let (out_h, out_w) = (h + top + bottom - (reach_h - 1), w + left + right - (reach_w - 1));
     let padded =
         if top + bottom + left + right > 0 { x.pad([(top, bottom), (left, right)], PadMode::Constant(0.0)) } else { x };
     // Windows in (ky, kx) order, each [N, C, H_out, W_out]: rows (ky, kx, c) of the columns.
