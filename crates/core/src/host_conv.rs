@@ -254,16 +254,42 @@ fn check_shapes(x: &[f32], x_dims: [usize; 4], wt: &[f32], w_dims: [usize; 4], o
     assert_eq!(c, cw, "conv2d_host: input has {c} channels, the weight expects {cw}");
     assert_eq!(x.len(), n * c * h * w, "conv2d_host: input buffer does not match {x_dims:?}");
     assert_eq!(wt.len(), o * c * kh * kw, "conv2d_host: weight buffer does not match {w_dims:?}");
+    conv_output_size("conv2d_host", [h, w], [kh, kw], options)
+}
+
+/// The `[H_out, W_out]` of a convolution of an `[h, w]` input with a `[kh, kw]` kernel and
+/// `options`; panics, naming `caller`, where the padded input is smaller than the dilated kernel.
+pub(crate) fn conv_output_size(
+    caller: &str,
+    [h, w]: [usize; 2],
+    [kh, kw]: [usize; 2],
+    options: &ConvOptions<2>,
+) -> [usize; 2] {
     let [(ph, ph_end), (pw, pw_end)] = options.padding;
     let [dh, dw] = options.dilation;
     let (reach_h, reach_w) = (dh * (kh - 1) + 1, dw * (kw - 1) + 1);
     assert!(
         h + ph + ph_end >= reach_h && w + pw + pw_end >= reach_w,
-        "conv2d_host: a {h}x{w} input with padding {:?} is smaller than the {reach_h}x{reach_w} kernel",
+        "{caller}: a {h}x{w} input with padding {:?} is smaller than the {reach_h}x{reach_w} kernel",
         options.padding
     );
     let [sh, sw] = options.stride;
     [(h + ph + ph_end - reach_h) / sh + 1, (w + pw + pw_end - reach_w) / sw + 1]
+}
+
+/// `out` (images of `o` output planes of `plane` values each) cut into parallel jobs of one image
+/// and one band of `band_len` values of every plane: job `image·bands + band` holds that band's
+/// slice of each of the image's planes, in plane order (the last band may be shorter).
+pub(crate) fn band_jobs(out: &mut [f32], o: usize, plane: usize, band_len: usize) -> Vec<Vec<&mut [f32]>> {
+    let bands = plane.div_ceil(band_len);
+    let images = out.len() / (o * plane).max(1);
+    let mut jobs: Vec<Vec<&mut [f32]>> = (0..images * bands).map(|_| Vec::with_capacity(o)).collect();
+    for (i, dst) in out.chunks_mut(plane).enumerate() {
+        for (band, rows) in dst.chunks_mut(band_len).enumerate() {
+            jobs[(i / o) * bands + band].push(rows);
+        }
+    }
+    jobs
 }
 
 /// [`host_conv_slices`] by im2col tiles and `gemm` for any shape (the path for everything the

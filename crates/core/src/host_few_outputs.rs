@@ -13,7 +13,7 @@
 
 use rayon::prelude::*;
 
-use crate::host_conv::{Epilogue, matmul_strided};
+use crate::host_conv::{Epilogue, band_jobs, matmul_strided};
 
 /// Most output channels for which this path runs (with a 3x3 kernel the product has 9·O rows).
 pub(crate) const MAX_OUTPUTS: usize = 4;
@@ -65,13 +65,7 @@ pub(crate) fn few_outputs_conv(
     let plane = out_h * out_w;
     let mut out = vec![0.0f32; n * o * plane];
     // One job per (image, band): its rows of every output plane.
-    let mut jobs: Vec<Vec<&mut [f32]>> = (0..n * bands).map(|_| Vec::with_capacity(o)).collect();
-    for (i, dst) in out.chunks_mut(plane).enumerate() {
-        for (band, rows) in dst.chunks_mut(band_rows * out_w).enumerate() {
-            jobs[(i / o) * bands + band].push(rows);
-        }
-    }
-    jobs.into_par_iter().enumerate().for_each(|(job, planes)| {
+    band_jobs(&mut out, o, plane, band_rows * out_w).into_par_iter().enumerate().for_each(|(job, planes)| {
         let (b, band) = (job / bands, job % bands);
         let oy0 = band * band_rows;
         let rows = band_rows.min(out_h - oy0);

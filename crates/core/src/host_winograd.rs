@@ -52,7 +52,7 @@ use std::sync::OnceLock;
 use burn::tensor::ops::ConvOptions;
 use rayon::prelude::*;
 
-use crate::host_conv::{Epilogue, matmul_strided};
+use crate::host_conv::{Epilogue, band_jobs, matmul_strided};
 pub(crate) use split::{Pending, first as split_first, second as split_second};
 
 /// Fewest input and output channels for which the Winograd path pays. Measured with F(2x2)
@@ -263,12 +263,8 @@ impl Plan {
         let plane = self.out_h * self.tiling.out_w;
         let mut out = crate::tensor::zeros_parallel(self.n * o * plane);
         // One job per (image, band) with its rows of every output plane: disjoint slices.
-        let mut jobs: Vec<Vec<&mut [f32]>> = (0..self.jobs()).map(|_| Vec::with_capacity(o)).collect();
-        for (i, dst) in out.chunks_mut(plane).enumerate() {
-            for (band, rows) in dst.chunks_mut(self.tiling.m * self.band_rows * self.tiling.out_w).enumerate() {
-                jobs[(i / o) * self.bands + band].push(rows);
-            }
-        }
+        let jobs = band_jobs(&mut out, o, plane, self.tiling.m * self.band_rows * self.tiling.out_w);
+        debug_assert_eq!(jobs.len(), self.jobs());
         jobs.into_par_iter().zip(extras.par_iter_mut()).enumerate().for_each(|(job, (planes, extra))| {
             let image = &x[(job / self.bands) * c * h * w..][..c * h * w];
             BUFFERS.with_borrow_mut(|buffers| body(job, image, planes, extra, buffers));

@@ -24,6 +24,8 @@ use std::sync::OnceLock;
 use burn::tensor::Tensor;
 use burn::tensor::ops::{ConvOptions, PadMode};
 
+use crate::host_conv::conv_output_size;
+
 /// Whether `DGSTEREO_GPU_CONV` asks for burn's convolution on the GPU (read once).
 fn route_disabled() -> bool {
     static DISABLED: OnceLock<bool> = OnceLock::new();
@@ -65,13 +67,7 @@ pub fn conv2d_by_matmul(
     assert_eq!(c, cw, "conv2d_by_matmul: input has {c} channels, the weight expects {cw}");
     let [(top, bottom), (left, right)] = options.padding;
     let [dh, dw] = options.dilation;
-    let (reach_h, reach_w) = (dh * (kh - 1) + 1, dw * (kw - 1) + 1);
-    assert!(
-        h + top + bottom >= reach_h && w + left + right >= reach_w,
-        "conv2d_by_matmul: a {h}x{w} input with padding {:?} is smaller than the {reach_h}x{reach_w} kernel",
-        options.padding
-    );
-    let (out_h, out_w) = (h + top + bottom - (reach_h - 1), w + left + right - (reach_w - 1));
+    let [out_h, out_w] = conv_output_size("conv2d_by_matmul", [h, w], [kh, kw], options);
     let padded =
         if top + bottom + left + right > 0 { x.pad([(top, bottom), (left, right)], PadMode::Constant(0.0)) } else { x };
     // Windows in (ky, kx) order, each [N, C, H_out, W_out]: rows (ky, kx, c) of the columns.
