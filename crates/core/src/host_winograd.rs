@@ -24,8 +24,8 @@
 //!   applying the epilogue. Input rows are split into column phases (column mod m) first, so
 //!   every transform step is a combination of long contiguous vectors (see
 //!   [`transform_inputs`]).
-//! - Band size: [`Variant::band_tiles`] tiles, measured, but at least two bands per rayon thread
-//!   so both cores stay busy on small grids.
+//! - Band size: [`Variant::band_tiles`] tiles, measured, but at least one band per rayon thread
+//!   so every core has work on small grids (see [`Plan::new`]).
 //! - Which variant ([`winograd_variant`]): F(4x4) where the grid has enough tiles, F(2x2) on
 //!   smaller grids, im2col below [`MIN_CHANNELS`] channels or [`MIN_TILES`] tiles.
 //!
@@ -222,7 +222,13 @@ impl Plan {
         let (out_h, out_w) = (h + ph + ph_end - 2, w + pw + pw_end - 2);
         let (tiles_h, tiles_w) = (out_h.div_ceil(m), out_w.div_ceil(m));
         let by_size = (variant.band_tiles / tiles_w).max(1);
-        let min_bands = (2 * rayon::current_num_threads()).div_ceil(n.max(1));
+        // One band per thread at least, not two: every band streams the whole transformed weight
+        // (`O x α² x C`, 14 MB for the GRU gates), which on the small grids of the GRUs at 1/8 and
+        // 1/16 cost more than the balance two bands per thread bought. Measured in one process
+        // alternating both rules, 25 rounds, min (median) ms: GRU 1/8 pair of 384x448 31.9 (45.8)
+        // -> 25.2 (39.1), GRU 1/16 8.5 (13.7) -> 7.4 (11.7), GRU 1/8 of KITTI 59.2 (84.4) -> 47.5
+        // (73.8); the 1/4 grids and the encoders' layers within the noise.
+        let min_bands = rayon::current_num_threads().div_ceil(n.max(1));
         let bands = tiles_h.div_ceil(by_size).max(min_bands).min(tiles_h);
         let band_rows = tiles_h.div_ceil(bands);
         let bands = tiles_h.div_ceil(band_rows);
