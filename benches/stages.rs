@@ -19,6 +19,7 @@ use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Distribution, Int, Tensor};
 use criterion::{BenchmarkId, Criterion, criterion_group};
 use dgstereo_core::default_device;
+use dgstereo_core::host_conv::KeptWeights;
 use dgstereo_costvolume::{
     CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, LookupKernel, OnTheFlyCorrelation,
 };
@@ -142,6 +143,8 @@ fn update(c: &mut Criterion) {
         let corr = random([1, 36, h, w]);
         let flow = Tensor::cat(vec![random([1, 1, h, w]), Tensor::zeros([1, 1, h, w], &default_device())], 1);
         group.bench_function(BenchmarkId::new("one iteration (3 GRU levels, flow head)", name), |b| {
+            // As inside the model's loop: the transformed convolution weights kept between steps.
+            let _kept = KeptWeights::new();
             b.iter(|| {
                 let mut state = hidden.clone();
                 black_box(block.step(&mut state, &gates, corr.clone(), flow.clone(), None, None))

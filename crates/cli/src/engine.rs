@@ -399,6 +399,10 @@ impl Engine {
         };
         let pred = self.model.predict(lt, rt, prior.as_ref(), self.iters, false, Some(corr))?;
         let small = disparity_map(pred.last());
+        drop(pred);
+        // The pass's freed buffers back to the system before the next pair (or the mirrored
+        // pass), whose full-resolution tensors would otherwise add to them.
+        dgstereo_core::allocator::release_freed_memory();
         let info = RunInfo { network_size: (l.width, l.height), corr, rejected: None };
         Ok((disparity_to_size(&small, w, h)?, info))
     }

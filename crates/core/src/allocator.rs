@@ -33,6 +33,25 @@ pub fn retain_freed_memory() -> bool {
     }
 }
 
+/// Hands the heap's free memory back to the system (glibc's `malloc_trim`), for a caller that
+/// has finished one unit of work (a stereo pair) and starts the next: with
+/// [`retain_freed_memory`] the buffers freed during a pass stay resident, and the next pass's
+/// largest tensors (above the `mmap` threshold, mapped fresh) would add to them. The next pass
+/// faults its heap pages in again, as a fresh process does. Returns whether memory was released
+/// (always `false` where it does nothing).
+pub fn release_freed_memory() -> bool {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        // SAFETY: `malloc_trim` only returns free heap pages to the system; glibc serialises it
+        // against concurrent allocation.
+        unsafe { libc::malloc_trim(0) == 1 }
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        false
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

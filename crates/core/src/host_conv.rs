@@ -31,6 +31,8 @@ use rayon::prelude::*;
 
 use crate::device::host_kernels_apply;
 use crate::host_few_outputs::{self, few_outputs_conv};
+/// Keeps the Winograd convolutions' transformed weights for reuse while alive (an update loop).
+pub use crate::host_winograd::KeptWeights;
 use crate::host_winograd::{split_first, split_second, winograd_conv, winograd_disabled, winograd_variant};
 use crate::matmul_conv::{conv2d_by_matmul, matmul_conv_applies};
 

@@ -11,8 +11,10 @@
 //! `M_k = U_k V_k`, one per position `k` of the transformed tile, `O x C` times `C x T` for `T`
 //! tiles; the transforms are linear combinations with small constant coefficients.
 //!
-//! - The weights are transformed once per call into `[O][α²][C]` (the product's left operand
-//!   `U_k` has row stride `α²·C`), in parallel over output channels.
+//! - The weights are transformed into `[O][α²][C]` (the product's left operand `U_k` has row
+//!   stride `α²·C`), in parallel over output channels, and kept for the next call with the same
+//!   weights while a [`KeptWeights`] scope is open (`weight_cache`: the update loop would
+//!   transform the GRUs' weights again at every iteration).
 //! - The output is cut into bands of whole tile rows per image, processed in parallel with
 //!   rayon; each band transforms its input tiles into the thread's reusable buffers (zeros where
 //!   a tile reaches outside the input: the padding and the partial last tile row or column of
@@ -45,6 +47,7 @@
 //! of the `gemm` crate's `unsafe` entry point.
 
 mod split;
+mod weight_cache;
 
 use std::ops::Range;
 use std::sync::OnceLock;
@@ -54,6 +57,8 @@ use rayon::prelude::*;
 
 use crate::host_conv::{Epilogue, band_jobs, matmul_strided};
 pub(crate) use split::{Pending, first as split_first, second as split_second};
+pub use weight_cache::KeptWeights;
+use weight_cache::transformed_weights;
 
 /// Fewest input and output channels for which the Winograd path pays. Measured with F(2x2)
 /// against the im2col path at 96x112 (time im2col / time Winograd, two runs): C = O = 8: 0.75
@@ -184,7 +189,7 @@ pub(crate) fn winograd_conv(
     let c = x_dims[1];
     assert_eq!(wt.len(), o * c * 9, "winograd_conv: the weight is not [{o}, {c}, 3, 3]");
     let plan = Plan::new(variant, x_dims, padding);
-    let u = transform_weights(variant, wt, o, c);
+    let u = transformed_weights(variant, wt, o, c);
     let k2 = plan.k2;
     plan.run(x, o, &mut vec![(); plan.jobs()], |job, image, planes, _, [v, mm, scratch]| {
         let (tile_rows, t) = (plan.tile_rows(job), plan.tiles(job));

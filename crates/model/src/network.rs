@@ -7,7 +7,7 @@ use burn::nn::conv::Conv2d;
 use burn::tensor::activation::{relu, tanh};
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::DepthPrior;
-use dgstereo_core::host_conv::conv2d_forward;
+use dgstereo_core::host_conv::{KeptWeights, conv2d_forward};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::timing::{StageClock, timed};
 use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CostVolume};
@@ -214,6 +214,9 @@ impl RaftStereo {
         let zeros = Tensor::<4>::zeros([n, 1, h, w], &device);
         let factor = 1usize << self.n_downsample;
         let mut flow_up = Vec::new();
+        // The iterations run the same convolutions: their transformed weights are kept until the
+        // loop ends (host Winograd path only; results unchanged).
+        let _kept = KeptWeights::new();
         for k in 0..iters {
             flow_x = flow_x.detach();
             let corr = timed(&mut clock, "correlation lookup", || corr_fn.lookup(coords0.clone() + flow_x.clone()));

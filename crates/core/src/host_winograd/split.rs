@@ -20,7 +20,7 @@ pub(crate) struct Pending {
     variant: &'static Variant,
     plan: Plan,
     /// The second convolution's transformed weights, `[O][α²][C]` over all its input channels.
-    u: Vec<f32>,
+    u: std::sync::Arc<Vec<f32>>,
     o: usize,
     /// Input channels the second convolution has in all (its own ones first, then the shared).
     c: usize,
@@ -55,7 +55,7 @@ pub(crate) fn first(
     assert_eq!(wt_first.len(), o1 * c * 9, "split winograd: the first weight is not [{o1}, {c}, 3, 3]");
     assert_eq!(wt_second.len(), o2 * c2 * 9, "split winograd: the second weight is not [{o2}, {c2}, 3, 3]");
     let plan = Plan::new(variant, x_dims, padding);
-    let (u1, u2) = (transform_weights(variant, wt_first, o1, c), transform_weights(variant, wt_second, o2, c2));
+    let (u1, u2) = (transformed_weights(variant, wt_first, o1, c), transformed_weights(variant, wt_second, o2, c2));
     let k2 = plan.k2;
     // Every element of a job's sums is written by its first product (no accumulation), so the
     // buffers come from the calling thread's pool without being cleared.
