@@ -3,8 +3,8 @@
 //!
 //! In inference the update loop transforms the same weights again at every iteration (the GRUs'
 //! gates and candidates, the motion encoder's convolutions): about 4 % of a 384x448 x 32 pass on
-//! the Xeon. The convolution API takes plain slices (the weights are copied out of their tensors
-//! for each call), so there is no identity to key a cache on; the key is the value itself. An
+//! the Xeon. The convolution API takes plain slices (the GRU's gate weight is a concatenation
+//! made at each step), so there is no identity to key a cache on; the key is the value itself. An
 //! entry holds a copy of the raw weight (`O x C x 9`, a quarter of the F(4x4) transform's size)
 //! and is reused only where the new weight is bit-identical to it, so a changed weight (a
 //! checkpoint loaded into the same model, a validation pass between training steps) never gets
