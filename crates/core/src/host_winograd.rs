@@ -55,7 +55,7 @@ use std::sync::OnceLock;
 use burn::tensor::ops::ConvOptions;
 use rayon::prelude::*;
 
-use crate::host_conv::{Epilogue, band_jobs, matmul_strided};
+use crate::host_conv::{Epilogue, band_jobs, conv_output_size, matmul_strided};
 pub(crate) use split::{Pending, first as split_first, second as split_second};
 pub use weight_cache::KeptWeights;
 use weight_cache::transformed_weights;
@@ -221,10 +221,10 @@ struct Plan {
 
 impl Plan {
     fn new(variant: &Variant, [n, c, h, w]: [usize; 4], padding: [(usize, usize); 2]) -> Self {
-        let [(ph, ph_end), (pw, pw_end)] = padding;
-        assert!(h + ph + ph_end >= 3 && w + pw + pw_end >= 3, "winograd_conv: input smaller than the kernel");
+        let [(ph, _), (pw, _)] = padding;
+        let options = ConvOptions { stride: [1, 1], padding, dilation: [1, 1], groups: 1 };
+        let [out_h, out_w] = conv_output_size("winograd_conv", [h, w], [3, 3], &options);
         let m = variant.m;
-        let (out_h, out_w) = (h + ph + ph_end - 2, w + pw + pw_end - 2);
         let (tiles_h, tiles_w) = (out_h.div_ceil(m), out_w.div_ceil(m));
         let by_size = (variant.band_tiles / tiles_w).max(1);
         // One band per thread at least, not two: every band streams the whole transformed weight
