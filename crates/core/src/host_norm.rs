@@ -61,8 +61,8 @@ pub fn normalize_planes(x: Tensor<4>, norm: PlaneNorm<'_>, relu: bool) -> Tensor
     values.par_chunks_mut(plane.max(1)).enumerate().for_each(|(i, p)| {
         let (a, b) = match norm {
             PlaneNorm::Instance { epsilon } => {
-                let mean = p.iter().map(|&v| v as f64).sum::<f64>() / plane as f64;
-                let var = p.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / plane as f64;
+                let mean = lane_sum(p, |v| v) / plane as f64;
+                let var = lane_sum(p, |v| (v - mean) * (v - mean)) / plane as f64;
                 let inv = 1.0 / (var + epsilon).sqrt();
                 (inv as f32, (-mean * inv) as f32)
             }
@@ -76,6 +76,25 @@ pub fn normalize_planes(x: Tensor<4>, norm: PlaneNorm<'_>, relu: bool) -> Tensor
         }
     });
     Tensor::from_data(TensorData::new(values, dims), &device)
+}
+
+/// Independent partial sums: a plane's statistics as one running `f64` sum were a chain of
+/// dependent additions (one per value, each waiting for the last): 39 ms for the stem's instance
+/// norm of two 384x448 images on the Xeon, more than the convolution before it.
+const LANES: usize = 8;
+
+/// `Σ f(v as f64)` over `values`, in [`LANES`] independent partial sums (added in order at the
+/// end) so the additions overlap and vectorise.
+#[inline(always)]
+fn lane_sum(values: &[f32], f: impl Fn(f64) -> f64) -> f64 {
+    let mut lanes = [0.0f64; LANES];
+    let (chunks, tail) = values.as_chunks::<LANES>();
+    for chunk in chunks {
+        for j in 0..LANES {
+            lanes[j] += f(chunk[j] as f64);
+        }
+    }
+    lanes.iter().sum::<f64>() + tail.iter().map(|&v| f(v as f64)).sum::<f64>()
 }
 
 /// `max(0, a + b)`: for CPU inference ([`host_kernels_apply`]) in one parallel host pass,
