@@ -1,4 +1,5 @@
-//! Bilinear resizing as products with fixed interpolation matrices.
+//! Bilinear resizing as products with fixed interpolation matrices, and the GRUs' 2x average
+//! pooling.
 //!
 //! `F.interpolate(x, size, mode="bilinear")` is separable: resizing rows and columns are linear
 //! maps, so `y = A_h · x · A_wᵀ` with fixed matrices `A_h` (`H_out x H_in`) and `A_w`. Written this
@@ -8,6 +9,8 @@
 //! output row and column, in parallel over channel planes: the products spend most of their work
 //! on the matrices' zeros (the GRUs' resizes between levels were 4 % of a CPU forward pass).
 
+use burn::tensor::module::avg_pool2d;
+use burn::tensor::ops::AvgPoolOptions;
 use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 
@@ -110,6 +113,47 @@ fn resize_bilinear_host(x: Tensor<4>, [ho, wo]: [usize; 2], align_corners: bool)
     Tensor::from_data(TensorData::new(out, [n, c, ho, wo]), &device)
 }
 
+/// `F.avg_pool2d(x, 3, stride=2, padding=1)`: the mean of each 3x3 window at stride 2, the zero
+/// padding counted in the mean (PyTorch's default `count_include_pad`), so every output is its
+/// window's sum over 9. For CPU inference ([`host_kernels_apply`]) a host pass per channel plane
+/// (the three rows summed, then the three columns); elsewhere burn's `avg_pool2d`. burn Flex's
+/// pooling took 9 ms for the GRUs' 1/4 state at 384x448 (128 x 96 x 112), 5 % of an update
+/// iteration; the host pass well under one.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; output `[N, C, (H - 1) / 2 + 1, (W - 1) / 2 + 1]`
+pub fn average_pool_half(x: Tensor<4>) -> Tensor<4> {
+    if !host_kernels_apply(&x.device()) {
+        let options = AvgPoolOptions::new([3, 3]).with_stride([2, 2]).with_padding([1, 1]);
+        return avg_pool2d(x, options);
+    }
+    let (device, [n, c, h, w]) = (x.device(), x.dims());
+    let (ho, wo) = ((h.max(1) - 1) / 2 + 1, (w.max(1) - 1) / 2 + 1);
+    let values = host_values(x);
+    let mut out = zeros_parallel(n * c * ho * wo);
+    if h * w > 0 {
+        out.par_chunks_mut(ho * wo).zip(values.par_chunks(h * w)).for_each_init(Vec::new, |sums, (dst, src)| {
+            // One row of vertical window sums, with a zero column on each side (the padding).
+            sums.resize(w + 2, 0.0);
+            for (oy, line) in dst.chunks_exact_mut(wo).enumerate() {
+                let row = |y: usize| &src[y * w..][..w];
+                let (centre, below) = (row(2 * oy), (2 * oy + 1 < h).then(|| row(2 * oy + 1)));
+                let above = oy.checked_sub(1).map(|_| row(2 * oy - 1));
+                let inner = &mut sums[1..=w];
+                inner.copy_from_slice(centre);
+                for r in [above, below].into_iter().flatten() {
+                    inner.iter_mut().zip(r).for_each(|(s, v)| *s += v);
+                }
+                // Output column ox covers padded columns 2·ox .. 2·ox + 2.
+                for (ox, d) in line.iter_mut().enumerate() {
+                    *d = (sums[2 * ox] + sums[2 * ox + 1] + sums[2 * ox + 2]) / 9.0;
+                }
+            }
+        });
+    }
+    Tensor::from_data(TensorData::new(out, [n, c, ho, wo]), &device)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -156,6 +200,22 @@ mod tests {
         let via_entry = resize_bilinear(x.clone(), [11, 13], true);
         let host = resize_bilinear_host(x, [11, 13], true);
         assert_eq!(crate::tensor::max_abs_diff(via_entry, host), 0.0);
+    }
+
+    /// The host pooling against burn's `avg_pool2d` (the reference) on even and odd sizes, one row
+    /// or column, and a single pixel.
+    #[test]
+    fn host_average_pool_matches_burn() {
+        let device = Device::flex();
+        let options = AvgPoolOptions::new([3, 3]).with_stride([2, 2]).with_padding([1, 1]);
+        for [h, w] in [[8, 10], [7, 9], [1, 6], [5, 1], [1, 1], [2, 3]] {
+            let x = Tensor::<4>::random([2, 3, h, w], burn::tensor::Distribution::Default, &device);
+            let reference = avg_pool2d(x.clone(), options.clone());
+            let host = average_pool_half(x);
+            assert_eq!(host.dims(), reference.dims(), "{h}x{w}");
+            let diff = crate::tensor::max_abs_diff(host, reference);
+            assert!(diff < 1e-6, "{h}x{w}: {diff}");
+        }
     }
 
     #[test]

@@ -2,12 +2,10 @@
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
-use burn::tensor::module::avg_pool2d;
-use burn::tensor::ops::AvgPoolOptions;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::host_conv::{conv2d_forward, conv2d_relu_forward};
 use dgstereo_core::layers::{ConvInit, conv2d};
-use dgstereo_core::resample::resize_bilinear;
+use dgstereo_core::resample::{average_pool_half, resize_bilinear};
 use dgstereo_core::timing::{StageClock, timed};
 
 use crate::gru::{ConvGru, GateContext};
@@ -60,7 +58,7 @@ pub struct MultiLevelUpdateBlock {
 /// `F.avg_pool2d(x, 3, stride=2, padding=1)` (padding counted in the average): a finer
 /// state handed to the next coarser GRU.
 pub fn pool2x(x: Tensor<4>) -> Tensor<4> {
-    avg_pool2d(x, AvgPoolOptions::new([3, 3]).with_stride([2, 2]).with_padding([1, 1]))
+    average_pool_half(x)
 }
 
 /// Bilinear resize (align corners) of `x` to the size of `dest`: a coarser state handed to
