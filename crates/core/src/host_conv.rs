@@ -317,42 +317,32 @@ pub(crate) fn im2col_conv_slices(
     let tiles_per_image = out_h.div_ceil(rows_per_tile);
     let geometry = Geometry { c, h, w, kh, kw, sh, sw, ph, pw, dh, dw, out_w };
 
-    // Per tile (image-major): the O x P block of output it covers, row-major.
-    let blocks: Vec<Vec<f32>> = (0..n * tiles_per_image)
-        .into_par_iter()
-        .map(|t| {
-            let (b, tile) = (t / tiles_per_image, t % tiles_per_image);
-            let oy0 = tile * rows_per_tile;
-            let oy1 = (oy0 + rows_per_tile).min(out_h);
-            let p = (oy1 - oy0) * out_w;
-            // Column matrix, K x P row-major: row (ci, ky, kx), column (oy, ox) of the tile. The
-            // buffer is the thread's, reused across calls, and every element is written below
-            // (zeros where the kernel reaches into the padding), so it is never cleared first.
-            COLUMNS.with_borrow_mut(|col| {
-                col.resize(k * p, 0.0);
-                fill_columns(&mut col[..k * p], &x[b * c * h * w..(b + 1) * c * h * w], geometry, oy0..oy1);
-                let mut block = vec![0.0f32; o * p];
-                matmul_into(&mut block, wt, k, &col[..k * p], [o, p, k]);
-                block
-            })
-        })
-        .collect();
-
-    // Scatter the blocks into NCHW planes, adding the bias.
+    // One job per (image, tile of output rows) with its rows of every output plane; its O x P
+    // product goes to the thread's block buffer, then into those rows with the bias and the
+    // epilogue (no per-tile allocation, no second pass over the whole output).
     let mut out = crate::tensor::zeros_parallel(n * o * plane);
-    out.par_chunks_mut(plane.max(1)).enumerate().for_each(|(i, dst)| {
-        let (b, oc) = (i / o, i % o);
-        let add = bias.map_or(0.0, |v| v[oc]);
-        for tile in 0..tiles_per_image {
-            let oy0 = tile * rows_per_tile;
-            let p = ((oy0 + rows_per_tile).min(out_h) - oy0) * out_w;
-            let src = &blocks[b * tiles_per_image + tile][oc * p..][..p];
-            let dst = &mut dst[oy0 * out_w..][..p];
-            match epilogue {
-                Epilogue::Linear => dst.iter_mut().zip(src).for_each(|(d, s)| *d = s + add),
-                Epilogue::Relu => dst.iter_mut().zip(src).for_each(|(d, s)| *d = (s + add).max(0.0)),
+    let jobs = band_jobs(&mut out, o, plane, rows_per_tile * out_w);
+    jobs.into_par_iter().enumerate().for_each(|(t, planes)| {
+        let (b, tile) = (t / tiles_per_image, t % tiles_per_image);
+        let oy0 = tile * rows_per_tile;
+        let oy1 = (oy0 + rows_per_tile).min(out_h);
+        let p = (oy1 - oy0) * out_w;
+        // Column matrix, K x P row-major: row (ci, ky, kx), column (oy, ox) of the tile. The
+        // buffers are the thread's, reused across calls; every element of both is written below
+        // (zeros where the kernel reaches into the padding), so they are never cleared first.
+        COLUMNS.with_borrow_mut(|[col, block]| {
+            col.resize(k * p, 0.0);
+            block.resize(o * p, 0.0);
+            fill_columns(&mut col[..k * p], &x[b * c * h * w..(b + 1) * c * h * w], geometry, oy0..oy1);
+            matmul_into(&mut block[..o * p], wt, k, &col[..k * p], [o, p, k]);
+            for (oc, dst) in planes.into_iter().enumerate() {
+                let (src, add) = (&block[oc * p..][..p], bias.map_or(0.0, |v| v[oc]));
+                match epilogue {
+                    Epilogue::Linear => dst.iter_mut().zip(src).for_each(|(d, s)| *d = s + add),
+                    Epilogue::Relu => dst.iter_mut().zip(src).for_each(|(d, s)| *d = (s + add).max(0.0)),
+                }
             }
-        }
+        })
     });
     (out, [n, o, out_h, out_w])
 }
@@ -412,8 +402,9 @@ pub(crate) fn matmul_strided_with(
 }
 
 thread_local! {
-    /// Each worker thread's column buffer, grown to the largest tile it has built.
-    static COLUMNS: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// Each worker thread's column matrix and product block, grown to the largest tile it has
+    /// built.
+    static COLUMNS: std::cell::RefCell<[Vec<f32>; 2]> = const { std::cell::RefCell::new([Vec::new(), Vec::new()]) };
 }
 
 /// Sizes of one convolution: input channels and size, kernel, stride, leading padding,
@@ -436,6 +427,9 @@ struct Geometry {
 
 /// Writes every element of the column matrix of output rows `rows` of one image (`src`, NCHW).
 fn fill_columns(col: &mut [f32], src: &[f32], g: Geometry, rows: std::ops::Range<usize>) {
+    if g.sw == 2 {
+        return fill_columns_stride2(col, src, g, rows);
+    }
     let p = rows.len() * g.out_w;
     for ci in 0..g.c {
         let channel = &src[ci * g.h * g.w..(ci + 1) * g.h * g.w];
@@ -465,6 +459,53 @@ fn fill_columns(col: &mut [f32], src: &[f32], g: Geometry, rows: std::ops::Range
                             *v = if ix >= 0 && ix < g.w as isize { line[ix as usize] } else { 0.0 };
                         }
                     }
+                }
+            }
+        }
+    }
+}
+
+/// [`fill_columns`] for a horizontal stride of 2: each input row is split once into its even and
+/// odd columns, and every kernel column's row of the matrix is then one shifted copy from one of
+/// them (column `2·ox + offset` is phase `offset mod 2`, index `ox + offset div 2`). The general
+/// path gathered element by element, once per kernel column: the encoders' stride-2
+/// convolutions spent most of their column-building time there.
+fn fill_columns_stride2(col: &mut [f32], src: &[f32], g: Geometry, rows: std::ops::Range<usize>) {
+    let p = rows.len() * g.out_w;
+    let (even_len, odd_len) = (g.w.div_ceil(2), g.w / 2);
+    let mut phases = vec![0.0f32; even_len + odd_len];
+    for ci in 0..g.c {
+        let channel = &src[ci * g.h * g.w..(ci + 1) * g.h * g.w];
+        for ky in 0..g.kh {
+            for (r, oy) in rows.clone().enumerate() {
+                let iy = (oy * g.sh + ky * g.dh) as isize - g.ph as isize;
+                let line = (iy >= 0 && iy < g.h as isize).then(|| &channel[iy as usize * g.w..][..g.w]);
+                if let Some(line) = line {
+                    let (even, odd) = phases.split_at_mut(even_len);
+                    let (pairs, last) = line.as_chunks::<2>();
+                    for ((e, o), pair) in even.iter_mut().zip(odd.iter_mut()).zip(pairs) {
+                        (*e, *o) = (pair[0], pair[1]);
+                    }
+                    if let [v] = last {
+                        even[even_len - 1] = *v;
+                    }
+                }
+                for kx in 0..g.kw {
+                    let dst = &mut col[((ci * g.kh + ky) * g.kw + kx) * p + r * g.out_w..][..g.out_w];
+                    let Some(_) = line else {
+                        dst.fill(0.0);
+                        continue;
+                    };
+                    let offset = (kx * g.dw) as isize - g.pw as isize;
+                    let (phase, shift) = (offset.rem_euclid(2) as usize, offset.div_euclid(2));
+                    let source = if phase == 0 { &phases[..even_len] } else { &phases[even_len..] };
+                    // dst[ox] = source[ox + shift] where that index lies inside the phase.
+                    let lo = (-shift).clamp(0, g.out_w as isize) as usize;
+                    let hi = (source.len() as isize - shift).clamp(lo as isize, g.out_w as isize) as usize;
+                    dst[..lo].fill(0.0);
+                    let start = (lo as isize + shift) as usize;
+                    dst[lo..hi].copy_from_slice(&source[start..start + (hi - lo)]);
+                    dst[hi..].fill(0.0);
                 }
             }
         }
@@ -546,6 +587,12 @@ mod tests {
         // Smaller again: the threads' reused column buffers hold stale values from the case above.
         case(2, 3, 4, [7, 9], [3, 3], 1, [1, 1], 1);
         case(1, 5, 4, [11, 9], [5, 5], 3, [2, 2], 1);
+        // Stride 2: odd and even widths, no padding, dilation, a 1x1 projection, a 2-wide input.
+        case(1, 3, 5, [9, 12], [3, 3], 2, [0, 0], 1);
+        case(2, 4, 3, [13, 15], [3, 3], 2, [2, 2], 2);
+        case(1, 6, 5, [10, 11], [1, 1], 2, [0, 0], 1);
+        case(1, 2, 3, [6, 2], [3, 3], 2, [1, 1], 1);
+        case(1, 8, 16, [12, 300], [3, 3], 2, [1, 1], 1); // several tiles per image
         // Deep columns (40 x 9 = 360 rows), one output channel, a 1x1 image.
         case(2, 40, 13, [21, 27], [3, 3], 1, [1, 1], 1);
         case(1, 30, 1, [5, 70], [3, 3], 1, [1, 1], 1);
