@@ -30,6 +30,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::device::host_kernels_apply;
+use crate::tensor::reuse_buffer;
 use crate::host_few_outputs::{self, few_outputs_conv};
 /// Keeps the Winograd convolutions' transformed weights for reuse while alive (an update loop).
 pub use crate::host_winograd::KeptWeights;
@@ -331,10 +332,9 @@ pub(crate) fn im2col_conv_slices(
         // buffers are the thread's, reused across calls; every element of both is written below
         // (zeros where the kernel reaches into the padding), so they are never cleared first.
         COLUMNS.with_borrow_mut(|[col, block]| {
-            col.resize(k * p, 0.0);
-            block.resize(o * p, 0.0);
-            fill_columns(&mut col[..k * p], &x[b * c * h * w..(b + 1) * c * h * w], geometry, oy0..oy1);
-            matmul_into(&mut block[..o * p], wt, k, &col[..k * p], [o, p, k]);
+            let (col, block) = (reuse_buffer(col, k * p), reuse_buffer(block, o * p));
+            fill_columns(col, &x[b * c * h * w..(b + 1) * c * h * w], geometry, oy0..oy1);
+            matmul_into(block, wt, k, col, [o, p, k]);
             for (oc, dst) in planes.into_iter().enumerate() {
                 let (src, add) = (&block[oc * p..][..p], bias.map_or(0.0, |v| v[oc]));
                 match epilogue {

@@ -56,6 +56,7 @@ use burn::tensor::ops::ConvOptions;
 use rayon::prelude::*;
 
 use crate::host_conv::{Epilogue, band_jobs, conv_output_size, matmul_strided};
+use crate::tensor::reuse_buffer;
 pub(crate) use split::{Pending, first as split_first, second as split_second};
 pub use weight_cache::KeptWeights;
 use weight_cache::transformed_weights;
@@ -195,9 +196,7 @@ pub(crate) fn winograd_conv(
         let (tile_rows, t) = (plan.tile_rows(job), plan.tiles(job));
         // Every element of `v` and `mm` is written before it is read (the transform fills all of
         // `v`, the products write all of `mm`), so stale values never leak.
-        v.resize(k2 * c * t, 0.0);
-        mm.resize(k2 * o * t, 0.0);
-        let (v, mm) = (&mut v[..k2 * c * t], &mut mm[..k2 * o * t]);
+        let (v, mm) = (reuse_buffer(v, k2 * c * t), reuse_buffer(mm, k2 * o * t));
         transform_inputs(variant, v, image, plan.tiling, tile_rows.clone(), scratch);
         for k in 0..k2 {
             matmul_strided(&mut mm[k * t..], k2 * t, &u[k * c..], k2 * c, &v[k * t..], k2 * t, [o, t, c]);
@@ -384,8 +383,7 @@ fn transform_inputs(
     // Column phases [p][row phase][l][tws] (+1 slack for the last shifted read), then `d B`
     // [j][row phase][l][tws].
     let per_phase = m * (rows + 1) * tws;
-    scratch.resize(m * per_phase + 1 + alpha * per_phase, 0.0);
-    let (phases, rows_b) = scratch.split_at_mut(m * per_phase + 1);
+    let (phases, rows_b) = reuse_buffer(scratch, m * per_phase + 1 + alpha * per_phase).split_at_mut(m * per_phase + 1);
     for ci in 0..g.c {
         let channel = &image[ci * g.h * g.w..][..g.h * g.w];
         // Input rows in memory order (row `m·l + rp` of the band goes to slot `(rp, l)`): reading
@@ -464,8 +462,7 @@ fn transform_outputs(
     let (m, alpha, tw) = (g.m, g.m + 2, g.tiles_w);
     let t = band_rows * (tw + 1);
     // `M A` per row i of the tile: q[m·i + s] (s = output column), then Y[m·r + s] (r = row).
-    scratch.resize((alpha + m) * m * t, 0.0);
-    let (q, y) = scratch.split_at_mut(alpha * m * t);
+    let (q, y) = reuse_buffer(scratch, (alpha + m) * m * t).split_at_mut(alpha * m * t);
     for (oc, dst) in planes.into_iter().enumerate() {
         let add = bias.map_or(0.0, |b| b[oc]);
         for (k, q) in q.chunks_exact_mut(t).enumerate() {

@@ -63,16 +63,14 @@ pub(crate) fn first(
         (0..plan.jobs())
             .map(|job| {
                 let mut sum = pool.pop().unwrap_or_default();
-                sum.resize(o2 * k2 * plan.tiles(job), 0.0);
+                reuse_buffer(&mut sum, o2 * k2 * plan.tiles(job));
                 sum
             })
             .collect()
     });
     let out = plan.run(x, o1, &mut sums, |job, image, planes, sum, [v, mm, scratch]| {
         let (tile_rows, t) = (plan.tile_rows(job), plan.tiles(job));
-        v.resize(k2 * c * t, 0.0);
-        mm.resize(k2 * o1 * t, 0.0);
-        let (v, mm) = (&mut v[..k2 * c * t], &mut mm[..k2 * o1 * t]);
+        let (v, mm) = (reuse_buffer(v, k2 * c * t), reuse_buffer(mm, k2 * o1 * t));
         transform_inputs(variant, v, image, plan.tiling, tile_rows.clone(), scratch);
         let (own1, own2) = (c - shared, c2 - shared);
         for k in 0..k2 {
@@ -108,8 +106,7 @@ pub(crate) fn second(
     let k2 = plan.k2;
     let out = plan.run(x, o, &mut sums, |job, image, planes, sum, [v, _, scratch]| {
         let (tile_rows, t) = (plan.tile_rows(job), plan.tiles(job));
-        v.resize(k2 * own * t, 0.0);
-        let v = &mut v[..k2 * own * t];
+        let v = reuse_buffer(v, k2 * own * t);
         transform_inputs(variant, v, image, plan.tiling, tile_rows.clone(), scratch);
         for k in 0..k2 {
             let (lhs, rhs) = (&u[k * c2..], &v[k * t..]);
