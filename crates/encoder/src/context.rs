@@ -104,7 +104,8 @@ impl ContextEncoder {
             out.push(pair(&self.outputs16, &y));
             if levels >= 3 {
                 let z = forward_layer(&self.layer5, y);
-                out.push([self.outputs32[0].forward(z.clone()), self.outputs32[1].forward(z)]);
+                let [hidden, context] = [&self.outputs32[0], &self.outputs32[1]];
+                out.push([conv2d_forward(hidden, z.clone()), conv2d_forward(context, z)]);
             }
         }
         ContextFeatures { levels: out }
