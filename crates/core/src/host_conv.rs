@@ -30,12 +30,12 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::device::host_kernels_apply;
-use crate::tensor::reuse_buffer;
 use crate::host_few_outputs::{self, few_outputs_conv};
 /// Keeps the Winograd convolutions' transformed weights for reuse while alive (an update loop).
 pub use crate::host_winograd::KeptWeights;
 use crate::host_winograd::{split_first, split_second, winograd_conv, winograd_disabled, winograd_variant};
 use crate::matmul_conv::{conv2d_by_matmul, matmul_conv_applies};
+use crate::tensor::reuse_buffer;
 
 /// Output pixels per tile (whole output rows, at least one): enough columns for an efficient
 /// product, few enough for many tiles and small column buffers. 128, 256, 512 and 1024 ran within
