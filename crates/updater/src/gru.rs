@@ -71,12 +71,12 @@ impl ConvGru {
     /// One step.
     pub fn forward(&self, h: Tensor<4>, ctx: &GateContext, inputs: Vec<Tensor<4>>) -> Tensor<4> {
         let hidden = h.dims()[1];
-        let x = Tensor::cat(inputs, 1);
         if host_kernels_apply(&h.device())
-            && let Some(next) = super::gru_host::step(self, h.clone(), ctx, x.clone())
+            && let Some(next) = super::gru_host::step(self, h.clone(), ctx, &inputs)
         {
             return next;
         }
+        let x = Tensor::cat(inputs, 1);
         let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
         let zr = sigmoid(self.gates(hx) + ctx.zr.clone());
         let z = zr.clone().narrow(1, 0, hidden);

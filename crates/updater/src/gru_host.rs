@@ -43,31 +43,43 @@ fn sigmoid(v: f32) -> f32 {
     0.5 + 0.5 * tanh_fast(0.5 * v)
 }
 
-/// One step `h' = (1 - z)·h + z·tanh(convq([r·h, x]) + cq)` on the host.
+/// One step `h' = (1 - z)·h + z·tanh(convq([r·h, x]) + cq)` on the host, `x` being the
+/// concatenation of `inputs` (never built: their planes go straight into `[h, x]`).
 ///
 /// # Shapes
-/// - `h`, the context terms: `[N, C, H, W]`; `x`: `[N, Cx, H, W]`; output `[N, C, H, W]`
+/// - `h`, the context terms: `[N, C, H, W]`; `inputs[i]`: `[N, C_i, H, W]`; output `[N, C, H, W]`
 ///
 /// `None` (nothing computed) when a convolution has options the host kernel does not take.
-pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, x: Tensor<4>) -> Option<Tensor<4>> {
+pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, inputs: &[Tensor<4>]) -> Option<Tensor<4>> {
     let (zr_options, q_options) = (conv_options(&gru.convz)?, conv_options(&gru.convq)?);
     if conv_options(&gru.convr)? != zr_options {
         return None;
     }
     let device = h.device();
     let [n, c, hh, ww] = h.dims();
-    let cx = x.dims()[1];
     let plane = hh * ww;
+    // Each input's values and channel count; x's channel `j` is channel `j - (channels before)`
+    // of the input that holds it.
+    let parts: Vec<_> = inputs.iter().map(|t| (host_values(t.clone()), t.dims()[1])).collect();
+    let cx: usize = parts.iter().map(|(_, channels)| channels).sum();
     let channels = c + cx;
     let hv = host_values(h);
-    let xv = host_values(x);
+    let input_plane = |b: usize, mut j: usize| {
+        for (values, count) in &parts {
+            if j < *count {
+                return &values[(b * count + j) * plane..][..plane];
+            }
+            j -= count;
+        }
+        unreachable!("channel {j} past the inputs' {cx}")
+    };
 
     // [h, x] per image, the gates' input; later reused as [r·h, x], the candidate's input.
     let mut hx = zeros_parallel(n * channels * plane);
     hx.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
         let (b, ch) = (i / channels, i % channels);
-        let src = if ch < c { &hv[(b * c + ch) * plane..] } else { &xv[(b * cx + ch - c) * plane..] };
-        dst.copy_from_slice(&src[..plane]);
+        let src = if ch < c { &hv[(b * c + ch) * plane..][..plane] } else { input_plane(b, ch - c) };
+        dst.copy_from_slice(src);
     });
 
     let (zr_weight, zr_bias) = gru.gate_weights();
