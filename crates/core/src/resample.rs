@@ -94,19 +94,36 @@ fn resize_bilinear_host(x: Tensor<4>, [ho, wo]: [usize; 2], align_corners: bool)
     let values = host_values(x);
     let mut out = zeros_parallel(n * c * ho * wo);
     if !out.is_empty() && h * w > 0 {
+        // A row step blends two whole rows (vector operations); a column step gathers two taps
+        // per output value. Upsampling rows, the columns go first, on the `h` input rows rather
+        // than the `ho` output rows: half the gathers at the GRUs' 2x upsampling (the 1/8 state to
+        // 1/4 of 384x448, one process alternating both orders, median of 57: 2.49 -> 1.97 ms; 1/16
+        // to 1/8 0.61 -> 0.45 ms). Either order is the same interpolation up to rounding.
+        let columns_first = ho > h;
         out.par_chunks_mut(ho * wo).zip(values.par_chunks(h * w)).for_each_init(Vec::new, |tmp, (dst, src)| {
-            // Rows first (`tmp` is `ho x w`), as the matrix path multiplies `A_h` first.
-            tmp.resize(ho * w, 0.0);
-            for (line, &(y0, y1, t)) in tmp.chunks_exact_mut(w).zip(&rows) {
-                let (a, b) = (&src[y0 * w..][..w], &src[y1 * w..][..w]);
-                for ((d, a), b) in line.iter_mut().zip(a).zip(b) {
-                    *d = (1.0 - t) * a + t * b;
+            let blend_rows = |dst: &mut [f32], src: &[f32], width: usize| {
+                for (line, &(y0, y1, t)) in dst.chunks_exact_mut(width).zip(&rows) {
+                    let (a, b) = (&src[y0 * width..][..width], &src[y1 * width..][..width]);
+                    for ((d, a), b) in line.iter_mut().zip(a).zip(b) {
+                        *d = (1.0 - t) * a + t * b;
+                    }
                 }
-            }
-            for (line, src) in dst.chunks_exact_mut(wo).zip(tmp.chunks_exact(w)) {
-                for (d, &(x0, x1, t)) in line.iter_mut().zip(&columns) {
-                    *d = (1.0 - t) * src[x0] + t * src[x1];
+            };
+            let blend_columns = |dst: &mut [f32], src: &[f32]| {
+                for (line, src) in dst.chunks_exact_mut(wo).zip(src.chunks_exact(w)) {
+                    for (d, &(x0, x1, t)) in line.iter_mut().zip(&columns) {
+                        *d = (1.0 - t) * src[x0] + t * src[x1];
+                    }
                 }
+            };
+            if columns_first {
+                tmp.resize(h * wo, 0.0);
+                blend_columns(tmp, src);
+                blend_rows(dst, tmp, wo);
+            } else {
+                tmp.resize(ho * w, 0.0);
+                blend_rows(tmp, src, w);
+                blend_columns(dst, tmp);
             }
         });
     }
