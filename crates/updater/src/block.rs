@@ -147,8 +147,8 @@ impl Updater for MultiLevelUpdateBlock {
         let mut clock = clock;
         let n = self.n_gru_layers;
         self.update_coarse(hidden, context, n == 3, n >= 2, &mut clock);
-        let motion = timed(&mut clock, "motion encoder", || self.encoder.forward(flow, corr, guidance));
-        let mut inputs = vec![motion];
+        let motion = timed(&mut clock, "motion encoder", || self.encoder.forward_parts(flow, corr, guidance));
+        let mut inputs = Vec::from(motion);
         if n > 1 {
             inputs.push(timed(&mut clock, "interpolation", || interp(hidden[1].clone(), &hidden[0])));
         }

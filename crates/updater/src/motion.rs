@@ -47,15 +47,52 @@ impl MotionEncoder {
         }
     }
 
-    /// The GRU input of one iteration.
+    /// The GRU input of one iteration: `[features, flow]` concatenated ([`Self::forward_parts`]).
     pub fn forward(&self, flow: Tensor<4>, corr: Tensor<4>, guidance: Option<&Tensor<4>>) -> Tensor<4> {
+        Tensor::cat(Vec::from(self.forward_parts(flow, corr, guidance)), 1)
+    }
+
+    /// The GRU input of one iteration as its two parts, the 126 motion features and the flow
+    /// (2 channels), not yet concatenated: the host GRU step copies its inputs into its own
+    /// concatenation anyway, so building this one too was a wasted pass every iteration.
+    ///
+    /// # Shapes
+    /// - `flow`: `[N, 2, H, W]`; `corr`: `[N, corr_channels, H, W]`; output `[N, 126, H, W]` and
+    ///   `[N, 2, H, W]`
+    pub fn forward_parts(&self, flow: Tensor<4>, corr: Tensor<4>, guidance: Option<&Tensor<4>>) -> [Tensor<4>; 2] {
         let cor = conv2d_relu_forward(&self.convc2, conv2d_relu_forward(&self.convc1, corr));
         let flo = conv2d_relu_forward(&self.convf2, conv2d_relu_forward(&self.convf1, flow.clone()));
         let mut parts = vec![cor, flo];
         if let (Some(g1), Some(g2), Some(g)) = (&self.convg1, &self.convg2, guidance) {
             parts.push(conv2d_relu_forward(g2, conv2d_relu_forward(g1, g.clone())));
         }
-        let out = conv2d_relu_forward(&self.conv, Tensor::cat(parts, 1));
-        Tensor::cat(vec![out, flow], 1)
+        [conv2d_relu_forward(&self.conv, Tensor::cat(parts, 1)), flow]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::tensor::{Device, Distribution};
+    use dgstereo_core::tensor::max_abs_diff;
+
+    use super::*;
+
+    /// The concatenated input is the two parts side by side, the flow passed through unchanged
+    /// (with and without the guidance branch).
+    #[test]
+    fn forward_is_the_parts_concatenated() {
+        let device = Device::flex();
+        let rand = |c: usize| Tensor::<4>::random([2, c, 6, 7], Distribution::Normal(0.0, 1.0), &device);
+        for guidance_channels in [0, 3] {
+            let encoder = MotionEncoder::new(36, guidance_channels, &device);
+            let (flow, corr, guidance) = (rand(2), rand(36), rand(guidance_channels.max(1)));
+            let guidance = (guidance_channels > 0).then_some(&guidance);
+            let [features, passed] = encoder.forward_parts(flow.clone(), corr.clone(), guidance);
+            assert_eq!(features.dims(), [2, 126, 6, 7]);
+            assert_eq!(max_abs_diff(passed, flow.clone()), 0.0);
+            let whole = encoder.forward(flow.clone(), corr, guidance);
+            assert_eq!(max_abs_diff(whole.clone().narrow(1, 0, 126), features), 0.0);
+            assert_eq!(max_abs_diff(whole.narrow(1, 126, 2), flow), 0.0);
+        }
     }
 }
