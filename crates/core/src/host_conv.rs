@@ -33,7 +33,7 @@ use crate::device::host_kernels_apply;
 use crate::host_few_outputs::{self, few_outputs_conv};
 /// Keeps the Winograd convolutions' transformed weights for reuse while alive (an update loop).
 pub use crate::host_winograd::KeptWeights;
-use crate::host_winograd::{split_first, split_second, winograd_conv, winograd_disabled, winograd_variant};
+use crate::host_winograd::{split_first, split_row, split_second, winograd_conv, winograd_disabled, winograd_variant};
 use crate::matmul_conv::{conv2d_by_matmul, matmul_conv_applies};
 use crate::tensor::reuse_buffer;
 
@@ -456,12 +456,7 @@ fn fill_columns(col: &mut [f32], src: &[f32], g: Geometry, rows: std::ops::Range
                     let line = &channel[iy as usize * g.w..][..g.w];
                     if g.sw == 1 {
                         // ix = ox + offset: one shifted copy, zeros outside the input.
-                        let lo = (-offset).clamp(0, g.out_w as isize) as usize;
-                        let hi = (g.w as isize - offset).clamp(lo as isize, g.out_w as isize) as usize;
-                        let start = (lo as isize + offset) as usize;
-                        dst[..lo].fill(0.0);
-                        dst[lo..hi].copy_from_slice(&line[start..start + (hi - lo)]);
-                        dst[hi..].fill(0.0);
+                        shifted_copy(dst, line, offset);
                     } else {
                         for (ox, v) in dst.iter_mut().enumerate() {
                             let ix = (ox * g.sw) as isize + offset;
@@ -474,51 +469,52 @@ fn fill_columns(col: &mut [f32], src: &[f32], g: Geometry, rows: std::ops::Range
     }
 }
 
-/// [`fill_columns`] for a horizontal stride of 2: each input row is split once into its even and
-/// odd columns, and every kernel column's row of the matrix is then one shifted copy from one of
-/// them (column `2·ox + offset` is phase `offset mod 2`, index `ox + offset div 2`). The general
-/// path gathered element by element, once per kernel column: the encoders' stride-2
-/// convolutions spent most of their column-building time there.
+/// [`fill_columns`] for a horizontal stride of 2: each input row a kernel row reads is split
+/// into its even and odd columns (module `host_winograd`'s row split), and every kernel column's
+/// row of the matrix is then one shifted copy from one of them (column `2·ox + offset` is phase
+/// `offset mod 2`, index `ox + offset div 2`). The general path gathered element by element,
+/// once per kernel column: the encoders' stride-2 convolutions spent most of their
+/// column-building time there.
 fn fill_columns_stride2(col: &mut [f32], src: &[f32], g: Geometry, rows: std::ops::Range<usize>) {
     let p = rows.len() * g.out_w;
-    let (even_len, odd_len) = (g.w.div_ceil(2), g.w / 2);
-    let mut phases = vec![0.0f32; even_len + odd_len];
+    // Both phases `ceil(w / 2)` long: for an odd width the odd phase's last value lies outside
+    // the row, a zero like the padding.
+    let half = g.w.div_ceil(2);
+    let mut phases = vec![0.0f32; 2 * half];
     for ci in 0..g.c {
         let channel = &src[ci * g.h * g.w..(ci + 1) * g.h * g.w];
         for ky in 0..g.kh {
             for (r, oy) in rows.clone().enumerate() {
                 let iy = (oy * g.sh + ky * g.dh) as isize - g.ph as isize;
-                let line = (iy >= 0 && iy < g.h as isize).then(|| &channel[iy as usize * g.w..][..g.w]);
-                if let Some(line) = line {
-                    let (even, odd) = phases.split_at_mut(even_len);
-                    let (pairs, last) = line.as_chunks::<2>();
-                    for ((e, o), pair) in even.iter_mut().zip(odd.iter_mut()).zip(pairs) {
-                        (*e, *o) = (pair[0], pair[1]);
-                    }
-                    if let [v] = last {
-                        even[even_len - 1] = *v;
-                    }
+                let inside = iy >= 0 && iy < g.h as isize;
+                if inside {
+                    let (even, odd) = phases.split_at_mut(half);
+                    split_row::<2>(&channel[iy as usize * g.w..][..g.w], 0, [even, odd]);
                 }
                 for kx in 0..g.kw {
                     let dst = &mut col[((ci * g.kh + ky) * g.kw + kx) * p + r * g.out_w..][..g.out_w];
-                    let Some(_) = line else {
+                    if !inside {
                         dst.fill(0.0);
                         continue;
-                    };
+                    }
                     let offset = (kx * g.dw) as isize - g.pw as isize;
                     let (phase, shift) = (offset.rem_euclid(2) as usize, offset.div_euclid(2));
-                    let source = if phase == 0 { &phases[..even_len] } else { &phases[even_len..] };
-                    // dst[ox] = source[ox + shift] where that index lies inside the phase.
-                    let lo = (-shift).clamp(0, g.out_w as isize) as usize;
-                    let hi = (source.len() as isize - shift).clamp(lo as isize, g.out_w as isize) as usize;
-                    dst[..lo].fill(0.0);
-                    let start = (lo as isize + shift) as usize;
-                    dst[lo..hi].copy_from_slice(&source[start..start + (hi - lo)]);
-                    dst[hi..].fill(0.0);
+                    shifted_copy(dst, &phases[phase * half..][..half], shift);
                 }
             }
         }
     }
+}
+
+/// `dst[i] = source[i + shift]` where that index lies inside `source`, zeros elsewhere.
+fn shifted_copy(dst: &mut [f32], source: &[f32], shift: isize) {
+    let n = dst.len() as isize;
+    let lo = (-shift).clamp(0, n) as usize;
+    let hi = (source.len() as isize - shift).clamp(lo as isize, n) as usize;
+    let start = (lo as isize + shift) as usize;
+    dst[..lo].fill(0.0);
+    dst[lo..hi].copy_from_slice(&source[start..start + (hi - lo)]);
+    dst[hi..].fill(0.0);
 }
 
 #[cfg(test)]

@@ -421,7 +421,7 @@ fn transform_inputs(
 /// samples in a profile of the encoders' 64-channel layer; in one process alternating both, 15
 /// rounds, median ms: layer1 64->64 at 384x448 115.4 -> 113.6, GRU 384->128 at 96x112 42.0 ->
 /// 40.3 (the loads of the input rows now take the time the gather took).
-fn split_row<const M: usize>(line: &[f32], pw: usize, mut dst: [&mut [f32]; M]) {
+pub(crate) fn split_row<const M: usize>(line: &[f32], pw: usize, mut dst: [&mut [f32]; M]) {
     let n = dst[0].len();
     let value = |i: usize, p: usize| (M * i + p).checked_sub(pw).and_then(|x| line.get(x)).copied().unwrap_or(0.0);
     // Columns i in lo..hi hold all M phases inside the row: pw ≤ M·i and M·i + M - 1 < len + pw.
