@@ -6,7 +6,10 @@ use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig, DeformConv2d, DeformConv2dConfig};
 use burn::tensor::{Device, Tensor};
 
+use dgstereo_core::device::host_kernels_apply;
+
 use crate::ImageFusion;
+use crate::host_deform::deform_conv2d_host;
 use crate::init::{RGB, near_identity_deform_conv, zeroed};
 use crate::projection::FeatureProjection;
 
@@ -72,7 +75,10 @@ impl DeformableFusion {
         let (image_features, depth_features) = self.projection.forward(image, depth);
         let offset = self.offsets(depth_features.clone());
         let features = Tensor::cat(vec![image_features, depth_features], 1);
-        self.mixer.forward(features, offset, None)
+        let host = host_kernels_apply(&features.device())
+            .then(|| deform_conv2d_host(&self.mixer, features.clone(), offset.clone()))
+            .flatten();
+        host.unwrap_or_else(|| self.mixer.forward(features, offset, None))
     }
 }
 

@@ -40,6 +40,7 @@
 pub mod conv;
 pub mod deformable;
 pub mod depth;
+pub mod host_deform;
 pub mod init;
 pub mod projection;
 

@@ -1,0 +1,234 @@
+//! The deformable convolution of DGIA on host buffers, for CPU inference.
+//!
+//! Design decision: burn Flex's `deform_conv2d` builds a deformable im2col matrix on one thread
+//! per image (its only parallel loop is over the batch, and the model fuses one view at a time),
+//! recomputing the bilinear sampling position and weights for every input channel and writing the
+//! matrix with a stride of the whole image between consecutive values; at the full network
+//! resolution it took most of the paper model's inference time. DGIA's deformable convolution has
+//! few channels (`2F = 16` in, 3 out), so here every output pixel accumulates its outputs
+//! directly: per kernel tap the sampling position, its four corners and their weights are found
+//! once and shared by all input channels, each sample goes straight into the output channels'
+//! sums, and rows of output pixels run in parallel. Used where the host kernels apply (CPU
+//! inference, [`dgstereo_core::device::host_kernels_apply`]) and the convolution has one weight
+//! group, one offset group and no modulation mask (DGIA's); burn's operation stays the reference
+//! and the path everywhere else, and the tests check both agree.
+
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::DeformConv2d;
+use burn::tensor::{Tensor, TensorData};
+use dgstereo_core::tensor::host_values;
+use rayon::prelude::*;
+
+/// The geometry of one deformable convolution.
+#[derive(Clone, Copy)]
+struct Geometry {
+    c: usize,
+    o: usize,
+    h: usize,
+    w: usize,
+    kh: usize,
+    kw: usize,
+    stride: [usize; 2],
+    padding: [usize; 2],
+    dilation: [usize; 2],
+    out_h: usize,
+    out_w: usize,
+}
+
+/// `conv`'s output for `input` sampled at `offset`, or `None` where this kernel does not apply
+/// (several weight or offset groups, padding other than explicit and symmetric or none).
+///
+/// # Shapes
+/// - `input`: `[N, C, H, W]`; `offset`: `[N, 2·kh·kw, H_out, W_out]` (per kernel tap `k =
+///   kh_i·kw + kw_i`, channel `2k` the row offset, `2k + 1` the column offset, as torchvision)
+/// - output: `[N, O, H_out, W_out]`
+pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<4>) -> Option<Tensor<4>> {
+    if conv.weight_groups != 1 || conv.offset_groups != 1 {
+        return None;
+    }
+    let device = input.device();
+    let [n, c, h, w] = input.dims();
+    let [o, wc, kh, kw] = conv.weight.dims();
+    let padding = match conv.padding {
+        PaddingConfig2d::Valid => [0, 0],
+        PaddingConfig2d::Explicit(top, left, bottom, right) if top == bottom && left == right => [top, left],
+        _ => return None,
+    };
+    let (stride, dilation) = (conv.stride, conv.dilation);
+    let extent = |size: usize, axis: usize, k: usize| {
+        (size + 2 * padding[axis]).checked_sub(dilation[axis] * (k - 1) + 1).map(|span| span / stride[axis] + 1)
+    };
+    let (out_h, out_w) = (extent(h, 0, kh)?, extent(w, 1, kw)?);
+    let offset_dims = offset.dims();
+    assert_eq!(wc, c, "deformable convolution: the weight takes {wc} input channels, the input has {c}");
+    assert_eq!(
+        offset_dims,
+        [n, 2 * kh * kw, out_h, out_w],
+        "deformable convolution: offsets must be [N, 2·kh·kw, H_out, W_out]"
+    );
+    let g = Geometry { c, o, h, w, kh, kw, stride, padding, dilation, out_h, out_w };
+    let (x, offset) = (host_values(input), host_values(offset));
+    // Weights per tap and input channel, the output channels innermost: [k][c][o].
+    let weight = host_values(conv.weight.val());
+    let mut taps = vec![0f32; kh * kw * c * o];
+    for (oc, per_out) in weight.chunks_exact(c * kh * kw).enumerate() {
+        for (ic, per_in) in per_out.chunks_exact(kh * kw).enumerate() {
+            for (k, &value) in per_in.iter().enumerate() {
+                taps[(k * c + ic) * o + oc] = value;
+            }
+        }
+    }
+    let bias = conv.bias.as_ref().map(|b| host_values(b.val()));
+    let plane = out_h * out_w;
+    let rows: Vec<Vec<f32>> = (0..n * out_h)
+        .into_par_iter()
+        .map(|job| {
+            let (b, oy) = (job / out_h, job % out_h);
+            let image = &x[b * c * h * w..][..c * h * w];
+            let offsets = &offset[b * 2 * kh * kw * plane..][..2 * kh * kw * plane];
+            output_row(g, image, offsets, &taps, bias.as_deref(), oy)
+        })
+        .collect();
+    let mut out = vec![0f32; n * o * plane];
+    for (job, row) in rows.iter().enumerate() {
+        let (b, oy) = (job / out_h, job % out_h);
+        for (oc, values) in row.chunks_exact(out_w).enumerate() {
+            out[(b * o + oc) * plane + oy * out_w..][..out_w].copy_from_slice(values);
+        }
+    }
+    Some(Tensor::from_data(TensorData::new(out, [n, o, out_h, out_w]), &device))
+}
+
+/// Output row `oy` of one image, `[O][W_out]`: bias plus, per output pixel, kernel tap and input
+/// channel, the tap's weight times the input sampled bilinearly at the tap's position moved by
+/// its offset (zero outside the input, as burn's and torchvision's kernels).
+fn output_row(g: Geometry, image: &[f32], offsets: &[f32], taps: &[f32], bias: Option<&[f32]>, oy: usize) -> Vec<f32> {
+    let (plane_in, plane_out) = (g.h * g.w, g.out_h * g.out_w);
+    let mut row = vec![0f32; g.o * g.out_w];
+    let mut sums = vec![0f32; g.o];
+    for ox in 0..g.out_w {
+        sums.iter_mut().enumerate().for_each(|(oc, s)| *s = bias.map_or(0.0, |b| b[oc]));
+        for k in 0..g.kh * g.kw {
+            let (ki, kj) = (k / g.kw, k % g.kw);
+            let at = oy * g.out_w + ox;
+            let dy = offsets[2 * k * plane_out + at];
+            let dx = offsets[(2 * k + 1) * plane_out + at];
+            let y = (oy * g.stride[0] + ki * g.dilation[0]) as f32 - g.padding[0] as f32 + dy;
+            let x = (ox * g.stride[1] + kj * g.dilation[1]) as f32 - g.padding[1] as f32 + dx;
+            let Some(corners) = Corners::new(y, x, g.h, g.w) else { continue };
+            let weights = &taps[k * g.c * g.o..][..g.c * g.o];
+            for ic in 0..g.c {
+                let value = corners.sample(&image[ic * plane_in..][..plane_in]);
+                let per_out = &weights[ic * g.o..][..g.o];
+                for oc in 0..g.o {
+                    sums[oc] += per_out[oc] * value;
+                }
+            }
+        }
+        for (oc, &s) in sums.iter().enumerate() {
+            row[oc * g.out_w + ox] = s;
+        }
+    }
+    row
+}
+
+/// The four neighbours of a sampling position and their bilinear weights, a neighbour outside
+/// the input with weight zero.
+struct Corners {
+    index: [usize; 4],
+    weight: [f32; 4],
+}
+
+impl Corners {
+    /// `None` where the position lies a whole pixel or more outside the input (the sample is 0).
+    #[inline(always)]
+    fn new(y: f32, x: f32, h: usize, w: usize) -> Option<Self> {
+        if y <= -1.0 || y >= h as f32 || x <= -1.0 || x >= w as f32 {
+            return None;
+        }
+        // `floor` on (-1, size): a call into libm on the baseline x86-64 target, so by hand.
+        let floor = |v: f32| if v < 0.0 { -1 } else { v as isize };
+        let (y0, x0) = (floor(y), floor(x));
+        let (ly, lx) = (y - y0 as f32, x - x0 as f32);
+        let (hy, hx) = (1.0 - ly, 1.0 - lx);
+        let mut index = [0; 4];
+        let mut weight = [hy * hx, hy * lx, ly * hx, ly * lx];
+        for (i, (dy, dx)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate() {
+            let (yy, xx) = (y0 + dy, x0 + dx);
+            if yy >= 0 && (yy as usize) < h && xx >= 0 && (xx as usize) < w {
+                index[i] = yy as usize * w + xx as usize;
+            } else {
+                weight[i] = 0.0;
+            }
+        }
+        Some(Self { index, weight })
+    }
+
+    /// The bilinear sample of one input channel plane, summed in burn's order.
+    #[inline(always)]
+    fn sample(&self, channel: &[f32]) -> f32 {
+        let (i, k) = (&self.index, &self.weight);
+        k[0] * channel[i[0]] + k[1] * channel[i[1]] + k[2] * channel[i[2]] + k[3] * channel[i[3]]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::nn::conv::DeformConv2dConfig;
+    use burn::tensor::module::deform_conv2d;
+    use burn::tensor::ops::DeformConvOptions;
+    use burn::tensor::{Device, Distribution};
+
+    use super::*;
+
+    /// The host kernel against burn's `deform_conv2d` (the reference) on DGIA's shape and on
+    /// strided, dilated, unpadded and non-square cases, with offsets large enough to send samples
+    /// past every border; fails on an error above 1e-5 of the output's magnitude. `geometry` is
+    /// `[stride, dilation, padding]`.
+    fn case(n: usize, [c, o]: [usize; 2], [h, w]: [usize; 2], [kh, kw]: [usize; 2], geometry: [usize; 3], bias: bool) {
+        let [stride, dilation, pad] = geometry;
+        let device = Device::flex();
+        let conv = DeformConv2dConfig::new([c, o], [kh, kw])
+            .with_stride([stride, stride])
+            .with_dilation([dilation, dilation])
+            .with_padding(PaddingConfig2d::Explicit(pad, pad, pad, pad))
+            .with_bias(bias)
+            .init(&device);
+        let conv =
+            DeformConv2d { bias: conv.bias.map(|b| b.map(|t| t.random_like(Distribution::Normal(0.0, 1.0)))), ..conv };
+        let out_h = (h + 2 * pad - dilation * (kh - 1) - 1) / stride + 1;
+        let out_w = (w + 2 * pad - dilation * (kw - 1) - 1) / stride + 1;
+        let x = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+        let offset = Tensor::<4>::random([n, 2 * kh * kw, out_h, out_w], Distribution::Uniform(-3.0, 3.0), &device);
+        let options = DeformConvOptions::new([stride; 2], [pad; 2], [dilation; 2], 1, 1);
+        let bias_value = conv.bias.as_ref().map(|b| b.val());
+        let reference = deform_conv2d(x.clone(), offset.clone(), conv.weight.val(), None, bias_value, options);
+        let got = deform_conv2d_host(&conv, x, offset).expect("one weight and offset group");
+        assert_eq!(got.dims(), reference.dims());
+        let (got, want) = (host_values(got), host_values(reference));
+        let scale = want.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
+        let worst = got.iter().zip(want.iter()).map(|(g, w)| (g - w).abs()).fold(0f32, f32::max);
+        assert!(
+            worst <= 1e-5 * scale,
+            "n {n} c {c} o {o} {h}x{w} k {kh}x{kw} s {stride} d {dilation} p {pad}: {worst} of {scale}"
+        );
+    }
+
+    #[test]
+    fn host_deformable_convolution_agrees_with_burn() {
+        case(2, [16, 3], [11, 13], [3, 3], [1, 1, 1], true); // DGIA's shape
+        case(1, [5, 4], [9, 7], [3, 3], [2, 1, 1], false);
+        case(1, [3, 2], [10, 12], [3, 3], [1, 2, 2], true);
+        case(1, [4, 3], [8, 9], [2, 3], [1, 1, 0], true);
+        case(1, [2, 5], [1, 1], [1, 1], [1, 1, 0], true);
+    }
+
+    #[test]
+    fn several_groups_fall_back_to_burn() {
+        let device = Device::flex();
+        let conv = DeformConv2dConfig::new([4, 4], [3, 3]).with_weight_groups(2).init(&device);
+        let x = Tensor::<4>::zeros([1, 4, 5, 5], &device);
+        let offset = Tensor::<4>::zeros([1, 18, 3, 3], &device);
+        assert!(deform_conv2d_host(&conv, x, offset).is_none());
+    }
+}
