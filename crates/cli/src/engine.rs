@@ -18,6 +18,7 @@
 //! before any pair is read, so `infer` can fail fast on those and keep going on per-pair ones.
 
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use anyhow::{Context, bail};
 use burn::tensor::Device;
@@ -233,6 +234,9 @@ pub struct RunInfo {
     /// With `--lr-check`: the pixels the right view did not confirm (row-major, at the input's
     /// size), which the returned disparity has filled.
     pub rejected: Option<Mask>,
+    /// Seconds spent computing the depth prior (both passes with `--lr-check`); `None` without
+    /// a prior.
+    pub prior_seconds: Option<f64>,
 }
 
 impl RunInfo {
@@ -366,10 +370,11 @@ impl Engine {
             return Ok((disparity, info));
         };
         // The right view's disparity is the left one of the mirrored, swapped pair.
-        let (mirrored, _) = self.network_disparity(&mirror_rgb(right), &mirror_rgb(left), name)?;
+        let (mirrored, mirrored_info) = self.network_disparity(&mirror_rgb(right), &mirror_rgb(left), name)?;
         let rejected = rejected_pixels(&disparity, &mirror_disparity(&mirrored), threshold);
         let filled = fill_rejected(&disparity, &rejected);
-        Ok((filled, RunInfo { rejected: Some(rejected), ..info }))
+        let prior_seconds = info.prior_seconds.zip(mirrored_info.prior_seconds).map(|(a, b)| a + b);
+        Ok((filled, RunInfo { rejected: Some(rejected), prior_seconds, ..info }))
     }
 
     /// The network's disparity of a pair of one size, at that size.
@@ -388,6 +393,7 @@ impl Engine {
         };
         let corr = self.choose_corr(l.width, l.height);
         let (lt, rt) = (image_tensor(&l, &self.device), image_tensor(&r, &self.device));
+        let prior_start = Instant::now();
         let prior = match &self.prior {
             Some(p) => p.provide(&PriorInput {
                 left: lt.clone(),
@@ -397,13 +403,14 @@ impl Engine {
             })?,
             None => None,
         };
+        let prior_seconds = prior.is_some().then(|| prior_start.elapsed().as_secs_f64());
         let pred = self.model.predict(lt, rt, prior.as_ref(), self.iters, false, Some(corr))?;
         let small = disparity_map(pred.last());
         drop(pred);
         // The pass's freed buffers back to the system before the next pair (or the mirrored
         // pass), whose full-resolution tensors would otherwise add to them.
         dgstereo_core::allocator::release_freed_memory();
-        let info = RunInfo { network_size: (l.width, l.height), corr, rejected: None };
+        let info = RunInfo { network_size: (l.width, l.height), corr, rejected: None, prior_seconds };
         Ok((disparity_to_size(&small, w, h)?, info))
     }
 }

@@ -239,8 +239,9 @@ fn process_pair(
         written.iter().map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()).collect();
     let checked =
         info.rejected_share().map_or(String::new(), |s| format!(", left-right check replaced {:.1} %", 100.0 * s));
+    let prior = info.prior_seconds.map_or(String::new(), |s| format!(" (depth prior {s:.2} s)"));
     Ok(format!(
-        "{}: {}x{} (network {}x{}, {:?} volume{checked}) {:.2} s -> {}",
+        "{}: {}x{} (network {}x{}, {:?} volume{checked}) {:.2} s{prior} -> {}",
         pair.name,
         left.width,
         left.height,
