@@ -7,6 +7,7 @@ use burn::nn::conv::{Conv2d, Conv2dConfig, DeformConv2d, DeformConv2dConfig};
 use burn::tensor::{Device, Tensor};
 
 use dgstereo_core::device::host_kernels_apply;
+use dgstereo_core::host_conv::conv2d_forward;
 
 use crate::ImageFusion;
 use crate::host_deform::deform_conv2d_host;
@@ -61,7 +62,7 @@ impl DeformableFusion {
     /// - `depth_features`: `[N, F, H, W]`
     /// - output: `[N, 18, H, W]`
     pub fn offsets(&self, depth_features: Tensor<4>) -> Tensor<4> {
-        self.offset.forward(depth_features)
+        conv2d_forward(&self.offset, depth_features)
     }
 
     /// The enhanced image.

@@ -6,9 +6,10 @@
 //! matrix with a stride of the whole image between consecutive values; at the full network
 //! resolution it took most of the paper model's inference time. DGIA's deformable convolution has
 //! few channels (`2F = 16` in, 3 out), so here every output pixel accumulates its outputs
-//! directly: per kernel tap the sampling position, its four corners and their weights are found
-//! once and shared by all input channels, each sample goes straight into the output channels'
-//! sums, and rows of output pixels run in parallel. Used where the host kernels apply (CPU
+//! directly: the input is laid out with its channels innermost once, per kernel tap the sampling
+//! position, its four corners and their weights are found once and the sample of all channels is
+//! one vector, which goes straight into per-output-channel partial sums; rows of output pixels
+//! run in parallel. Used where the host kernels apply (CPU
 //! inference, [`dgstereo_core::device::host_kernels_apply`]) and the convolution has one weight
 //! group, one offset group and no modulation mask (DGIA's); burn's operation stays the reference
 //! and the path everywhere else, and the tests check both agree.
@@ -68,13 +69,25 @@ pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<
     );
     let g = Geometry { c, o, h, w, kh, kw, stride, padding, dilation, out_h, out_w };
     let (x, offset) = (host_values(input), host_values(offset));
-    // Weights per tap and input channel, the output channels innermost: [k][c][o].
+    // The input with its channels innermost, [N][H·W][C], so that a sample of all channels at one
+    // position is one contiguous run.
+    let plane_in = h * w;
+    let mut pixels = vec![0f32; n * plane_in * c];
+    pixels.par_chunks_mut(w * c).enumerate().for_each(|(row, dst)| {
+        let (b, y) = (row / h, row % h);
+        for (ic, channel) in x[b * c * plane_in..][..c * plane_in].chunks_exact(plane_in).enumerate() {
+            for (xx, &value) in channel[y * w..][..w].iter().enumerate() {
+                dst[xx * c + ic] = value;
+            }
+        }
+    });
+    // Weights per tap and output channel, the input channels innermost: [k][o][c].
     let weight = host_values(conv.weight.val());
-    let mut taps = vec![0f32; kh * kw * c * o];
+    let mut taps = vec![0f32; kh * kw * o * c];
     for (oc, per_out) in weight.chunks_exact(c * kh * kw).enumerate() {
         for (ic, per_in) in per_out.chunks_exact(kh * kw).enumerate() {
             for (k, &value) in per_in.iter().enumerate() {
-                taps[(k * c + ic) * o + oc] = value;
+                taps[(k * o + oc) * c + ic] = value;
             }
         }
     }
@@ -84,9 +97,13 @@ pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<
         .into_par_iter()
         .map(|job| {
             let (b, oy) = (job / out_h, job % out_h);
-            let image = &x[b * c * h * w..][..c * h * w];
+            let image = &pixels[b * plane_in * c..][..plane_in * c];
             let offsets = &offset[b * 2 * kh * kw * plane..][..2 * kh * kw * plane];
-            output_row(g, image, offsets, &taps, bias.as_deref(), oy)
+            match c {
+                16 => output_row::<16>(g, image, offsets, &taps, bias.as_deref(), oy),
+                8 => output_row::<8>(g, image, offsets, &taps, bias.as_deref(), oy),
+                _ => output_row::<0>(g, image, offsets, &taps, bias.as_deref(), oy),
+            }
         })
         .collect();
     let mut out = vec![0f32; n * o * plane];
@@ -99,15 +116,28 @@ pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<
     Some(Tensor::from_data(TensorData::new(out, [n, o, out_h, out_w]), &device))
 }
 
-/// Output row `oy` of one image, `[O][W_out]`: bias plus, per output pixel, kernel tap and input
-/// channel, the tap's weight times the input sampled bilinearly at the tap's position moved by
-/// its offset (zero outside the input, as burn's and torchvision's kernels).
-fn output_row(g: Geometry, image: &[f32], offsets: &[f32], taps: &[f32], bias: Option<&[f32]>, oy: usize) -> Vec<f32> {
-    let (plane_in, plane_out) = (g.h * g.w, g.out_h * g.out_w);
+/// Output row `oy` of one image (`image` as `[H·W][C]`), `[O][W_out]`: bias plus, per output
+/// pixel, kernel tap and input channel, the tap's weight times the input sampled bilinearly at
+/// the tap's position moved by its offset (zero outside the input, as burn's and torchvision's
+/// kernels). Per tap the sample of all channels is one vector, and each output channel keeps a
+/// vector of partial sums over the channels, added up once per pixel.
+fn output_row<const C: usize>(
+    g: Geometry,
+    image: &[f32],
+    offsets: &[f32],
+    taps: &[f32],
+    bias: Option<&[f32]>,
+    oy: usize,
+) -> Vec<f32> {
+    // `C` is the channel count known at compile time (DGIA's 16, or 8), which lets the per-channel
+    // loops unroll into vector operations; 0 means "read it from `g`".
+    let c = if C == 0 { g.c } else { C };
+    let plane_out = g.out_h * g.out_w;
     let mut row = vec![0f32; g.o * g.out_w];
-    let mut sums = vec![0f32; g.o];
+    let mut sample = vec![0f32; c];
+    let mut partial = vec![0f32; g.o * c];
     for ox in 0..g.out_w {
-        sums.iter_mut().enumerate().for_each(|(oc, s)| *s = bias.map_or(0.0, |b| b[oc]));
+        partial.fill(0.0);
         for k in 0..g.kh * g.kw {
             let (ki, kj) = (k / g.kw, k % g.kw);
             let at = oy * g.out_w + ox;
@@ -116,17 +146,22 @@ fn output_row(g: Geometry, image: &[f32], offsets: &[f32], taps: &[f32], bias: O
             let y = (oy * g.stride[0] + ki * g.dilation[0]) as f32 - g.padding[0] as f32 + dy;
             let x = (ox * g.stride[1] + kj * g.dilation[1]) as f32 - g.padding[1] as f32 + dx;
             let Some(corners) = Corners::new(y, x, g.h, g.w) else { continue };
-            let weights = &taps[k * g.c * g.o..][..g.c * g.o];
-            for ic in 0..g.c {
-                let value = corners.sample(&image[ic * plane_in..][..plane_in]);
-                let per_out = &weights[ic * g.o..][..g.o];
-                for oc in 0..g.o {
-                    sums[oc] += per_out[oc] * value;
+            corners.sample(image, &mut sample[..c]);
+            let weights = &taps[k * g.o * c..][..g.o * c];
+            for oc in 0..g.o {
+                let (sums, weights) = (&mut partial[oc * c..][..c], &weights[oc * c..][..c]);
+                for j in 0..c {
+                    sums[j] += weights[j] * sample[j];
                 }
             }
         }
-        for (oc, &s) in sums.iter().enumerate() {
-            row[oc * g.out_w + ox] = s;
+        for oc in 0..g.o {
+            let sums = &partial[oc * c..][..c];
+            let mut total = 0.0;
+            for &v in sums {
+                total += v;
+            }
+            row[oc * g.out_w + ox] = bias.map_or(0.0, |b| b[oc]) + total;
         }
     }
     row
@@ -164,11 +199,17 @@ impl Corners {
         Some(Self { index, weight })
     }
 
-    /// The bilinear sample of one input channel plane, summed in burn's order.
+    /// The bilinear samples of all channels of `image` (`[H·W][C]`) into `out` (`C` long), each
+    /// summed in burn's order.
     #[inline(always)]
-    fn sample(&self, channel: &[f32]) -> f32 {
+    fn sample(&self, image: &[f32], out: &mut [f32]) {
+        let c = out.len();
         let (i, k) = (&self.index, &self.weight);
-        k[0] * channel[i[0]] + k[1] * channel[i[1]] + k[2] * channel[i[2]] + k[3] * channel[i[3]]
+        let [a, b, cc, d] =
+            [&image[i[0] * c..][..c], &image[i[1] * c..][..c], &image[i[2] * c..][..c], &image[i[3] * c..][..c]];
+        for j in 0..c {
+            out[j] = k[0] * a[j] + k[1] * b[j] + k[2] * cc[j] + k[3] * d[j];
+        }
     }
 }
 
@@ -217,6 +258,7 @@ mod tests {
     #[test]
     fn host_deformable_convolution_agrees_with_burn() {
         case(2, [16, 3], [11, 13], [3, 3], [1, 1, 1], true); // DGIA's shape
+        case(1, [8, 3], [7, 9], [3, 3], [1, 1, 1], true); // the other specialised channel count
         case(1, [5, 4], [9, 7], [3, 3], [2, 1, 1], false);
         case(1, [3, 2], [10, 12], [3, 3], [1, 2, 2], true);
         case(1, [4, 3], [8, 9], [2, 3], [1, 1, 0], true);

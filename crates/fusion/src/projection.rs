@@ -3,6 +3,7 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::tensor::{Device, Tensor};
+use dgstereo_core::host_conv::conv2d_forward;
 
 use crate::depth::normalize_depth;
 use crate::init::{RGB, identity_padded_projection};
@@ -46,6 +47,6 @@ impl FeatureProjection {
     pub fn forward(&self, image: Tensor<4>, depth: Tensor<4>) -> (Tensor<4>, Tensor<4>) {
         let [_, _, h, w] = image.dims();
         let depth = normalize_depth(depth, [h, w]);
-        (self.image.forward(image), self.depth.forward(depth))
+        (conv2d_forward(&self.image, image), conv2d_forward(&self.depth, depth))
     }
 }
