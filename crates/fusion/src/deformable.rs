@@ -5,7 +5,6 @@ use burn::module::Module;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig, DeformConv2d, DeformConv2dConfig};
 use burn::tensor::{Device, Tensor};
-
 use dgstereo_core::device::host_kernels_apply;
 use dgstereo_core::host_conv::conv2d_forward;
 

@@ -1,18 +1,18 @@
 //! The deformable convolution of DGIA on host buffers, for CPU inference.
 //!
-//! Design decision: burn Flex's `deform_conv2d` builds a deformable im2col matrix on one thread
-//! per image (its only parallel loop is over the batch, and the model fuses one view at a time),
+//! Design decision: burn Flex's `deform_conv2d` builds a deformable im2col matrix on one thread per
+//! image (its only parallel loop is over the batch, and the model fuses one view at a time),
 //! recomputing the bilinear sampling position and weights for every input channel and writing the
 //! matrix with a stride of the whole image between consecutive values; at the full network
-//! resolution it took most of the paper model's inference time. DGIA's deformable convolution has
-//! few channels (`2F = 16` in, 3 out), so here every output pixel accumulates its outputs
-//! directly: the input is laid out with its channels innermost once, per kernel tap the sampling
-//! position, its four corners and their weights are found once and the sample of all channels is
-//! one vector, which goes straight into per-output-channel partial sums; rows of output pixels
-//! run in parallel. Used where the host kernels apply (CPU
-//! inference, [`dgstereo_core::device::host_kernels_apply`]) and the convolution has one weight
-//! group, one offset group and no modulation mask (DGIA's); burn's operation stays the reference
-//! and the path everywhere else, and the tests check both agree.
+//! resolution it took about a third of the paper model's CPU inference. DGIA's deformable
+//! convolution has few channels (`2F = 16` in, 3 out), so here every output pixel accumulates its
+//! outputs directly: the input is laid out with its channels innermost once, per kernel tap the
+//! sampling position, its four corners and their weights are found once and the sample of all
+//! channels is one vector, which goes straight into per-output-channel partial sums; rows of output
+//! pixels run in parallel. Used where the host kernels apply (CPU inference,
+//! [`dgstereo_core::device::host_kernels_apply`]) and the convolution has one weight group, one
+//! offset group and no modulation mask (DGIA's); burn's operation stays the reference and the path
+//! everywhere else, and the tests check both agree.
 
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::DeformConv2d;
