@@ -16,6 +16,7 @@ use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
+use dgstereo_core::host_conv::{conv2d_forward, conv2d_relu_forward};
 use dgstereo_core::resample::resize_bilinear;
 
 use super::dinov2::{IntermediateLayer, PATCH_SIZE};
@@ -54,7 +55,7 @@ impl ResidualConvUnit {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = self.conv2.forward(relu(self.conv1.forward(relu(x.clone()))));
+        let y = conv2d_forward(&self.conv2, conv2d_relu_forward(&self.conv1, relu(x.clone())));
         y + x
     }
 }
@@ -91,7 +92,7 @@ impl FeatureFusionBlock {
         let x = self.res_conf_unit2.forward(x);
         let [_, _, h, w] = x.dims();
         let x = resize_bilinear(x, size.unwrap_or([2 * h, 2 * w]), true);
-        self.out_conv.forward(x)
+        conv2d_forward(&self.out_conv, x)
     }
 }
 
@@ -176,15 +177,15 @@ impl DptHead {
             .map(|(layer, project)| {
                 let [b, n, c] = layer.tokens.dims();
                 assert_eq!(n, h * w, "token count {n} does not match the {h}x{w} patch grid");
-                project.forward(layer.tokens.clone().swap_dims(1, 2).reshape([b, c, h, w]))
+                conv2d_forward(project, layer.tokens.clone().swap_dims(1, 2).reshape([b, c, h, w]))
             })
             .collect();
         let [l1, l2, l3, l4]: [Tensor<4>; 4] = maps.try_into().expect("four maps");
         let s = &self.scratch;
-        let l1 = s.layer1_rn.forward(self.upsample_4x.forward(l1));
-        let l2 = s.layer2_rn.forward(self.upsample_2x.forward(l2));
-        let l3 = s.layer3_rn.forward(l3);
-        let l4 = s.layer4_rn.forward(self.downsample_2x.forward(l4));
+        let l1 = conv2d_forward(&s.layer1_rn, self.upsample_4x.forward(l1));
+        let l2 = conv2d_forward(&s.layer2_rn, self.upsample_2x.forward(l2));
+        let l3 = conv2d_forward(&s.layer3_rn, l3);
+        let l4 = conv2d_forward(&s.layer4_rn, conv2d_forward(&self.downsample_2x, l4));
         let size = |t: &Tensor<4>| {
             let [_, _, th, tw] = t.dims();
             [th, tw]
@@ -193,9 +194,9 @@ impl DptHead {
         let path = s.refinenet3.forward(path, Some(l3.clone()), Some(size(&l2)));
         let path = s.refinenet2.forward(path, Some(l2.clone()), Some(size(&l1)));
         let path = s.refinenet1.forward(path, Some(l1), None);
-        let out = s.output_conv1.forward(path);
+        let out = conv2d_forward(&s.output_conv1, path);
         let out = resize_bilinear(out, [h * PATCH_SIZE, w * PATCH_SIZE], true);
-        let out = relu(s.output_conv2_hidden.forward(out));
-        relu(s.output_conv2_out.forward(out))
+        let out = conv2d_relu_forward(&s.output_conv2_hidden, out);
+        conv2d_relu_forward(&s.output_conv2_out, out)
     }
 }
