@@ -99,10 +99,10 @@ pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<
             let (b, oy) = (job / out_h, job % out_h);
             let image = &pixels[b * plane_in * c..][..plane_in * c];
             let offsets = &offset[b * 2 * kh * kw * plane..][..2 * kh * kw * plane];
-            match c {
-                16 => output_row::<16>(g, image, offsets, &taps, bias.as_deref(), oy),
-                8 => output_row::<8>(g, image, offsets, &taps, bias.as_deref(), oy),
-                _ => output_row::<0>(g, image, offsets, &taps, bias.as_deref(), oy),
+            match (c, o) {
+                (16, 3) => output_row_fixed::<16, 3>(g, image, offsets, &taps, bias.as_deref(), oy),
+                (8, 3) => output_row_fixed::<8, 3>(g, image, offsets, &taps, bias.as_deref(), oy),
+                _ => output_row(g, image, offsets, &taps, bias.as_deref(), oy),
             }
         })
         .collect();
@@ -121,7 +121,32 @@ pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<
 /// the tap's position moved by its offset (zero outside the input, as burn's and torchvision's
 /// kernels). Per tap the sample of all channels is one vector, and each output channel keeps a
 /// vector of partial sums over the channels, added up once per pixel.
-fn output_row<const C: usize>(
+fn output_row(g: Geometry, image: &[f32], offsets: &[f32], taps: &[f32], bias: Option<&[f32]>, oy: usize) -> Vec<f32> {
+    let (c, o) = (g.c, g.o);
+    let mut row = vec![0f32; o * g.out_w];
+    let mut sample = vec![0f32; c];
+    let mut partial = vec![0f32; o * c];
+    for ox in 0..g.out_w {
+        partial.fill(0.0);
+        for_each_tap(g, offsets, oy, ox, |k, corners| {
+            corners.sample(image, &mut sample);
+            for (sums, weights) in partial.chunks_exact_mut(c).zip(taps[k * o * c..][..o * c].chunks_exact(c)) {
+                for j in 0..c {
+                    sums[j] += weights[j] * sample[j];
+                }
+            }
+        });
+        for (oc, sums) in partial.chunks_exact(c).enumerate() {
+            row[oc * g.out_w + ox] = bias.map_or(0.0, |b| b[oc]) + sums.iter().sum::<f32>();
+        }
+    }
+    row
+}
+
+/// [`output_row`] with the channel counts known at compile time (DGIA's 16 or 8 in, 3 out): the
+/// sample and the partial sums live in registers and the per-channel loops unroll into vector
+/// operations. Same operations in the same order.
+fn output_row_fixed<const C: usize, const O: usize>(
     g: Geometry,
     image: &[f32],
     offsets: &[f32],
@@ -129,42 +154,42 @@ fn output_row<const C: usize>(
     bias: Option<&[f32]>,
     oy: usize,
 ) -> Vec<f32> {
-    // `C` is the channel count known at compile time (DGIA's 16, or 8), which lets the per-channel
-    // loops unroll into vector operations; 0 means "read it from `g`".
-    let c = if C == 0 { g.c } else { C };
-    let plane_out = g.out_h * g.out_w;
-    let mut row = vec![0f32; g.o * g.out_w];
-    let mut sample = vec![0f32; c];
-    let mut partial = vec![0f32; g.o * c];
+    let mut row = vec![0f32; O * g.out_w];
     for ox in 0..g.out_w {
-        partial.fill(0.0);
-        for k in 0..g.kh * g.kw {
-            let (ki, kj) = (k / g.kw, k % g.kw);
-            let at = oy * g.out_w + ox;
-            let dy = offsets[2 * k * plane_out + at];
-            let dx = offsets[(2 * k + 1) * plane_out + at];
-            let y = (oy * g.stride[0] + ki * g.dilation[0]) as f32 - g.padding[0] as f32 + dy;
-            let x = (ox * g.stride[1] + kj * g.dilation[1]) as f32 - g.padding[1] as f32 + dx;
-            let Some(corners) = Corners::new(y, x, g.h, g.w) else { continue };
-            corners.sample(image, &mut sample[..c]);
-            let weights = &taps[k * g.o * c..][..g.o * c];
-            for oc in 0..g.o {
-                let (sums, weights) = (&mut partial[oc * c..][..c], &weights[oc * c..][..c]);
-                for j in 0..c {
-                    sums[j] += weights[j] * sample[j];
+        let mut partial = [[0f32; C]; O];
+        for_each_tap(g, offsets, oy, ox, |k, corners| {
+            let mut sample = [0f32; C];
+            corners.sample(image, &mut sample);
+            let weights = &taps[k * O * C..][..O * C];
+            for (oc, sums) in partial.iter_mut().enumerate() {
+                for j in 0..C {
+                    sums[j] += weights[oc * C + j] * sample[j];
                 }
             }
-        }
-        for oc in 0..g.o {
-            let sums = &partial[oc * c..][..c];
-            let mut total = 0.0;
-            for &v in sums {
-                total += v;
-            }
-            row[oc * g.out_w + ox] = bias.map_or(0.0, |b| b[oc]) + total;
+        });
+        for (oc, sums) in partial.iter().enumerate() {
+            row[oc * g.out_w + ox] = bias.map_or(0.0, |b| b[oc]) + sums.iter().sum::<f32>();
         }
     }
     row
+}
+
+/// Calls `visit(k, corners)` for every kernel tap `k` of output pixel `(oy, ox)` whose sampling
+/// position (the tap's place moved by its offset) is less than a pixel outside the input; the
+/// other taps sample zero.
+#[inline(always)]
+fn for_each_tap(g: Geometry, offsets: &[f32], oy: usize, ox: usize, mut visit: impl FnMut(usize, &Corners)) {
+    let (plane_out, at) = (g.out_h * g.out_w, oy * g.out_w + ox);
+    for k in 0..g.kh * g.kw {
+        let (ki, kj) = (k / g.kw, k % g.kw);
+        let dy = offsets[2 * k * plane_out + at];
+        let dx = offsets[(2 * k + 1) * plane_out + at];
+        let y = (oy * g.stride[0] + ki * g.dilation[0]) as f32 - g.padding[0] as f32 + dy;
+        let x = (ox * g.stride[1] + kj * g.dilation[1]) as f32 - g.padding[1] as f32 + dx;
+        if let Some(corners) = Corners::new(y, x, g.h, g.w) {
+            visit(k, &corners);
+        }
+    }
 }
 
 /// The four neighbours of a sampling position and their bilinear weights, a neighbour outside
@@ -259,6 +284,7 @@ mod tests {
     fn host_deformable_convolution_agrees_with_burn() {
         case(2, [16, 3], [11, 13], [3, 3], [1, 1, 1], true); // DGIA's shape
         case(1, [8, 3], [7, 9], [3, 3], [1, 1, 1], true); // the other specialised channel count
+        case(1, [16, 4], [6, 5], [3, 3], [1, 1, 1], false); // 16 channels in, not 3 out: generic
         case(1, [5, 4], [9, 7], [3, 3], [2, 1, 1], false);
         case(1, [3, 2], [10, 12], [3, 3], [1, 2, 2], true);
         case(1, [4, 3], [8, 9], [2, 3], [1, 1, 0], true);
