@@ -60,9 +60,33 @@ fn infer_with_a_prior_uses_the_paper_default() {
     ]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("paper-default.safetensors"), "{}", text(&o));
+    assert!(text(&o).contains("(depth prior "), "the pair's line says how long its prior took: {}", text(&o));
     let written: Vec<String> =
         std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert!(written.iter().any(|f| f.ends_with("_disparity.pfm")), "{written:?}");
+}
+
+/// `bench --prior-weights` times the depth prior inside every run of a model that uses one, and
+/// refuses a model that does not.
+#[test]
+fn bench_times_the_depth_prior_of_a_model_with_one() {
+    let Some(shared) = shared_dir_for_test("bench_prior", "golden/depth_anything_v2_vits_random.pth") else {
+        return;
+    };
+    let dav2 = shared.join("golden/depth_anything_v2_vits_random.pth");
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("paper.toml");
+    std::fs::write(&config, "[updater]\nguidance = \"gradient\"\n\n[fusion]\nkind = \"deformable\"\n").unwrap();
+    let bench = |extra: &[&str]| {
+        let mut args = vec!["bench", "--size", "64x64", "--iters", "1", "--runs", "1", "--warmup", "0"];
+        args.extend_from_slice(extra);
+        dgstereo(&args)
+    };
+    let o = bench(&["--config", config.to_str().unwrap(), "--prior-weights", dav2.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("of which the depth prior (Depth Anything V2, both views): median"), "{}", text(&o));
+    let o = bench(&["--prior-weights", dav2.to_str().unwrap()]);
+    assert!(!o.status.success() && text(&o).contains("uses no depth prior"), "{}", text(&o));
 }
 
 #[test]

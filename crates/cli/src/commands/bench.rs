@@ -26,6 +26,7 @@ use dgstereo_costvolume::CorrelationImplementation;
 use dgstereo_model::flops::StageMacs;
 use dgstereo_model::profile::profile_forward;
 use dgstereo_model::{ModelConfig, StereoModel};
+use dgstereo_prior::{PriorConfig, PriorInput, PriorProvider};
 
 /// Options of `dgstereo bench`.
 #[derive(Args)]
@@ -65,6 +66,12 @@ pub struct BenchArgs {
     /// f32-only, so a half precision on the CPU runs burn's operations).
     #[arg(long, default_value = "f32")]
     pub precision: String,
+    /// Depth Anything V2 weights (`depth_anything_v2_vit{s,b,l}.pth`): every run also computes
+    /// the depth prior of both views, as `infer` does, and its time is reported apart (the model
+    /// configuration, `--config`, must use a prior). Without it a model with a prior gets a
+    /// synthetic one, outside the timed runs.
+    #[arg(long)]
+    pub prior_weights: Option<std::path::PathBuf>,
 }
 
 /// Parses `HxW`.
@@ -172,6 +179,20 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         left: Tensor::random([1, 1, h, w], Distribution::Uniform(0.1, 1.0), &device),
         right: Tensor::random([1, 1, h, w], Distribution::Uniform(0.1, 1.0), &device),
     });
+    let provider = match &a.prior_weights {
+        Some(_) if !config.needs_prior() => {
+            bail!(
+                "--prior-weights: this model configuration uses no depth prior (pass --config of a model with fusion or guidance)"
+            )
+        }
+        Some(weights) => Some(
+            PriorConfig::DepthAnythingV2 { weights: weights.clone(), encoder: None, input_size: 518 }
+                .init(&device)
+                .with_context(|| format!("--prior-weights {}", weights.display()))?,
+        ),
+        None => None,
+    };
+    let mut prior_seconds = Vec::new();
     let padder = InputPadder::new(h, w, config.pad_divisor());
     let padded = padder.padded();
     let macs = StageMacs::new(&config, padded).forward(a.iters, 1);
@@ -183,7 +204,22 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let mut predict = || -> anyhow::Result<(f64, f64)> {
         let cpu = process_cpu_seconds();
         let start = Instant::now();
-        let out = model.predict(left.clone(), right.clone(), prior.as_ref(), a.iters, false, Some(implementation))?;
+        let computed = match &provider {
+            Some(p) => {
+                let input = PriorInput {
+                    left: left.clone(),
+                    right: right.clone(),
+                    gt_disparity: None,
+                    names: vec!["bench".into()],
+                };
+                let computed = p.provide(&input)?;
+                prior_seconds.push(start.elapsed().as_secs_f64());
+                computed
+            }
+            None => None,
+        };
+        let prior = computed.as_ref().or(prior.as_ref());
+        let out = model.predict(left.clone(), right.clone(), prior, a.iters, false, Some(implementation))?;
         let data = out.last().into_data(); // waits for asynchronous backends
         let wall = start.elapsed().as_secs_f64();
         let cpu = process_cpu_seconds().zip(cpu).map_or(f64::NAN, |(b, a)| b - a);
@@ -205,9 +241,15 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     }
     let mut times: Vec<f64> = runs.iter().map(|r| r.0).collect();
     let mut cpu: Vec<f64> = runs.iter().map(|r| r.1).collect();
+    // The warm-up's priors come first; the timed runs' are the last `runs`.
+    let timed_priors = prior_seconds.split_off(prior_seconds.len().saturating_sub(a.runs));
+    // The operation count is the stereo network's: with a timed prior its rate is over the
+    // network's share of each run.
+    let mut network: Vec<f64> =
+        times.iter().zip(timed_priors.iter().chain(std::iter::repeat(&0.0))).map(|(t, p)| t - p).collect();
     let min = times.iter().copied().fold(f64::INFINITY, f64::min);
     let med = median(&mut times);
-    let gflops = 2.0 * macs as f64 / med / 1e9;
+    let gflops = 2.0 * macs as f64 / median(&mut network) / 1e9;
     println!(
         "size {h}x{w} (padded {}x{}), {} iterations, {} cost volume, device {}, {precision}, {kernels} kernels, {} threads",
         padded[0],
@@ -220,6 +262,13 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     println!("{}", machine_line());
     println!("runs {} after {} warm-up: median {med:.3} s, min {min:.3} s", a.runs, a.warmup);
     println!("CPU time per run (all threads): median {:.2} s", median(&mut cpu));
+    if !timed_priors.is_empty() {
+        let mut timed = timed_priors.clone();
+        println!(
+            "of which the depth prior (Depth Anything V2, both views): median {:.3} s; the GFLOP/s below are the network's",
+            median(&mut timed)
+        );
+    }
     println!("throughput {:.3} megapixels/s", (h * w) as f64 / 1e6 / med);
     println!(
         "work {:.1} GFLOP (direct convolutions): {gflops:.1} GFLOP/s effective ({:.0} % of a {:.0} GFLOP/s peak)",
