@@ -67,7 +67,7 @@ fn infer_with_a_prior_uses_the_paper_default() {
 }
 
 /// `bench --prior-weights` times the depth prior inside every run of a model that uses one, and
-/// refuses a model that does not.
+/// refuses a model that does not and a half precision (the prior runs in f32, as in `infer`).
 #[test]
 fn bench_times_the_depth_prior_of_a_model_with_one() {
     let Some(shared) = shared_dir_for_test("bench_prior", "golden/depth_anything_v2_vits_random.pth") else {
@@ -87,6 +87,9 @@ fn bench_times_the_depth_prior_of_a_model_with_one() {
     assert!(text(&o).contains("of which the depth prior (Depth Anything V2, both views): median"), "{}", text(&o));
     let o = bench(&["--prior-weights", dav2.to_str().unwrap()]);
     assert!(!o.status.success() && text(&o).contains("uses no depth prior"), "{}", text(&o));
+    let half = ["--config", config.to_str().unwrap(), "--prior-weights", dav2.to_str().unwrap(), "--precision", "f16"];
+    let o = bench(&half);
+    assert!(!o.status.success() && text(&o).contains("runs in f32 only"), "{}", text(&o));
 }
 
 #[test]

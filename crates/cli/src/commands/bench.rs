@@ -180,6 +180,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         right: Tensor::random([1, 1, h, w], Distribution::Uniform(0.1, 1.0), &device),
     });
     let provider = match &a.prior_weights {
+        Some(_) if precision != Precision::F32 => {
+            bail!("--precision {precision}: the depth prior runs in f32 only; leave out --precision or --prior-weights")
+        }
         Some(_) if !config.needs_prior() => {
             bail!(
                 "--prior-weights: this model configuration uses no depth prior (pass --config of a model with fusion or guidance)"
