@@ -16,6 +16,13 @@ fn demo_metric(stdout: &str, key: &str) -> f64 {
     json[key].as_f64().unwrap()
 }
 
+/// The golden Depth Anything V2 (ViT-S, random weights) checkpoint in the shared data, or `None`
+/// (with the printed notice) where the shared data is missing outside CI.
+fn golden_depth_anything(test: &str) -> Option<std::path::PathBuf> {
+    const FILE: &str = "golden/depth_anything_v2_vits_random.pth";
+    shared_dir_for_test(test, FILE).map(|shared| shared.join(FILE))
+}
+
 #[test]
 fn demo_runs_the_bundled_default_and_it_has_learned() {
     let weights = assets().join("weights/raft-stereo-default.safetensors");
@@ -41,10 +48,7 @@ fn demo_runs_the_bundled_default_and_it_has_learned() {
 
 #[test]
 fn infer_with_a_prior_uses_the_paper_default() {
-    let Some(shared) = shared_dir_for_test("paper_default", "golden/depth_anything_v2_vits_random.pth") else {
-        return;
-    };
-    let dav2 = shared.join("golden/depth_anything_v2_vits_random.pth");
+    let Some(dav2) = golden_depth_anything("paper_default") else { return };
     let dir = tempfile::tempdir().unwrap();
     let o = infer_cones(&[
         "--prior-weights",
@@ -70,10 +74,7 @@ fn infer_with_a_prior_uses_the_paper_default() {
 /// refuses a model that does not and a half precision (the prior runs in f32, as in `infer`).
 #[test]
 fn bench_times_the_depth_prior_of_a_model_with_one() {
-    let Some(shared) = shared_dir_for_test("bench_prior", "golden/depth_anything_v2_vits_random.pth") else {
-        return;
-    };
-    let dav2 = shared.join("golden/depth_anything_v2_vits_random.pth");
+    let Some(dav2) = golden_depth_anything("bench_prior") else { return };
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("paper.toml");
     std::fs::write(&config, "[updater]\nguidance = \"gradient\"\n\n[fusion]\nkind = \"deformable\"\n").unwrap();
