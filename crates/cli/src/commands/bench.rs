@@ -245,7 +245,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let mut times: Vec<f64> = runs.iter().map(|r| r.0).collect();
     let mut cpu: Vec<f64> = runs.iter().map(|r| r.1).collect();
     // The warm-up's priors come first; the timed runs' are the last `runs`.
-    let timed_priors = prior_seconds.split_off(prior_seconds.len().saturating_sub(a.runs));
+    let mut timed_priors = prior_seconds.split_off(prior_seconds.len().saturating_sub(a.runs));
     // The operation count is the stereo network's: with a timed prior its rate is over the
     // network's share of each run.
     let mut network: Vec<f64> =
@@ -266,10 +266,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     println!("runs {} after {} warm-up: median {med:.3} s, min {min:.3} s", a.runs, a.warmup);
     println!("CPU time per run (all threads): median {:.2} s", median(&mut cpu));
     if !timed_priors.is_empty() {
-        let mut timed = timed_priors.clone();
         println!(
             "of which the depth prior (Depth Anything V2, both views): median {:.3} s; the GFLOP/s below are the network's",
-            median(&mut timed)
+            median(&mut timed_priors)
         );
     }
     println!("throughput {:.3} megapixels/s", (h * w) as f64 / 1e6 / med);

@@ -252,6 +252,7 @@ impl DinoVisionTransformer {
 mod tests {
     use burn::tensor::Distribution;
     use burn::tensor::activation::softmax;
+    use dgstereo_core::tensor::max_abs_diff;
 
     use super::*;
 
@@ -274,7 +275,7 @@ mod tests {
             let composed = softmax(scores, 3).matmul(take(2)).swap_dims(1, 2).reshape([2, tokens, 32]);
             let want = attn.proj.forward(composed);
             let got = attn.forward(x);
-            let err: f32 = (got - want.clone()).abs().max().into_scalar();
+            let err = max_abs_diff(got, want.clone());
             let scale: f32 = want.abs().max().into_scalar();
             assert!(err <= 1e-5 * scale, "{tokens} tokens: max error {err} of {scale}");
         }
