@@ -46,6 +46,8 @@
 //! The products go through [`crate::host_conv::matmul_strided_with`], the workspace's one call
 //! of the `gemm` crate's `unsafe` entry point.
 
+mod blocks;
+mod simd;
 mod split;
 mod weight_cache;
 
@@ -169,8 +171,9 @@ thread_local! {
     static BUFFERS: std::cell::RefCell<[Vec<f32>; 3]> = const { std::cell::RefCell::new([Vec::new(), Vec::new(), Vec::new()]) };
 }
 
-/// A 3x3, stride-1 convolution by Winograd `variant`, with the bias and `epilogue` applied.
-/// Returns the output and its dimensions.
+/// A 3x3, stride-1 convolution by Winograd `variant`, with the bias and `epilogue` applied:
+/// F(4x4) with few channels in blocks of tiles ([`blocks`]), otherwise in bands. Returns the
+/// output and its dimensions.
 ///
 /// # Shapes
 /// - `x`: `x_dims = [N, C, H, W]` (NCHW); `wt`: `[O, C, 3, 3]` (OIHW); `bias`: `[O]`
@@ -178,6 +181,24 @@ thread_local! {
 ///   W + left + right - 2]`
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn winograd_conv(
+    variant: &Variant,
+    x: &[f32],
+    x_dims: [usize; 4],
+    wt: &[f32],
+    o: usize,
+    bias: Option<&[f32]>,
+    padding: [(usize, usize); 2],
+    epilogue: Epilogue,
+) -> (Vec<f32>, [usize; 4]) {
+    if variant.m == 4 && blocks::suits(x_dims[1], o) {
+        return blocks::blocked_conv(x, x_dims, wt, o, bias, padding, epilogue);
+    }
+    band_conv(variant, x, x_dims, wt, o, bias, padding, epilogue)
+}
+
+/// [`winograd_conv`] in bands of whole tile rows (the module's doc).
+#[allow(clippy::too_many_arguments)]
+fn band_conv(
     variant: &Variant,
     x: &[f32],
     x_dims: [usize; 4],
@@ -514,7 +535,8 @@ mod tests {
     use crate::host_conv::im2col_conv_slices;
     use crate::tensor::to_vec;
 
-    /// Both variants against burn's convolution (the reference) and the im2col path on one
+    /// Both variants in bands, and F(4x4) in blocks compiled for each instruction set the
+    /// processor has, against burn's convolution (the reference) and the im2col path on one
     /// shape, without and with ReLU; returns each variant's largest error relative to the
     /// reference output's largest magnitude (F(2x2) within 1e-5, F(4x4) within 4e-5).
     fn case(n: usize, [c, o]: [usize; 2], [h, w]: [usize; 2], padding: [(usize, usize); 2], bias: bool) -> [f32; 2] {
@@ -532,15 +554,23 @@ mod tests {
         for epilogue in [Epilogue::Linear, Epilogue::Relu] {
             let finish = |v: f32| if epilogue == Epilogue::Relu { v.max(0.0) } else { v };
             let (im2col, _) = im2col_conv_slices(&x, [n, c, h, w], &wt, [o, c, 3, 3], b.as_deref(), &options, epilogue);
-            for (worst, (variant, bound)) in worst.iter_mut().zip([(&F2, 1e-5), (&F4, 4e-5)]) {
-                let (got, got_dims) = winograd_conv(variant, &x, [n, c, h, w], &wt, o, b.as_deref(), padding, epilogue);
-                assert_eq!(got_dims, dims, "{shape}");
+            // F(2x2) and F(4x4) in bands, then F(4x4) in blocks for every instruction set here.
+            let bands = [&F2, &F4].map(|variant| {
+                let got = band_conv(variant, &x, [n, c, h, w], &wt, o, b.as_deref(), padding, epilogue);
+                (format!("F({}) bands", variant.m), variant.m, got)
+            });
+            let blocks = blocks::Isa::available().into_iter().map(|isa| {
+                let got = blocks::blocked_conv_with(isa, &x, [n, c, h, w], &wt, o, b.as_deref(), padding, epilogue);
+                (format!("F(4) blocks {isa:?}"), 4, got)
+            });
+            for (path, m, (got, got_dims)) in bands.into_iter().chain(blocks) {
+                let (worst, bound) = if m == 2 { (&mut worst[0], 1e-5) } else { (&mut worst[1], 4e-5) };
+                assert_eq!(got_dims, dims, "{shape} {path}");
                 for ((g, e), i) in got.iter().zip(&expected).zip(&im2col) {
                     let (e, err) = (finish(*e), (g - finish(*e)).abs() / scale);
                     assert!(
                         err <= bound && (i - e).abs() / scale <= 1e-5,
-                        "{shape} F({m}) {epilogue:?}: winograd {g}, im2col {i}, burn {e} (scale {scale})",
-                        m = variant.m
+                        "{shape} {path} {epilogue:?}: winograd {g}, im2col {i}, burn {e} (scale {scale})",
                     );
                     *worst = worst.max(err);
                 }
@@ -573,6 +603,11 @@ mod tests {
         // Several bands per image: one tile row per band (150 to 300 tiles a row), narrow rows.
         case(1, [4, 5], [11, 600], [(1, 1), (1, 1)], true);
         case(2, [3, 4], [71, 9], [(1, 1), (1, 1)], true);
+        // Rows of whole vectors of tiles and a partial last tile (the blocked path's shuffles at
+        // both row ends, blocks and vectors that cross tile rows), unpadded and asymmetric.
+        case(1, [3, 4], [13, 141], [(1, 1), (1, 1)], true);
+        case(1, [2, 3], [10, 133], [(0, 0), (0, 0)], false);
+        case(2, [3, 2], [9, 150], [(2, 1), (0, 3)], true);
         // Smaller again after the large bands: the threads' reused buffers hold stale values.
         case(1, [2, 2], [4, 4], [(1, 1), (1, 1)], true);
     }

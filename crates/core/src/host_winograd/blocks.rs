@@ -1,0 +1,481 @@
+//! F(4x4, 3x3) in blocks of [`LANES`] tiles whose transforms and products stay in the core's
+//! caches: the path for convolutions with few channels on large grids.
+//!
+//! Design decision: the band path of the parent module writes a band's transformed inputs
+//! (`C x 36 x T`, megabytes for the encoders' 64-channel layers at full resolution) before the
+//! `gemm` crate packs them again for its products, and reads the products back from the same
+//! distance; on those layers the transforms, the packing and their page faults took about three
+//! quarters of the time and the products a quarter. Here a band is cut into blocks of [`LANES`]
+//! consecutive tiles (across tile rows), and each block runs start to end while its data are
+//! small: the input transform of all channels (`36 x C x LANES`), the 36 products by a kernel
+//! of our own over weights packed once per call (`[36][O/8][C][8]`, so no packing per product),
+//! and the output transform (`O x 36 x LANES`) straight into the output rows. Every step is
+//! vectorised over the block's tiles.
+//!
+//! The kernel keeps 8 output channels by `L` tiles of sums in registers (`L` = 32 with
+//! AVX-512, 16 with AVX2, 8 otherwise: 16 vector registers in each case) and adds one input
+//! channel's products per step (two vector loads and eight broadcasts for sixteen fused
+//! multiply-adds). The transforms are the factored F(4x4) formulas ([`input_1d`],
+//! [`output_1d`]); the tiles' input columns are split into their four phases, and the output
+//! tiles' columns merged back into rows, by vector shuffles ([`Simd::deinterleave4`]). The
+//! whole band body is compiled three times, for AVX-512, AVX2 with FMA and the baseline, and
+//! chosen at run time ([`Isa`]); the vectors are `std::arch` intrinsics behind the small
+//! [`Simd`] trait. What it took, measured on a 64-channel layer: the same loops over
+//! fixed-size arrays left to the autovectoriser ran about 10x slower (sums kept in memory,
+//! scalar fused multiply-adds); a closure or an array `map` inside the body is compiled without
+//! the body's instruction set, so the intrinsics in it become calls (20-30 % slower); prefetching
+//! the input rows two channels ahead ([`PREFETCH_CHANNELS`]) took 8 % (64 channels) to 20 % (96
+//! channels) off.
+
+use std::sync::OnceLock;
+
+use super::simd::{self, Simd};
+use super::*;
+
+/// Tiles per block: the vectors of the transforms and the kernel's columns.
+const LANES: usize = 32;
+/// Output channels per kernel step.
+const ROWS: usize = 8;
+/// Positions of the transformed tile, α² of F(4x4).
+const K2: usize = 36;
+
+/// Most `C·O` (input times output channels) for which the blocked path runs: above it the
+/// transformed weight (`36·C·O` values, read once per block of [`LANES`] tiles) outgrows the
+/// core's caches, and the band path's products over hundreds of tiles per read of the weight
+/// win. Measured on the Xeon in one process alternating both paths, one image, 15 rounds, min
+/// (median) ms, bands -> blocks: 64->64 at 384x448 88.4 (121.7) -> 57.2 (81.8), at 384x1248
+/// 241 (298) -> 173 (204), at 96x112 5.0 (7.6) -> 4.0 (5.9); 96->96 at 192x224 30.8 (44.9) ->
+/// 24.0 (33.8), at 192x624 103 (114) -> 83 (98); 128->128 at 96x112 11.0 (16.9) -> 11.1
+/// (16.9), at 96x312 39.4 (44.2) -> 34.3 (38.7); 128->126 at 96x112 14.4 (18.2) -> 13.7 (16.7);
+/// 384->128 at 96x112 34.5 (39.4) -> 46.5 (52.5).
+pub(crate) const MAX_CHANNEL_PRODUCT: usize = 128 * 128;
+
+/// Whether the blocked path takes an F(4x4) convolution of `c` input and `o` output channels
+/// (see [`MAX_CHANNEL_PRODUCT`]), unless `DGSTEREO_WINOGRAD_BLOCKS=0` turns it off (read once).
+pub(crate) fn suits(c: usize, o: usize) -> bool {
+    static OFF: OnceLock<bool> = OnceLock::new();
+    let off = *OFF.get_or_init(|| std::env::var("DGSTEREO_WINOGRAD_BLOCKS").is_ok_and(|v| v == "0"));
+    !off && c * o <= MAX_CHANNEL_PRODUCT
+}
+
+/// A 3x3, stride-1 convolution by F(4x4, 3x3) in cache-resident blocks of tiles, with the bias
+/// and `epilogue` applied; the same contract as [`winograd_conv`].
+///
+/// # Shapes
+/// - `x`: `x_dims = [N, C, H, W]` (NCHW); `wt`: `[O, C, 3, 3]` (OIHW); `bias`: `[O]`
+/// - output `[N, O, H + top + bottom - 2, W + left + right - 2]`
+pub(crate) fn blocked_conv(
+    x: &[f32],
+    x_dims: [usize; 4],
+    wt: &[f32],
+    o: usize,
+    bias: Option<&[f32]>,
+    padding: [(usize, usize); 2],
+    epilogue: Epilogue,
+) -> (Vec<f32>, [usize; 4]) {
+    blocked_conv_with(Isa::detect(), x, x_dims, wt, o, bias, padding, epilogue)
+}
+
+/// [`blocked_conv`] compiled for `isa` (which the processor must have).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn blocked_conv_with(
+    isa: Isa,
+    x: &[f32],
+    x_dims: [usize; 4],
+    wt: &[f32],
+    o: usize,
+    bias: Option<&[f32]>,
+    padding: [(usize, usize); 2],
+    epilogue: Epilogue,
+) -> (Vec<f32>, [usize; 4]) {
+    let c = x_dims[1];
+    assert_eq!(wt.len(), o * c * 9, "winograd_conv: the weight is not [{o}, {c}, 3, 3]");
+    let plan = Plan::new(&F4, x_dims, padding);
+    let packed = pack_weights(&transformed_weights(&F4, wt, o, c), o, c);
+    plan.run(x, o, &mut vec![(); plan.jobs()], |job, image, mut planes, _, [v, mm, _]| {
+        let v = reuse_buffer(v, K2 * c * LANES);
+        let mm = reuse_buffer(mm, o.next_multiple_of(ROWS) * K2 * LANES);
+        let band = Band { g: plan.tiling, tile_rows: plan.tile_rows(job), packed: &packed, o, bias, epilogue };
+        isa.run(&band, image, &mut planes, v, mm);
+    })
+}
+
+/// `U` (`[O][36][C]`, [`transform_weights`]) repacked as `[36][O/8][C][8]`, the output channels
+/// padded with zeros to a multiple of 8: the kernel's eight weights of one input channel are
+/// adjacent.
+fn pack_weights(u: &[f32], o: usize, c: usize) -> Vec<f32> {
+    let groups = o.div_ceil(ROWS);
+    let mut packed = vec![0.0; K2 * groups * c * ROWS];
+    packed.par_chunks_mut(groups * c * ROWS).enumerate().for_each(|(k, dst)| {
+        for oc in 0..o {
+            let (group, r) = (oc / ROWS, oc % ROWS);
+            for (ci, &value) in u[(oc * K2 + k) * c..][..c].iter().enumerate() {
+                dst[(group * c + ci) * ROWS + r] = value;
+            }
+        }
+    });
+    packed
+}
+
+/// The instruction set the block body is compiled for, detected at run time.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Isa {
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    Baseline,
+}
+
+impl Isa {
+    fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("fma") {
+                return Self::Avx512;
+            }
+            if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+                return Self::Avx2;
+            }
+        }
+        Self::Baseline
+    }
+
+    /// Every set this processor runs, the best first (the tests run each).
+    #[cfg(test)]
+    pub(super) fn available() -> Vec<Self> {
+        let mut sets = vec![Self::Baseline];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+                sets.insert(0, Self::Avx2);
+            }
+            if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("fma") {
+                sets.insert(0, Self::Avx512);
+            }
+        }
+        sets
+    }
+
+    #[allow(unsafe_code)]
+    fn run(self, band: &Band, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f32], mm: &mut [f32]) {
+        match self {
+            // SAFETY: `detect` chose these only where the processor has the features.
+            #[cfg(target_arch = "x86_64")]
+            Self::Avx512 => unsafe { band_avx512(band, image, planes, v, mm) },
+            #[cfg(target_arch = "x86_64")]
+            Self::Avx2 => unsafe { band_avx2(band, image, planes, v, mm) },
+            Self::Baseline => band.run::<simd::Baseline>(image, planes, v, mm),
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma")]
+fn band_avx512(band: &Band, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f32], mm: &mut [f32]) {
+    band.run::<simd::Avx512>(image, planes, v, mm)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn band_avx2(band: &Band, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f32], mm: &mut [f32]) {
+    band.run::<simd::Avx2>(image, planes, v, mm)
+}
+
+/// `Bᵀ d` of F(4x4) (the rows of [`F4`]'s `bt`) on six vectors, in the factored form: 6
+/// additions and 8 fused multiply-adds instead of 20 products.
+#[inline(always)]
+fn input_1d<S: Simd>([d0, d1, d2, d3, d4, d5]: [S; 6]) -> [S; 6] {
+    let k = S::splat;
+    let (sum12, diff12) = (d1.add(d2), d1.sub(d2));
+    let (a, b) = (d4.sub(d2), d3.sub(d1));
+    [
+        k(4.0).mul_add(d0, k(-5.0).mul_add(d2, d4)),
+        k(-4.0).mul_add(sum12, d3.add(d4)),
+        k(4.0).mul_add(diff12, d4.sub(d3)),
+        k(2.0).mul_add(b, a),
+        k(-2.0).mul_add(b, a),
+        k(4.0).mul_add(d1, k(-5.0).mul_add(d3, d5)),
+    ]
+}
+
+/// Six vectors `stride` values apart from the start of `src`.
+#[inline(always)]
+fn load6<S: Simd>(src: &[f32], stride: usize) -> [S; 6] {
+    [
+        S::load(src),
+        S::load(&src[stride..]),
+        S::load(&src[2 * stride..]),
+        S::load(&src[3 * stride..]),
+        S::load(&src[4 * stride..]),
+        S::load(&src[5 * stride..]),
+    ]
+}
+
+/// `Aᵀ m` of F(4x4) (the rows of [`F4`]'s `at`) on six vectors, factored likewise.
+#[inline(always)]
+fn output_1d<S: Simd>([m0, m1, m2, m3, m4, m5]: [S; 6]) -> [S; 4] {
+    let k = S::splat;
+    let (sum12, diff12, sum34, diff34) = (m1.add(m2), m1.sub(m2), m3.add(m4), m3.sub(m4));
+    [
+        m0.add(sum12).add(sum34),
+        k(2.0).mul_add(diff34, diff12),
+        k(4.0).mul_add(sum34, sum12),
+        k(8.0).mul_add(diff34, diff12).add(m5),
+    ]
+}
+
+/// Channels ahead whose input rows [`Band::transform_inputs`] prefetches: a block's rows of one
+/// channel are hundreds of separate lines, too many streams for the hardware prefetcher.
+const PREFETCH_CHANNELS: usize = 2;
+
+/// Prefetches the cache line holding `value` (a hint: no effect on results).
+#[inline(always)]
+fn prefetch(value: &f32) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: prefetching is a hint that never faults; `value` is a valid reference anyway.
+    #[allow(unsafe_code)]
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(std::ptr::from_ref(value).cast());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
+}
+
+/// One band's work: its tile rows, the packed weights and the output's finishing.
+struct Band<'a> {
+    g: Tiling,
+    tile_rows: Range<usize>,
+    packed: &'a [f32],
+    o: usize,
+    bias: Option<&'a [f32]>,
+    epilogue: Epilogue,
+}
+
+impl Band<'_> {
+    /// Runs every block of the band: `v` holds a block's transformed inputs (`[36][C][LANES]`),
+    /// `mm` its products (`[O][36][LANES]`).
+    #[inline(always)]
+    fn run<S: Simd>(&self, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f32], mm: &mut [f32]) {
+        let total = self.tile_rows.len() * self.g.tiles_w;
+        for start in (0..total).step_by(LANES) {
+            let lanes = (total - start).min(LANES);
+            self.transform_inputs::<S>(image, start, lanes, v);
+            self.products::<S>(v, mm);
+            self.transform_outputs::<S>(mm, start, lanes, planes);
+        }
+    }
+
+    /// The tiles of the block starting at band tile `start`, by tile row: `(tile row within the
+    /// band, first tile column, tiles, first lane)`.
+    #[inline(always)]
+    fn segments(&self, start: usize, lanes: usize) -> impl Iterator<Item = (usize, usize, usize, usize)> {
+        let tw = self.g.tiles_w;
+        let mut lane = 0;
+        std::iter::from_fn(move || {
+            (lane < lanes).then(|| {
+                let t = start + lane;
+                let (row, tx) = (t / tw, t % tw);
+                let count = (tw - tx).min(lanes - lane);
+                let segment = (row, tx, count, lane);
+                lane += count;
+                segment
+            })
+        })
+    }
+
+    /// `V = Bᵀ d B` of the block's tiles, all channels, into `v` (`[36][C][LANES]`); lanes past
+    /// `lanes` get the transform of zeros.
+    #[inline(always)]
+    fn transform_inputs<S: Simd>(&self, image: &[f32], start: usize, lanes: usize, v: &mut [f32]) {
+        let g = self.g;
+        // d[j][lane] of one input row, then its row transform rows[i][jj][lane].
+        let mut d = [[0.0f32; LANES]; 6];
+        let mut rows = [[[0.0f32; LANES]; 6]; 6];
+        for ci in 0..g.c {
+            let channel = &image[ci * g.h * g.w..][..g.h * g.w];
+            if let Some(ahead) =
+                image.get((ci + PREFETCH_CHANNELS) * g.h * g.w..).filter(|_| ci + PREFETCH_CHANNELS < g.c)
+            {
+                self.prefetch_rows(&ahead[..g.h * g.w], start, lanes);
+            }
+            for (i, row_t) in rows.iter_mut().enumerate() {
+                for dj in d.iter_mut() {
+                    dj.fill(0.0);
+                }
+                for (row, tx0, count, lane0) in self.segments(start, lanes) {
+                    let ty = self.tile_rows.start + row;
+                    let Some(iy) = (4 * ty + i).checked_sub(g.ph).filter(|&iy| iy < g.h) else { continue };
+                    gather_row::<S>(&channel[iy * g.w..][..g.w], g.pw, tx0, count, lane0, &mut d);
+                }
+                for l in (0..LANES).step_by(S::WIDTH) {
+                    let t = input_1d(load6::<S>(&d.as_flattened()[l..], LANES));
+                    for (jj, t) in t.into_iter().enumerate() {
+                        t.store(&mut row_t[jj][l..]);
+                    }
+                }
+            }
+            for jj in 0..6 {
+                for l in (0..LANES).step_by(S::WIDTH) {
+                    let column = load6::<S>(&rows.as_flattened().as_flattened()[jj * LANES + l..], 6 * LANES);
+                    for (ii, value) in input_1d(column).into_iter().enumerate() {
+                        value.store(&mut v[((6 * ii + jj) * g.c + ci) * LANES + l..]);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Asks the processor to fetch the block's input rows of `channel` into its caches.
+    #[inline(always)]
+    fn prefetch_rows(&self, channel: &[f32], start: usize, lanes: usize) {
+        let g = self.g;
+        for (row, tx0, count, _) in self.segments(start, lanes) {
+            let first = (4 * (self.tile_rows.start + row)).saturating_sub(g.ph);
+            let x0 = (4 * tx0).saturating_sub(g.pw);
+            let len = (4 * count + 2).min(g.w - x0.min(g.w));
+            for iy in first..(first + 6).min(g.h) {
+                let span = &channel[iy * g.w + x0..][..len];
+                for at in (0..len).step_by(16) {
+                    prefetch(&span[at]);
+                }
+                prefetch(&span[len - 1]);
+            }
+        }
+    }
+
+    /// `M_k = U_k V_k` for the 36 positions: `mm[o][k][lane]`, two vectors of lanes by
+    /// [`ROWS`] output channels of sums at a time.
+    #[inline(always)]
+    fn products<S: Simd>(&self, v: &[f32], mm: &mut [f32]) {
+        let c = self.g.c;
+        let groups = self.o.div_ceil(ROWS);
+        let w = S::WIDTH;
+        for k in 0..K2 {
+            let vk = &v[k * c * LANES..][..c * LANES];
+            for group in 0..groups {
+                let uk = &self.packed[(k * groups + group) * c * ROWS..][..c * ROWS];
+                for half in (0..LANES).step_by(2 * w) {
+                    let mut acc = [[S::splat(0.0); 2]; ROWS];
+                    let (uk, vk) = (uk.as_chunks::<ROWS>().0, vk.as_chunks::<LANES>().0);
+                    for (u, vv) in uk.iter().zip(vk) {
+                        let x = [S::load(&vv[half..]), S::load(&vv[half + w..])];
+                        for r in 0..ROWS {
+                            let b = S::splat(u[r]);
+                            acc[r][0] = b.mul_add(x[0], acc[r][0]);
+                            acc[r][1] = b.mul_add(x[1], acc[r][1]);
+                        }
+                    }
+                    for (r, sums) in acc.iter().enumerate() {
+                        let dst = &mut mm[((group * ROWS + r) * K2 + k) * LANES + half..];
+                        sums[0].store(dst);
+                        sums[1].store(&mut dst[w..]);
+                    }
+                }
+            }
+        }
+    }
+
+    /// `Y = Aᵀ M A` of the block's first `lanes` tiles, plus the bias and the epilogue, into the
+    /// band's output rows.
+    #[inline(always)]
+    fn transform_outputs<S: Simd>(&self, mm: &[f32], start: usize, lanes: usize, planes: &mut [&mut [f32]]) {
+        let g = self.g;
+        let relu = self.epilogue == Epilogue::Relu;
+        let mut y = [[[0.0f32; LANES]; 4]; 4];
+        for (oc, plane) in planes.iter_mut().enumerate() {
+            let m = &mm[oc * K2 * LANES..][..K2 * LANES];
+            let add = S::splat(self.bias.map_or(0.0, |b| b[oc]));
+            for l in (0..LANES).step_by(S::WIDTH) {
+                // Column j of `Aᵀ M`: tmp[j][r] = Σ_i Aᵀ[r][i] M[i][j]; then row r of Y from
+                // tmp[.][r].
+                // (No closure here: it would be compiled without the caller's instruction set.)
+                let m = &m[l..];
+                let tmp = [
+                    output_1d(load6::<S>(m, 6 * LANES)),
+                    output_1d(load6::<S>(&m[LANES..], 6 * LANES)),
+                    output_1d(load6::<S>(&m[2 * LANES..], 6 * LANES)),
+                    output_1d(load6::<S>(&m[3 * LANES..], 6 * LANES)),
+                    output_1d(load6::<S>(&m[4 * LANES..], 6 * LANES)),
+                    output_1d(load6::<S>(&m[5 * LANES..], 6 * LANES)),
+                ];
+                for (r, y_r) in y.iter_mut().enumerate() {
+                    let row = output_1d([tmp[0][r], tmp[1][r], tmp[2][r], tmp[3][r], tmp[4][r], tmp[5][r]]);
+                    for (s, value) in row.into_iter().enumerate() {
+                        let value = value.add(add);
+                        let value = if relu { value.max(S::splat(0.0)) } else { value };
+                        value.store(&mut y_r[s][l..]);
+                    }
+                }
+            }
+            for (row, tx0, count, lane0) in self.segments(start, lanes) {
+                for (r, y_r) in y.iter().enumerate() {
+                    let oy = 4 * row + r;
+                    let Some(line) = plane.get_mut(oy * g.out_w..(oy + 1) * g.out_w) else { break };
+                    scatter_row::<S>(y_r, tx0, count, lane0, line);
+                }
+            }
+        }
+    }
+}
+
+/// Fills `d[j][lane0 + n] = line[4·(tx0 + n) + j - pw]` (zero outside the row) for the `count`
+/// tiles of one segment: whole vectors of lanes by [`Simd::deinterleave4`], from the row where
+/// the vector's values lie inside it, else from a zero-padded copy; single lanes where a vector
+/// would cross the segment's ends.
+#[inline(always)]
+fn gather_row<S: Simd>(line: &[f32], pw: usize, tx0: usize, count: usize, lane0: usize, d: &mut [[f32; LANES]; 6]) {
+    let w = S::WIDTH;
+    let mut stage = [0.0f32; LANES * 4 + 4];
+    let mut n = 0;
+    while n < count {
+        let (lane, x0) = (lane0 + n, 4 * (tx0 + n));
+        if lane % w == 0 && n + w <= count {
+            // Values x0 - pw .. x0 - pw + 4w + 4 of the row (the last two unused).
+            let span = 4 * w + 4;
+            let src = if x0 >= pw && x0 - pw + span <= line.len() {
+                &line[x0 - pw..][..span]
+            } else {
+                let stage = &mut stage[..span];
+                for (k, value) in stage.iter_mut().enumerate() {
+                    *value = (x0 + k).checked_sub(pw).and_then(|x| line.get(x)).copied().unwrap_or(0.0);
+                }
+                &*stage
+            };
+            let [p0, p1, p2, p3] = S::deinterleave4(src);
+            let [q0, q1, _, _] = S::deinterleave4(&src[4..]);
+            for (j, phase) in [p0, p1, p2, p3, q0, q1].into_iter().enumerate() {
+                phase.store(&mut d[j][lane..]);
+            }
+            n += w;
+        } else {
+            for (j, dj) in d.iter_mut().enumerate() {
+                dj[lane] = (x0 + j).checked_sub(pw).and_then(|x| line.get(x)).copied().unwrap_or(0.0);
+            }
+            n += 1;
+        }
+    }
+}
+
+/// Writes `line[4·(tx0 + n) + s] = y[s][lane0 + n]` for the `count` tiles of one segment,
+/// clipped to the row: whole vectors of lanes by [`Simd::interleave4`] where they fit, else lane
+/// by lane.
+#[inline(always)]
+fn scatter_row<S: Simd>(y: &[[f32; LANES]; 4], tx0: usize, count: usize, lane0: usize, line: &mut [f32]) {
+    let w = S::WIDTH;
+    let mut n = 0;
+    while n < count {
+        let (lane, x0) = (lane0 + n, 4 * (tx0 + n));
+        if lane % w == 0 && n + w <= count && x0 + 4 * w <= line.len() {
+            let phases =
+                [S::load(&y[0][lane..]), S::load(&y[1][lane..]), S::load(&y[2][lane..]), S::load(&y[3][lane..])];
+            S::interleave4(phases, &mut line[x0..]);
+            n += w;
+        } else {
+            for s in 0..4.min(line.len() - x0) {
+                line[x0 + s] = y[s][lane];
+            }
+            n += 1;
+        }
+    }
+}
