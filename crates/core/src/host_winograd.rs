@@ -190,8 +190,8 @@ pub(crate) fn winograd_conv(
     padding: [(usize, usize); 2],
     epilogue: Epilogue,
 ) -> (Vec<f32>, [usize; 4]) {
-    if variant.m == 4 && blocks::suits(x_dims[1], o) {
-        return blocks::blocked_conv(x, x_dims, wt, o, bias, padding, epilogue);
+    if let Some(isa) = blocks::instruction_set(x_dims[1], o).filter(|_| variant.m == 4) {
+        return blocks::blocked_conv(isa, x, x_dims, wt, o, bias, padding, epilogue);
     }
     band_conv(variant, x, x_dims, wt, o, bias, padding, epilogue)
 }
@@ -560,7 +560,7 @@ mod tests {
                 (format!("F({}) bands", variant.m), variant.m, got)
             });
             let blocks = blocks::Isa::available().into_iter().map(|isa| {
-                let got = blocks::blocked_conv_with(isa, &x, [n, c, h, w], &wt, o, b.as_deref(), padding, epilogue);
+                let got = blocks::blocked_conv(isa, &x, [n, c, h, w], &wt, o, b.as_deref(), padding, epilogue);
                 (format!("F(4) blocks {isa:?}"), 4, got)
             });
             for (path, m, (got, got_dims)) in bands.into_iter().chain(blocks) {

@@ -12,15 +12,14 @@
 //! and the output transform (`O x 36 x LANES`) straight into the output rows. Every step is
 //! vectorised over the block's tiles.
 //!
-//! The kernel keeps 8 output channels by `L` tiles of sums in registers (`L` = 32 with
-//! AVX-512, 16 with AVX2, 8 otherwise: 16 vector registers in each case) and adds one input
-//! channel's products per step (two vector loads and eight broadcasts for sixteen fused
+//! The kernel keeps 8 output channels by 32 tiles of sums in 16 vector registers and adds one
+//! input channel's products per step (two vector loads and eight broadcasts for sixteen fused
 //! multiply-adds). The transforms are the factored F(4x4) formulas ([`input_1d`],
 //! [`output_1d`]); the tiles' input columns are split into their four phases, and the output
 //! tiles' columns merged back into rows, by vector shuffles ([`Simd::deinterleave4`]). The
-//! whole band body is compiled three times, for AVX-512, AVX2 with FMA and the baseline, and
-//! chosen at run time ([`Isa`]); the vectors are `std::arch` intrinsics behind the small
-//! [`Simd`] trait. What it took, measured on a 64-channel layer: the same loops over
+//! band body is compiled for AVX-512 and runs where the processor has it ([`Isa`]; elsewhere
+//! the band path runs); the vectors are `std::arch` intrinsics behind the small [`Simd`]
+//! trait. What it took, measured on a 64-channel layer: the same loops over
 //! fixed-size arrays left to the autovectoriser ran about 10x slower (sums kept in memory,
 //! scalar fused multiply-adds); a closure or an array `map` inside the body is compiled without
 //! the body's instruction set, so the intrinsics in it become calls (20-30 % slower); prefetching
@@ -50,35 +49,25 @@ const K2: usize = 36;
 /// 384->128 at 96x112 34.5 (39.4) -> 46.5 (52.5).
 pub(crate) const MAX_CHANNEL_PRODUCT: usize = 128 * 128;
 
-/// Whether the blocked path takes an F(4x4) convolution of `c` input and `o` output channels
-/// (see [`MAX_CHANNEL_PRODUCT`]), unless `DGSTEREO_WINOGRAD_BLOCKS=0` turns it off (read once).
-pub(crate) fn suits(c: usize, o: usize) -> bool {
+/// The instruction set for the blocked path to take an F(4x4) convolution of `c` input and
+/// `o` output channels: AVX-512 where the processor has it and `C·O` is at most
+/// [`MAX_CHANNEL_PRODUCT`]; `None` (the band path) otherwise, or where
+/// `DGSTEREO_WINOGRAD_BLOCKS=0` (read once) turns the path off.
+pub(crate) fn instruction_set(c: usize, o: usize) -> Option<Isa> {
     static OFF: OnceLock<bool> = OnceLock::new();
     let off = *OFF.get_or_init(|| std::env::var("DGSTEREO_WINOGRAD_BLOCKS").is_ok_and(|v| v == "0"));
-    !off && c * o <= MAX_CHANNEL_PRODUCT
+    Isa::detect().filter(|_| !off && c * o <= MAX_CHANNEL_PRODUCT)
 }
 
-/// A 3x3, stride-1 convolution by F(4x4, 3x3) in cache-resident blocks of tiles, with the bias
-/// and `epilogue` applied; the same contract as [`winograd_conv`].
+/// A 3x3, stride-1 convolution by F(4x4, 3x3) in cache-resident blocks of tiles, compiled for
+/// `isa` (from [`instruction_set`]), with the bias and `epilogue` applied; the same contract as
+/// [`winograd_conv`].
 ///
 /// # Shapes
 /// - `x`: `x_dims = [N, C, H, W]` (NCHW); `wt`: `[O, C, 3, 3]` (OIHW); `bias`: `[O]`
 /// - output `[N, O, H + top + bottom - 2, W + left + right - 2]`
-pub(crate) fn blocked_conv(
-    x: &[f32],
-    x_dims: [usize; 4],
-    wt: &[f32],
-    o: usize,
-    bias: Option<&[f32]>,
-    padding: [(usize, usize); 2],
-    epilogue: Epilogue,
-) -> (Vec<f32>, [usize; 4]) {
-    blocked_conv_with(Isa::detect(), x, x_dims, wt, o, bias, padding, epilogue)
-}
-
-/// [`blocked_conv`] compiled for `isa` (which the processor must have).
 #[allow(clippy::too_many_arguments)]
-pub(super) fn blocked_conv_with(
+pub(crate) fn blocked_conv(
     isa: Isa,
     x: &[f32],
     x_dims: [usize; 4],
@@ -117,55 +106,47 @@ fn pack_weights(u: &[f32], o: usize, c: usize) -> Vec<f32> {
     packed
 }
 
-/// The instruction set the block body is compiled for, detected at run time.
+/// An instruction set the band body is compiled for.
+///
+/// Only AVX-512 is chosen: it is where the path was measured to beat the band path. The same
+/// body compiled for AVX2 ran the 64-channel layer at 384x448 in 94-112 ms against the band
+/// path's 84-98 ms (whose `gemm` products use AVX-512 on that machine), so on a processor
+/// without AVX-512 the band path runs. [`Isa::Portable`] (four lanes of plain Rust) lets the
+/// tests check the block logic on any processor.
 #[derive(Clone, Copy, Debug)]
-pub(super) enum Isa {
+pub(crate) enum Isa {
+    /// Sixteen lanes of AVX-512 with FMA.
     #[cfg(target_arch = "x86_64")]
     Avx512,
-    #[cfg(target_arch = "x86_64")]
-    Avx2,
-    Baseline,
+    /// Four lanes of plain Rust: for the tests only.
+    #[cfg(test)]
+    Portable,
 }
 
 impl Isa {
-    fn detect() -> Self {
+    /// The set the processor runs that the blocked path uses, if any.
+    fn detect() -> Option<Self> {
         #[cfg(target_arch = "x86_64")]
-        {
-            if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("fma") {
-                return Self::Avx512;
-            }
-            if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-                return Self::Avx2;
-            }
+        if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("fma") {
+            return Some(Self::Avx512);
         }
-        Self::Baseline
+        None
     }
 
-    /// Every set this processor runs, the best first (the tests run each).
+    /// Every set the tests can run here.
     #[cfg(test)]
     pub(super) fn available() -> Vec<Self> {
-        let mut sets = vec![Self::Baseline];
-        #[cfg(target_arch = "x86_64")]
-        {
-            if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-                sets.insert(0, Self::Avx2);
-            }
-            if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("fma") {
-                sets.insert(0, Self::Avx512);
-            }
-        }
-        sets
+        Self::detect().into_iter().chain([Self::Portable]).collect()
     }
 
     #[allow(unsafe_code)]
     fn run(self, band: &Band, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f32], mm: &mut [f32]) {
         match self {
-            // SAFETY: `detect` chose these only where the processor has the features.
+            // SAFETY: `detect` returns `Avx512` only where the processor has AVX-512 and FMA.
             #[cfg(target_arch = "x86_64")]
             Self::Avx512 => unsafe { band_avx512(band, image, planes, v, mm) },
-            #[cfg(target_arch = "x86_64")]
-            Self::Avx2 => unsafe { band_avx2(band, image, planes, v, mm) },
-            Self::Baseline => band.run::<simd::Baseline>(image, planes, v, mm),
+            #[cfg(test)]
+            Self::Portable => band.run::<simd::Portable>(image, planes, v, mm),
         }
     }
 }
@@ -174,12 +155,6 @@ impl Isa {
 #[target_feature(enable = "avx512f,fma")]
 fn band_avx512(band: &Band, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f32], mm: &mut [f32]) {
     band.run::<simd::Avx512>(image, planes, v, mm)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn band_avx2(band: &Band, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f32], mm: &mut [f32]) {
-    band.run::<simd::Avx2>(image, planes, v, mm)
 }
 
 /// `Bᵀ d` of F(4x4) (the rows of [`F4`]'s `bt`) on six vectors, in the factored form: 6
@@ -300,13 +275,13 @@ impl Band<'_> {
                 self.prefetch_rows(&ahead[..g.h * g.w], start, lanes);
             }
             for (i, row_t) in rows.iter_mut().enumerate() {
-                for dj in d.iter_mut() {
-                    dj.fill(0.0);
-                }
+                // Lanes past `lanes` keep stale values: their outputs are never written.
                 for (row, tx0, count, lane0) in self.segments(start, lanes) {
                     let ty = self.tile_rows.start + row;
-                    let Some(iy) = (4 * ty + i).checked_sub(g.ph).filter(|&iy| iy < g.h) else { continue };
-                    gather_row::<S>(&channel[iy * g.w..][..g.w], g.pw, tx0, count, lane0, &mut d);
+                    match (4 * ty + i).checked_sub(g.ph).filter(|&iy| iy < g.h) {
+                        Some(iy) => gather_row::<S>(&channel[iy * g.w..][..g.w], g.pw, tx0, count, lane0, &mut d),
+                        None => d.iter_mut().for_each(|dj| dj[lane0..lane0 + count].iter_mut().for_each(|v| *v = 0.0)),
+                    }
                 }
                 for l in (0..LANES).step_by(S::WIDTH) {
                     let t = input_1d(load6::<S>(&d.as_flattened()[l..], LANES));
@@ -357,8 +332,9 @@ impl Band<'_> {
                 let uk = &self.packed[(k * groups + group) * c * ROWS..][..c * ROWS];
                 for half in (0..LANES).step_by(2 * w) {
                     let mut acc = [[S::splat(0.0); 2]; ROWS];
-                    let (uk, vk) = (uk.as_chunks::<ROWS>().0, vk.as_chunks::<LANES>().0);
-                    for (u, vv) in uk.iter().zip(vk) {
+                    let (uk, vk) = (&uk.as_chunks::<ROWS>().0[..c], &vk.as_chunks::<LANES>().0[..c]);
+                    for ci in 0..c {
+                        let (u, vv) = (&uk[ci], &vk[ci]);
                         let x = [S::load(&vv[half..]), S::load(&vv[half + w..])];
                         for r in 0..ROWS {
                             let b = S::splat(u[r]);

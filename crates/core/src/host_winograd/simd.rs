@@ -1,5 +1,6 @@
-//! Vectors of `f32` lanes for the blocked Winograd path: one type per instruction set, each
-//! method a single instruction, inlined into a function compiled for that set.
+//! Vectors of `f32` lanes for the blocked Winograd path: AVX-512 (each method one or a few
+//! instructions, inlined into a function compiled for AVX-512) and, for the tests on any
+//! processor, four lanes of plain Rust.
 
 #![allow(unsafe_code)]
 
@@ -27,11 +28,13 @@ pub(super) trait Simd: Copy {
     fn interleave4(phases: [Self; 4], dst: &mut [f32]);
 }
 
-/// Four lanes in plain Rust: what a baseline x86-64 (SSE2) or another architecture compiles.
+/// Four lanes of plain Rust, for the tests of the block logic on any processor.
+#[cfg(test)]
 #[derive(Clone, Copy)]
-pub(super) struct Baseline([f32; 4]);
+pub(super) struct Portable([f32; 4]);
 
-impl Simd for Baseline {
+#[cfg(test)]
+impl Simd for Portable {
     const WIDTH: usize = 4;
     #[inline(always)]
     fn splat(value: f32) -> Self {
@@ -78,7 +81,7 @@ impl Simd for Baseline {
 }
 
 #[cfg(target_arch = "x86_64")]
-pub(super) use x86::{Avx2, Avx512};
+pub(super) use x86::Avx512;
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
@@ -178,87 +181,6 @@ mod x86 {
     fn index(values: &[i32; 16]) -> __m512i {
         unsafe { _mm512_loadu_si512(values.as_ptr().cast()) }
     }
-
-    /// Eight lanes of AVX2 with FMA; only for functions compiled with `avx2` and `fma`.
-    #[derive(Clone, Copy)]
-    pub(in super::super) struct Avx2(__m256);
-
-    // SAFETY (every method): as for `Avx512`, inside `blocks::band_avx2` only.
-    impl Simd for Avx2 {
-        const WIDTH: usize = 8;
-        #[inline(always)]
-        fn splat(value: f32) -> Self {
-            Self(unsafe { _mm256_set1_ps(value) })
-        }
-        #[inline(always)]
-        fn load(src: &[f32]) -> Self {
-            let src = &src[..8];
-            Self(unsafe { _mm256_loadu_ps(src.as_ptr()) })
-        }
-        #[inline(always)]
-        fn store(self, dst: &mut [f32]) {
-            let dst = &mut dst[..8];
-            unsafe { _mm256_storeu_ps(dst.as_mut_ptr(), self.0) }
-        }
-        #[inline(always)]
-        fn mul_add(self, b: Self, c: Self) -> Self {
-            Self(unsafe { _mm256_fmadd_ps(self.0, b.0, c.0) })
-        }
-        #[inline(always)]
-        fn add(self, b: Self) -> Self {
-            Self(unsafe { _mm256_add_ps(self.0, b.0) })
-        }
-        #[inline(always)]
-        fn sub(self, b: Self) -> Self {
-            Self(unsafe { _mm256_sub_ps(self.0, b.0) })
-        }
-        #[inline(always)]
-        fn max(self, b: Self) -> Self {
-            Self(unsafe { _mm256_max_ps(self.0, b.0) })
-        }
-        // Each 128-bit half holds one tile's four values: a 4x4 transpose within the halves
-        // gives every phase with the tiles in the order 0, 2, 4, 6 | 1, 3, 5, 7, which one
-        // permutation puts in order.
-        #[inline(always)]
-        fn deinterleave4(src: &[f32]) -> [Self; 4] {
-            let rows = [Self::load(src).0, Self::load(&src[8..]).0, Self::load(&src[16..]).0, Self::load(&src[24..]).0];
-            let [p0, p1, p2, p3] = transpose_halves(rows);
-            unsafe {
-                let order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
-                let put = |v| Self(_mm256_permutevar8x32_ps(v, order));
-                [put(p0), put(p1), put(p2), put(p3)]
-            }
-        }
-        #[inline(always)]
-        fn interleave4(phases: [Self; 4], dst: &mut [f32]) {
-            let [p0, p1, p2, p3] = phases;
-            let rows = unsafe {
-                let order = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
-                let put = |p: Self| _mm256_permutevar8x32_ps(p.0, order);
-                transpose_halves([put(p0), put(p1), put(p2), put(p3)])
-            };
-            let dst = &mut dst[..32];
-            Self(rows[0]).store(dst);
-            Self(rows[1]).store(&mut dst[8..]);
-            Self(rows[2]).store(&mut dst[16..]);
-            Self(rows[3]).store(&mut dst[24..]);
-        }
-    }
-
-    /// The 4x4 transpose of the four vectors' low halves, and of their high halves.
-    #[inline(always)]
-    fn transpose_halves([a, b, c, d]: [__m256; 4]) -> [__m256; 4] {
-        unsafe {
-            let (ab_low, cd_low) = (_mm256_unpacklo_ps(a, b), _mm256_unpacklo_ps(c, d));
-            let (ab_high, cd_high) = (_mm256_unpackhi_ps(a, b), _mm256_unpackhi_ps(c, d));
-            [
-                _mm256_shuffle_ps::<0x44>(ab_low, cd_low),
-                _mm256_shuffle_ps::<0xEE>(ab_low, cd_low),
-                _mm256_shuffle_ps::<0x44>(ab_high, cd_high),
-                _mm256_shuffle_ps::<0xEE>(ab_high, cd_high),
-            ]
-        }
-    }
 }
 
 #[cfg(test)]
@@ -293,15 +215,10 @@ mod tests {
 
     #[test]
     fn every_instruction_set_here_shuffles_and_computes_lane_by_lane() {
-        check::<Baseline>();
+        check::<Portable>();
         #[cfg(target_arch = "x86_64")]
-        {
-            if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("fma") {
-                check::<Avx512>();
-            }
-            if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-                check::<Avx2>();
-            }
+        if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("fma") {
+            check::<Avx512>();
         }
     }
 }
