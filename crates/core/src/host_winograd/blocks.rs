@@ -259,8 +259,9 @@ impl Band<'_> {
         })
     }
 
-    /// `V = Bᵀ d B` of the block's tiles, all channels, into `v` (`[36][C][LANES]`); lanes past
-    /// `lanes` get the transform of zeros.
+    /// `V = Bᵀ d B` of the block's first `lanes` tiles, all channels, into `v`
+    /// (`[36][C][LANES]`); lanes past `lanes` hold leftovers of earlier rows (finite or not,
+    /// every operation is lane by lane and their outputs are never written).
     #[inline(always)]
     fn transform_inputs<S: Simd>(&self, image: &[f32], start: usize, lanes: usize, v: &mut [f32]) {
         let g = self.g;
@@ -275,7 +276,6 @@ impl Band<'_> {
                 self.prefetch_rows(&ahead[..g.h * g.w], start, lanes);
             }
             for (i, row_t) in rows.iter_mut().enumerate() {
-                // Lanes past `lanes` keep stale values: their outputs are never written.
                 for (row, tx0, count, lane0) in self.segments(start, lanes) {
                     let ty = self.tile_rows.start + row;
                     match (4 * ty + i).checked_sub(g.ph).filter(|&iy| iy < g.h) {
@@ -308,7 +308,11 @@ impl Band<'_> {
         for (row, tx0, count, _) in self.segments(start, lanes) {
             let first = (4 * (self.tile_rows.start + row)).saturating_sub(g.ph);
             let x0 = (4 * tx0).saturating_sub(g.pw);
-            let len = (4 * count + 2).min(g.w - x0.min(g.w));
+            let len = (4 * count + 2).min(g.w.saturating_sub(x0));
+            if len == 0 {
+                // Tiles wholly in the right padding.
+                continue;
+            }
             for iy in first..(first + 6).min(g.h) {
                 let span = &channel[iy * g.w + x0..][..len];
                 for at in (0..len).step_by(16) {
