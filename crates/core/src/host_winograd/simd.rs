@@ -3,6 +3,8 @@
 //! processor, four lanes of plain Rust.
 
 #![allow(unsafe_code)]
+// Elsewhere than on x86-64 only the tests use these vectors.
+#![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 
 /// A vector of [`Simd::WIDTH`] `f32` lanes.
 pub(super) trait Simd: Copy {
