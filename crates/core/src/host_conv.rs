@@ -35,7 +35,9 @@ use crate::device::host_kernels_apply;
 use crate::host_few_outputs::{self, few_outputs_conv};
 /// Keeps the Winograd convolutions' transformed weights for reuse while alive (an update loop).
 pub use crate::host_winograd::KeptWeights;
-use crate::host_winograd::{split_first, split_row, split_second, winograd_conv, winograd_disabled, winograd_variant};
+use crate::host_winograd::{
+    Conv3x3, split_first, split_row, split_second, winograd_conv, winograd_disabled, winograd_variant,
+};
 use crate::matmul_conv::{conv2d_by_matmul, matmul_conv_applies};
 use crate::tensor::reuse_buffer;
 
@@ -249,7 +251,8 @@ fn host_conv_slices(
 ) -> (Vec<f32>, [usize; 4]) {
     if let Some(variant) = winograd_variant(x_dims, w_dims, options).filter(|_| !winograd_disabled()) {
         check_shapes(x, x_dims, wt, w_dims, options);
-        return winograd_conv(variant, x, x_dims, wt, w_dims[0], bias, options.padding, epilogue);
+        let conv = Conv3x3 { x, x_dims, wt, o: w_dims[0], bias, padding: options.padding, epilogue };
+        return winograd_conv(variant, &conv);
     }
     if host_few_outputs::suits(x_dims[1], w_dims[0], options.stride, options.groups) {
         check_shapes(x, x_dims, wt, w_dims, options);

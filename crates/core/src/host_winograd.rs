@@ -178,45 +178,46 @@ thread_local! {
     static BUFFERS: std::cell::RefCell<[Vec<f32>; 3]> = const { std::cell::RefCell::new([Vec::new(), Vec::new(), Vec::new()]) };
 }
 
-/// A 3x3, stride-1 convolution by Winograd `variant`, with the bias and `epilogue` applied:
-/// F(4x4) with few channels in blocks of tiles ([`blocks`]), otherwise in bands. Returns the
-/// output and its dimensions.
+/// The operands of one 3x3, stride-1 convolution, as every Winograd path takes them, with the
+/// bias and `epilogue` to apply.
 ///
 /// # Shapes
 /// - `x`: `x_dims = [N, C, H, W]` (NCHW); `wt`: `[O, C, 3, 3]` (OIHW); `bias`: `[O]`
 /// - `padding`: `[(top, bottom), (left, right)]`; output `[N, O, H + top + bottom - 2,
 ///   W + left + right - 2]`
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn winograd_conv(
-    variant: &Variant,
-    x: &[f32],
-    x_dims: [usize; 4],
-    wt: &[f32],
-    o: usize,
-    bias: Option<&[f32]>,
-    padding: [(usize, usize); 2],
-    epilogue: Epilogue,
-) -> (Vec<f32>, [usize; 4]) {
-    if let Some(isa) = blocks::instruction_set(x_dims[1], o).filter(|_| variant.m == 4) {
-        return blocks::blocked_conv(isa, x, x_dims, wt, o, bias, padding, epilogue);
+#[derive(Clone, Copy)]
+pub(crate) struct Conv3x3<'a> {
+    pub(crate) x: &'a [f32],
+    pub(crate) x_dims: [usize; 4],
+    pub(crate) wt: &'a [f32],
+    pub(crate) o: usize,
+    pub(crate) bias: Option<&'a [f32]>,
+    pub(crate) padding: [(usize, usize); 2],
+    pub(crate) epilogue: Epilogue,
+}
+
+impl Conv3x3<'_> {
+    /// Input channels, after checking that the weight is `[O, C, 3, 3]`.
+    fn channels(&self) -> usize {
+        let (c, o) = (self.x_dims[1], self.o);
+        assert_eq!(self.wt.len(), o * c * 9, "winograd_conv: the weight is not [{o}, {c}, 3, 3]");
+        c
     }
-    band_conv(variant, x, x_dims, wt, o, bias, padding, epilogue)
+}
+
+/// `conv` by Winograd `variant`: F(4x4) with few channels in blocks of tiles ([`blocks`]),
+/// otherwise in bands. Returns the output and its dimensions.
+pub(crate) fn winograd_conv(variant: &Variant, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
+    if let Some(isa) = blocks::instruction_set(conv.x_dims[1], conv.o).filter(|_| variant.m == 4) {
+        return blocks::blocked_conv(isa, conv);
+    }
+    band_conv(variant, conv)
 }
 
 /// [`winograd_conv`] in bands of whole tile rows (the module's doc).
-#[allow(clippy::too_many_arguments)]
-fn band_conv(
-    variant: &Variant,
-    x: &[f32],
-    x_dims: [usize; 4],
-    wt: &[f32],
-    o: usize,
-    bias: Option<&[f32]>,
-    padding: [(usize, usize); 2],
-    epilogue: Epilogue,
-) -> (Vec<f32>, [usize; 4]) {
-    let c = x_dims[1];
-    assert_eq!(wt.len(), o * c * 9, "winograd_conv: the weight is not [{o}, {c}, 3, 3]");
+fn band_conv(variant: &Variant, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
+    let &Conv3x3 { x, x_dims, wt, o, bias, padding, epilogue } = conv;
+    let c = conv.channels();
     let plan = Plan::new(variant, x_dims, padding);
     let u = transformed_weights(variant, wt, o, c);
     let k2 = plan.k2;
@@ -566,13 +567,14 @@ mod tests {
         for epilogue in [Epilogue::Linear, Epilogue::Relu] {
             let finish = |v: f32| if epilogue == Epilogue::Relu { v.max(0.0) } else { v };
             let (im2col, _) = im2col_conv_slices(&x, [n, c, h, w], &wt, [o, c, 3, 3], b.as_deref(), &options, epilogue);
+            let conv = Conv3x3 { x: &x, x_dims: [n, c, h, w], wt: &wt, o, bias: b.as_deref(), padding, epilogue };
             // F(2x2) and F(4x4) in bands, then F(4x4) in blocks for every instruction set here.
             let bands = [&F2, &F4].map(|variant| {
-                let got = band_conv(variant, &x, [n, c, h, w], &wt, o, b.as_deref(), padding, epilogue);
+                let got = band_conv(variant, &conv);
                 (format!("F({}) bands", variant.m), variant.m, got)
             });
             let blocks = blocks::Isa::available().into_iter().map(|isa| {
-                let got = blocks::blocked_conv(isa, &x, [n, c, h, w], &wt, o, b.as_deref(), padding, epilogue);
+                let got = blocks::blocked_conv(isa, &conv);
                 (format!("F(4) blocks {isa:?}"), 4, got)
             });
             for (path, m, (got, got_dims)) in bands.into_iter().chain(blocks) {

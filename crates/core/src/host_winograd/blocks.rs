@@ -62,26 +62,11 @@ pub(crate) fn instruction_set(c: usize, o: usize) -> Option<Isa> {
     Isa::detect().filter(|_| !off && c * o <= MAX_CHANNEL_PRODUCT)
 }
 
-/// A 3x3, stride-1 convolution by F(4x4, 3x3) in cache-resident blocks of tiles, compiled for
-/// `isa` (from [`instruction_set`]), with the bias and `epilogue` applied; the same contract as
-/// [`winograd_conv`].
-///
-/// # Shapes
-/// - `x`: `x_dims = [N, C, H, W]` (NCHW); `wt`: `[O, C, 3, 3]` (OIHW); `bias`: `[O]`
-/// - output `[N, O, H + top + bottom - 2, W + left + right - 2]`
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn blocked_conv(
-    isa: Isa,
-    x: &[f32],
-    x_dims: [usize; 4],
-    wt: &[f32],
-    o: usize,
-    bias: Option<&[f32]>,
-    padding: [(usize, usize); 2],
-    epilogue: Epilogue,
-) -> (Vec<f32>, [usize; 4]) {
-    let c = x_dims[1];
-    assert_eq!(wt.len(), o * c * 9, "winograd_conv: the weight is not [{o}, {c}, 3, 3]");
+/// `conv` by F(4x4, 3x3) in cache-resident blocks of tiles, compiled for `isa` (from
+/// [`instruction_set`]); the same contract as [`winograd_conv`].
+pub(crate) fn blocked_conv(isa: Isa, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
+    let &Conv3x3 { x, x_dims, wt, o, bias, padding, epilogue } = conv;
+    let c = conv.channels();
     let plan = Plan::new(&F4, x_dims, padding);
     // `u` lives to the end, as in the band path: freed right after the packing, it left a hole
     // in glibc's heap that raised a KITTI frame's peak memory from the second pass on by one

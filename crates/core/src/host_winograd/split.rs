@@ -165,8 +165,26 @@ mod tests {
                 Epilogue::Relu,
             );
             let got2 = second(pending, &own2_values, [n, own2, h, w], Some(&b2), Epilogue::Linear);
-            let want1 = winograd_conv(variant, &x1, [n, c1, h, w], &wt1, o1, Some(&b1), padding, Epilogue::Relu);
-            let want2 = winograd_conv(variant, &x2, [n, c2, h, w], &wt2, o2, Some(&b2), padding, Epilogue::Linear);
+            let conv1 = Conv3x3 {
+                x: &x1,
+                x_dims: [n, c1, h, w],
+                wt: &wt1,
+                o: o1,
+                bias: Some(&b1),
+                padding,
+                epilogue: Epilogue::Relu,
+            };
+            let want1 = winograd_conv(variant, &conv1);
+            let conv2 = Conv3x3 {
+                x: &x2,
+                x_dims: [n, c2, h, w],
+                wt: &wt2,
+                o: o2,
+                bias: Some(&b2),
+                padding,
+                epilogue: Epilogue::Linear,
+            };
+            let want2 = winograd_conv(variant, &conv2);
             for ((got, want), which) in [(got1, want1), (got2, want2)].into_iter().zip(["first", "second"]) {
                 assert_eq!(got.1, want.1, "F({}) {which}", variant.m);
                 let worst = got.0.iter().zip(&want.0).map(|(g, w)| (g - w).abs()).fold(0.0, f32::max);
