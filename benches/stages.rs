@@ -100,8 +100,9 @@ fn correlation(c: &mut Criterion) {
 /// GRU-1/4 candidate (384 -> 128 channels at the 1/4 grid, of 320x736 and of a 384x448 pair)
 /// and a feature-encoder layer1 convolution (64 -> 64; the default model runs layer1 at full
 /// resolution, here it runs at half of 320x736 to keep the bench short). `3x3 Host` is the
-/// dispatching kernel (Winograd F(4x4, 3x3) at these sizes unless `DGSTEREO_NO_WINOGRAD=1`),
-/// `3x3 Host im2col` its im2col path alone.
+/// dispatching kernel (Winograd F(4x4, 3x3) at these sizes unless `DGSTEREO_NO_WINOGRAD=1`; the
+/// 64-channel layer in cache-resident blocks where the processor has AVX-512, in bands with
+/// `DGSTEREO_WINOGRAD_BLOCKS=0`), `3x3 Host im2col` its im2col path alone.
 fn convolution(c: &mut Criterion) {
     use burn::tensor::module::conv2d;
     use burn::tensor::ops::ConvOptions;
