@@ -19,12 +19,12 @@
 //! tiles' columns merged back into rows, by vector shuffles ([`Simd::deinterleave4`]). The
 //! band body is compiled for AVX-512 and runs where the processor has it ([`Isa`]; elsewhere
 //! the band path runs); the vectors are `std::arch` intrinsics behind the small [`Simd`]
-//! trait. What it took, measured on a 64-channel layer: the same loops over
-//! fixed-size arrays left to the autovectoriser ran about 10x slower (sums kept in memory,
-//! scalar fused multiply-adds); a closure or an array `map` inside the body is compiled without
-//! the body's instruction set, so the intrinsics in it become calls (20-30 % slower); prefetching
-//! the input rows two channels ahead ([`PREFETCH_CHANNELS`]) took 8 % (64 channels) to 20 % (96
-//! channels) off.
+//! trait. What it took, measured on a 64-channel layer: the same loops over fixed-size arrays
+//! left to the autovectoriser ran about 10x slower (sums kept in memory, scalar fused
+//! multiply-adds); a closure or an array `map` inside the body is compiled without the body's
+//! instruction set, so the intrinsics in it become calls (20-30 % slower); prefetching the input
+//! rows two channels ahead ([`PREFETCH_CHANNELS`]) took 8 % (64 channels) to 20 % (96 channels)
+//! off.
 
 // Elsewhere than on x86-64 only the tests run the blocks (with the portable vectors).
 #![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
@@ -50,7 +50,7 @@ const K2: usize = 36;
 /// 24.0 (33.8), at 192x624 103 (114) -> 83 (98); 128->128 at 96x112 11.0 (16.9) -> 11.1
 /// (16.9), at 96x312 39.4 (44.2) -> 34.3 (38.7); 128->126 at 96x112 14.4 (18.2) -> 13.7 (16.7);
 /// 384->128 at 96x112 34.5 (39.4) -> 46.5 (52.5).
-pub(crate) const MAX_CHANNEL_PRODUCT: usize = 128 * 128;
+const MAX_CHANNEL_PRODUCT: usize = 128 * 128;
 
 /// The instruction set for the blocked path to take an F(4x4) convolution of `c` input and
 /// `o` output channels: AVX-512 where the processor has it and `C·O` is at most
