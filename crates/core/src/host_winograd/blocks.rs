@@ -103,7 +103,7 @@ fn pack_weights(u: &[f32], o: usize, c: usize) -> Vec<f32> {
 /// Only AVX-512 is chosen: it is where the path was measured to beat the band path. The same
 /// body compiled for AVX2 ran the 64-channel layer at 384x448 in 94-112 ms against the band
 /// path's 84-98 ms (whose `gemm` products use AVX-512 on that machine), so on a processor
-/// without AVX-512 the band path runs. [`Isa::Portable`] (four lanes of plain Rust) lets the
+/// without AVX-512 the band path runs. `Isa::Portable` (four lanes of plain Rust) lets the
 /// tests check the block logic on any processor.
 #[derive(Clone, Copy, Debug)]
 pub(crate) enum Isa {
@@ -150,7 +150,7 @@ fn band_avx512(band: &Band, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f
 }
 
 /// `Bᵀ d` of F(4x4) (the rows of [`F4`]'s `bt`) on six vectors, in the factored form: 6
-/// additions and 8 fused multiply-adds instead of 20 products.
+/// additions and 8 fused multiply-adds instead of one multiply-add per nonzero entry (22).
 #[inline(always)]
 fn input_1d<S: Simd>([d0, d1, d2, d3, d4, d5]: [S; 6]) -> [S; 6] {
     let k = S::splat;
