@@ -441,6 +441,13 @@ fn transform_inputs(
     }
 }
 
+/// Column `x` of a row padded with `pw` zeros on the left (and zeros past its end): `line[x - pw]`
+/// where that lies inside the row, else 0 (an empty `line` is a row outside the input).
+#[inline(always)]
+pub(crate) fn padded_value(line: &[f32], pw: usize, x: usize) -> f32 {
+    x.checked_sub(pw).and_then(|x| line.get(x)).copied().unwrap_or(0.0)
+}
+
 /// The `M` column phases of one input row shifted by the left padding `pw`: `dst[p][i] =
 /// line[M·i + p - pw]`, zeros outside the row (an empty `line` is a row outside the input).
 ///
@@ -452,7 +459,7 @@ fn transform_inputs(
 /// 40.3 (the loads of the input rows now take the time the gather took).
 pub(crate) fn split_row<const M: usize>(line: &[f32], pw: usize, mut dst: [&mut [f32]; M]) {
     let n = dst[0].len();
-    let value = |i: usize, p: usize| (M * i + p).checked_sub(pw).and_then(|x| line.get(x)).copied().unwrap_or(0.0);
+    let value = |i: usize, p: usize| padded_value(line, pw, M * i + p);
     // Columns i in lo..hi hold all M phases inside the row: pw ≤ M·i and M·i + M - 1 < len + pw.
     let lo = pw.div_ceil(M).min(n);
     let hi = ((line.len() + pw) / M).clamp(lo, n);

@@ -323,12 +323,11 @@ impl Band<'_> {
         let groups = self.o.div_ceil(ROWS);
         let w = S::WIDTH;
         for k in 0..K2 {
-            let vk = &v[k * c * LANES..][..c * LANES];
+            let vk = &v[k * c * LANES..][..c * LANES].as_chunks::<LANES>().0[..c];
             for group in 0..groups {
-                let uk = &self.packed[(k * groups + group) * c * ROWS..][..c * ROWS];
+                let uk = &self.packed[(k * groups + group) * c * ROWS..][..c * ROWS].as_chunks::<ROWS>().0[..c];
                 for half in (0..LANES).step_by(2 * w) {
                     let mut acc = [[S::splat(0.0); 2]; ROWS];
-                    let (uk, vk) = (&uk.as_chunks::<ROWS>().0[..c], &vk.as_chunks::<LANES>().0[..c]);
                     for ci in 0..c {
                         let (u, vv) = (&uk[ci], &vk[ci]);
                         let x = [S::load(&vv[half..]), S::load(&vv[half + w..])];
@@ -410,7 +409,7 @@ fn gather_row<S: Simd>(line: &[f32], pw: usize, tx0: usize, count: usize, lane0:
             } else {
                 let stage = &mut stage[..span];
                 for (k, value) in stage.iter_mut().enumerate() {
-                    *value = (x0 + k).checked_sub(pw).and_then(|x| line.get(x)).copied().unwrap_or(0.0);
+                    *value = padded_value(line, pw, x0 + k);
                 }
                 &*stage
             };
@@ -422,7 +421,7 @@ fn gather_row<S: Simd>(line: &[f32], pw: usize, tx0: usize, count: usize, lane0:
             n += w;
         } else {
             for (j, dj) in d.iter_mut().enumerate() {
-                dj[lane] = (x0 + j).checked_sub(pw).and_then(|x| line.get(x)).copied().unwrap_or(0.0);
+                dj[lane] = padded_value(line, pw, x0 + j);
             }
             n += 1;
         }
