@@ -12,6 +12,7 @@
 pub mod allocator;
 pub mod device;
 pub mod error;
+pub mod gpu_routes;
 pub mod host_conv;
 mod host_few_outputs;
 pub mod host_norm;

@@ -7,46 +7,59 @@
 //! an H200 in f16 and f32 alike, 47 % of a KITTI pass in the GRU at 1/4 resolution (burn's tuning
 //! database from the session 12 lease). burn's matrix product does run on the tensor cores at
 //! those sizes (its tuning picked `matmul_simple_cyclic_cmma_multi_rows`). So on devices other
-//! than the CPU a stride-1 convolution is built from burn's operations as an explicit im2col: the
-//! input padded once, its `kh·kw` shifted windows concatenated along the channels (`[N, kh·kw·C,
-//! H_out·W_out]`), and one product with the weight reordered to `[O, kh·kw·C]`. It costs the
+//! than the CPU a stride-1 convolution is built from burn's operations as an explicit im2col, the
+//! input's `kh·kw` shifted windows stacked along the channels (`[N, C·kh·kw, H_out·W_out]`), and
+//! one product with the weight as `[O, C·kh·kw]`. It costs the
 //! column matrix's memory (`kh·kw` times the input's), which a GPU has, and it differentiates on
 //! every backend, but autodiff would keep every column matrix for the backward pass, so training
 //! keeps burn's convolution ([`matmul_conv_applies`]). The CPU never takes it: its host kernels
 //! are faster there. burn's convolution stays the reference, and the tests check both agree,
 //! gradients included.
 //!
-//! The environment variable `DGSTEREO_GPU_CONV=burn` (read once per process) turns the route
-//! off, so a GPU run can measure what it gains.
+//! The column matrix is gathered in one `select` from the input with a zero column appended
+//! ([`Columns::Gathered`]): the shifted windows sliced one by one ([`Columns::Windows`]) cost a
+//! copy kernel each on wgpu (a window that starts off the 64-byte alignment of a binding offset is
+//! no view), ten kernels a 3x3 convolution and fifty for the motion encoder's 7x7, every
+//! iteration. The gathered rows are ordered `(c, ky, kx)`, the weight's own layout, so the weight
+//! needs no reordering either. The indices are built on the host once per shape and kept
+//! ([`window_indices`]).
+//!
+//! `DGSTEREO_GPU_STOCK=conv` turns the route off and `im2col` the gathered columns
+//! ([`crate::gpu_routes`]), so a GPU run can measure what each gains.
 
-use std::sync::OnceLock;
+use std::sync::{Mutex, PoisonError};
 
-use burn::tensor::Tensor;
 use burn::tensor::ops::{ConvOptions, PadMode};
+use burn::tensor::{Device, Int, Tensor, TensorData};
 
+use crate::gpu_routes::GpuRoute;
 use crate::host_conv::conv_output_size;
 
-/// Whether `DGSTEREO_GPU_CONV` asks for burn's convolution on the GPU (read once).
-fn route_disabled() -> bool {
-    static DISABLED: OnceLock<bool> = OnceLock::new();
-    *DISABLED.get_or_init(|| std::env::var("DGSTEREO_GPU_CONV").is_ok_and(|v| v.eq_ignore_ascii_case("burn")))
-}
-
 /// Whether a convolution with `options` and a `kh x kw` kernel on `device` takes
-/// [`conv2d_by_matmul`]: inference (no autodiff) on a device other than the CPU, stride 1,
-/// groups 1, a kernel larger than 1x1 (burn runs 1x1 convolutions as a product already).
-pub fn matmul_conv_applies(device: &burn::tensor::Device, options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
-    let on_cpu = *device == burn::tensor::Device::flex();
-    !route_disabled() && suits(on_cpu, device.is_autodiff(), options, kernel)
+/// [`conv2d_by_matmul`]: GPU inference ([`GpuRoute::MatmulConv`]), stride 1, groups 1, a kernel
+/// larger than 1x1 (burn runs 1x1 convolutions as a product already).
+pub fn matmul_conv_applies(device: &Device, options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
+    GpuRoute::MatmulConv.applies(device) && suits(options, kernel)
 }
 
-/// The rule of [`matmul_conv_applies`] apart from the environment.
-fn suits(on_cpu: bool, autodiff: bool, options: &ConvOptions<2>, [kh, kw]: [usize; 2]) -> bool {
-    !on_cpu && !autodiff && options.stride == [1, 1] && options.groups == 1 && kh * kw > 1
+/// The shape rule of [`matmul_conv_applies`].
+fn suits(options: &ConvOptions<2>, [kh, kw]: [usize; 2]) -> bool {
+    options.stride == [1, 1] && options.groups == 1 && kh * kw > 1
+}
+
+/// How the column matrix of [`conv2d_by_matmul`] is built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Columns {
+    /// One `select` of precomputed indices from the input with a zero column appended; rows
+    /// `(c, ky, kx)`.
+    Gathered,
+    /// The input padded, its `kh·kw` shifted windows sliced and concatenated; rows `(ky, kx, c)`.
+    Windows,
 }
 
 /// `conv2d(x, weight, bias, options)` for stride 1 and groups 1 as one matrix product over
-/// the input's shifted windows (explicit im2col from burn's operations).
+/// the input's shifted windows (explicit im2col from burn's operations), the columns gathered
+/// unless `DGSTEREO_GPU_STOCK` names `im2col`.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`
@@ -61,31 +74,121 @@ pub fn conv2d_by_matmul(
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
 ) -> Tensor<4> {
+    let columns = if GpuRoute::GatheredColumns.enabled() { Columns::Gathered } else { Columns::Windows };
+    conv2d_by_matmul_with(x, weight, bias, options, columns)
+}
+
+/// [`conv2d_by_matmul`] with the column matrix built as `columns` says.
+pub fn conv2d_by_matmul_with(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: &ConvOptions<2>,
+    columns: Columns,
+) -> Tensor<4> {
     assert!(options.stride == [1, 1] && options.groups == 1, "conv2d_by_matmul: stride 1 and groups 1 only");
     let [n, c, h, w] = x.dims();
     let [o, cw, kh, kw] = weight.dims();
     assert_eq!(c, cw, "conv2d_by_matmul: input has {c} channels, the weight expects {cw}");
-    let [(top, bottom), (left, right)] = options.padding;
-    let [dh, dw] = options.dilation;
     let [out_h, out_w] = conv_output_size("conv2d_by_matmul", [h, w], [kh, kw], options);
-    let padded =
-        if top + bottom + left + right > 0 { x.pad([(top, bottom), (left, right)], PadMode::Constant(0.0)) } else { x };
-    // Windows in (ky, kx) order, each [N, C, H_out, W_out]: rows (ky, kx, c) of the columns.
-    let windows: Vec<Tensor<4>> = (0..kh * kw)
-        .map(|tap| {
-            let (y, x) = (dh * (tap / kw), dw * (tap % kw));
-            padded.clone().slice([0..n, 0..c, y..y + out_h, x..x + out_w])
-        })
-        .collect();
     let k = kh * kw * c;
-    let columns = Tensor::cat(windows, 1).reshape([n, k, out_h * out_w]);
-    let weight = weight.permute([0, 2, 3, 1]).reshape([1, o, k]);
+    let (columns, weight) = match columns {
+        Columns::Gathered => {
+            let shape =
+                WindowShape { input: [h, w], kernel: [kh, kw], padding: options.padding, dilation: options.dilation };
+            let indices = window_indices(shape, &x.device());
+            let zero = Tensor::zeros([n, c, 1], &x.device());
+            let flat = Tensor::cat(vec![x.reshape([n, c, h * w]), zero], 2);
+            (flat.select(2, indices).reshape([n, k, out_h * out_w]), weight.reshape([1, o, k]))
+        }
+        Columns::Windows => {
+            let [(top, bottom), (left, right)] = options.padding;
+            let [dh, dw] = options.dilation;
+            let padded = if top + bottom + left + right > 0 {
+                x.pad([(top, bottom), (left, right)], PadMode::Constant(0.0))
+            } else {
+                x
+            };
+            // Windows in (ky, kx) order, each [N, C, H_out, W_out]: rows (ky, kx, c) of the columns.
+            let windows: Vec<Tensor<4>> = (0..kh * kw)
+                .map(|tap| {
+                    let (y, x) = (dh * (tap / kw), dw * (tap % kw));
+                    padded.clone().slice([0..n, 0..c, y..y + out_h, x..x + out_w])
+                })
+                .collect();
+            (Tensor::cat(windows, 1).reshape([n, k, out_h * out_w]), weight.permute([0, 2, 3, 1]).reshape([1, o, k]))
+        }
+    };
     let weight = if n > 1 { weight.expand([n, o, k]) } else { weight };
     let mut out = weight.matmul(columns);
     if let Some(b) = bias {
         out = out + b.reshape([1, o, 1]);
     }
     out.reshape([n, o, out_h, out_w])
+}
+
+/// What the gathered column indices depend on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct WindowShape {
+    input: [usize; 2],
+    kernel: [usize; 2],
+    padding: [(usize, usize); 2],
+    dilation: [usize; 2],
+}
+
+impl WindowShape {
+    /// For each row `(ky, kx)` of a channel and each output pixel, the input pixel it reads
+    /// (`y·W + x`), or `H·W` (the appended zero) where the window lies in the padding.
+    ///
+    /// # Shapes
+    /// - `kh·kw·H_out·W_out` indices, tap-major
+    fn indices(&self) -> Vec<i64> {
+        let ([h, w], [kh, kw]) = (self.input, self.kernel);
+        let [(top, bottom), (left, right)] = self.padding;
+        let [dh, dw] = self.dilation;
+        let out_h = (h + top + bottom).saturating_sub(dh * (kh - 1));
+        let out_w = (w + left + right).saturating_sub(dw * (kw - 1));
+        let zero = (h * w) as i64;
+        let mut indices = Vec::with_capacity(kh * kw * out_h * out_w);
+        for ky in 0..kh {
+            for kx in 0..kw {
+                for oy in 0..out_h {
+                    let y = (oy + dh * ky).checked_sub(top).filter(|&y| y < h);
+                    for ox in 0..out_w {
+                        let x = (ox + dw * kx).checked_sub(left).filter(|&x| x < w);
+                        indices.push(match (y, x) {
+                            (Some(y), Some(x)) => (y * w + x) as i64,
+                            _ => zero,
+                        });
+                    }
+                }
+            }
+        }
+        indices
+    }
+}
+
+/// The most index tensors kept: a pass uses a few shapes per resolution, and a folder of images
+/// of many sizes must not grow the cache without bound.
+const KEPT_INDEX_TENSORS: usize = 32;
+
+/// The indices of [`WindowShape::indices`] as a tensor on `device`, built once per shape and
+/// device and kept (up to [`KEPT_INDEX_TENSORS`], the oldest dropped first).
+fn window_indices(shape: WindowShape, device: &Device) -> Tensor<1, Int> {
+    type Kept = Vec<(WindowShape, Device, Tensor<1, Int>)>;
+    static KEPT: Mutex<Kept> = Mutex::new(Vec::new());
+    let mut kept = KEPT.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some((_, _, t)) = kept.iter().find(|(s, d, _)| *s == shape && d == device) {
+        return t.clone();
+    }
+    let values = shape.indices();
+    let len = values.len();
+    let tensor = Tensor::<1, Int>::from_data(TensorData::new(values, [len]), device);
+    if kept.len() == KEPT_INDEX_TENSORS {
+        kept.remove(0);
+    }
+    kept.push((shape, device.clone(), tensor.clone()));
+    tensor
 }
 
 #[cfg(test)]
@@ -101,13 +204,20 @@ mod tests {
     }
 
     /// Largest difference from burn's convolution relative to its output's largest magnitude.
-    fn relative_error(n: usize, [c, o]: [usize; 2], [h, w]: [usize; 2], k: [usize; 2], opts: ConvOptions<2>) -> f32 {
+    fn relative_error(
+        n: usize,
+        [c, o]: [usize; 2],
+        [h, w]: [usize; 2],
+        k: [usize; 2],
+        opts: ConvOptions<2>,
+        columns: Columns,
+    ) -> f32 {
         let device = Device::flex();
         let x = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
         let wt = Tensor::<4>::random([o, c, k[0], k[1]], Distribution::Normal(0.0, 0.3), &device);
         let b = Tensor::<1>::random([o], Distribution::Normal(0.0, 1.0), &device);
         let reference = conv2d(x.clone(), wt.clone(), Some(b.clone()), opts.clone());
-        let got = conv2d_by_matmul(x, wt, Some(b), &opts);
+        let got = conv2d_by_matmul_with(x, wt, Some(b), &opts, columns);
         assert_eq!(got.dims(), reference.dims());
         let scale = reference.clone().abs().max().into_scalar::<f32>().max(1e-6);
         max_abs_diff(got, reference) / scale
@@ -116,59 +226,89 @@ mod tests {
     #[test]
     fn the_matmul_convolution_agrees_with_burn() {
         let same = [(1, 1), (1, 1)];
-        for (n, co, hw, k, opts) in [
-            (1, [16, 24], [9, 13], [3, 3], options(same, 1)),
-            (2, [5, 7], [6, 5], [3, 3], options(same, 1)),
-            (1, [2, 8], [11, 10], [7, 7], options([(3, 3), (3, 3)], 1)), // the motion encoder's flow conv
-            (1, [3, 4], [8, 9], [3, 3], options([(0, 0), (0, 0)], 1)),   // no padding
-            (1, [3, 4], [8, 9], [3, 3], options([(2, 1), (0, 3)], 1)),   // asymmetric
-            (2, [4, 3], [10, 12], [3, 3], options([(2, 2), (2, 2)], 2)), // dilated
-            (1, [6, 2], [7, 8], [1, 3], options([(0, 0), (1, 1)], 1)),   // not square
-        ] {
-            let err = relative_error(n, co, hw, k, opts);
-            assert!(err < 1e-5, "n {n} {co:?} {hw:?} {k:?}: {err}");
+        for columns in [Columns::Gathered, Columns::Windows] {
+            for (n, co, hw, k, opts) in [
+                (1, [16, 24], [9, 13], [3, 3], options(same, 1)),
+                (2, [5, 7], [6, 5], [3, 3], options(same, 1)),
+                (1, [2, 8], [11, 10], [7, 7], options([(3, 3), (3, 3)], 1)), // the motion encoder's flow conv
+                (1, [3, 4], [8, 9], [3, 3], options([(0, 0), (0, 0)], 1)),   // no padding
+                (1, [3, 4], [8, 9], [3, 3], options([(2, 1), (0, 3)], 1)),   // asymmetric
+                (2, [4, 3], [10, 12], [3, 3], options([(2, 2), (2, 2)], 2)), // dilated
+                (1, [6, 2], [7, 8], [1, 3], options([(0, 0), (1, 1)], 1)),   // not square
+                (1, [3, 5], [2, 3], [3, 3], options([(4, 4), (3, 3)], 1)),   // padding wider than the input
+            ] {
+                let err = relative_error(n, co, hw, k, opts, columns);
+                assert!(err < 1e-5, "{columns:?} n {n} {co:?} {hw:?} {k:?}: {err}");
+            }
         }
     }
 
+    /// The gathered indices of a small case, written out: a 2x3 input, a 3x3 kernel, padding 1;
+    /// 6 is the appended zero.
+    #[test]
+    fn gathered_indices_read_the_window_or_the_zero() {
+        let shape = WindowShape { input: [2, 3], kernel: [3, 3], padding: [(1, 1), (1, 1)], dilation: [1, 1] };
+        let indices = shape.indices();
+        assert_eq!(indices.len(), 9 * 6);
+        assert_eq!(&indices[..6], &[6, 6, 6, 6, 0, 1]); // tap (0, 0): up and left
+        assert_eq!(&indices[4 * 6..5 * 6], &[0, 1, 2, 3, 4, 5]); // the centre tap reads the input
+        assert_eq!(&indices[8 * 6..], &[4, 5, 6, 6, 6, 6]); // tap (2, 2): down and right
+    }
+
     /// The route is exactly burn's convolution in value, so its gradients (through pad, slice,
-    /// cat, reshape and matmul) must be burn's convolution's too.
+    /// cat, select, reshape and matmul) must be burn's convolution's too.
     #[test]
     fn the_matmul_convolution_has_the_gradients_of_burns() {
         let device = Device::flex().autodiff();
         let opts = options([(1, 1), (1, 1)], 1);
-        let x = Tensor::<4>::random([2, 4, 6, 7], Distribution::Normal(0.0, 1.0), &device).require_grad();
-        let wt = Tensor::<4>::random([5, 4, 3, 3], Distribution::Normal(0.0, 0.3), &device).require_grad();
-        let b = Tensor::<1>::random([5], Distribution::Normal(0.0, 1.0), &device).require_grad();
-        let target = Tensor::<4>::random([2, 5, 6, 7], Distribution::Normal(0.0, 1.0), &device);
-        let loss = |out: Tensor<4>| (out * target.clone()).sum();
-        let g1 = loss(conv2d(x.clone(), wt.clone(), Some(b.clone()), opts.clone())).backward();
-        let g2 = loss(conv2d_by_matmul(x.clone(), wt.clone(), Some(b.clone()), &opts)).backward();
-        for (name, a, b) in [
-            ("input", x.grad(&g1).unwrap(), x.grad(&g2).unwrap()),
-            ("weight", wt.grad(&g1).unwrap(), wt.grad(&g2).unwrap()),
-        ] {
-            let scale = a.clone().abs().max().into_scalar::<f32>();
-            let err = max_abs_diff(a, b) / scale;
-            assert!(err < 1e-5, "{name} gradient: {err}");
+        for columns in [Columns::Gathered, Columns::Windows] {
+            let x = Tensor::<4>::random([2, 4, 6, 7], Distribution::Normal(0.0, 1.0), &device).require_grad();
+            let wt = Tensor::<4>::random([5, 4, 3, 3], Distribution::Normal(0.0, 0.3), &device).require_grad();
+            let b = Tensor::<1>::random([5], Distribution::Normal(0.0, 1.0), &device).require_grad();
+            let target = Tensor::<4>::random([2, 5, 6, 7], Distribution::Normal(0.0, 1.0), &device);
+            let loss = |out: Tensor<4>| (out * target.clone()).sum();
+            let g1 = loss(conv2d(x.clone(), wt.clone(), Some(b.clone()), opts.clone())).backward();
+            let g2 = loss(conv2d_by_matmul_with(x.clone(), wt.clone(), Some(b.clone()), &opts, columns)).backward();
+            for (name, a, b) in [
+                ("input", x.grad(&g1).unwrap(), x.grad(&g2).unwrap()),
+                ("weight", wt.grad(&g1).unwrap(), wt.grad(&g2).unwrap()),
+            ] {
+                let scale = a.clone().abs().max().into_scalar::<f32>();
+                let err = max_abs_diff(a, b) / scale;
+                assert!(err < 1e-5, "{columns:?} {name} gradient: {err}");
+            }
+            let (gb1, gb2) = (b.grad(&g1).unwrap(), b.grad(&g2).unwrap());
+            assert!(
+                max_abs_diff(gb1.clone().unsqueeze::<4>(), gb2.unsqueeze())
+                    <= 1e-4 * gb1.abs().max().into_scalar::<f32>()
+            );
         }
-        let (gb1, gb2) = (b.grad(&g1).unwrap(), b.grad(&g2).unwrap());
-        assert!(
-            max_abs_diff(gb1.clone().unsqueeze::<4>(), gb2.unsqueeze()) <= 1e-4 * gb1.abs().max().into_scalar::<f32>()
-        );
     }
 
-    /// GPU inference takes the route for stride-1 kernels larger than 1x1; the CPU keeps its
-    /// host kernels, training and strided or grouped convolutions keep burn's.
+    /// Stride-1 kernels larger than 1x1 suit the route; the CPU never takes it (its host kernels),
+    /// nor training, nor strided or grouped convolutions.
     #[test]
     fn only_gpu_inference_takes_the_route() {
         let opts = options([(1, 1), (1, 1)], 1);
-        assert!(suits(false, false, &opts, [3, 3]) && suits(false, false, &opts, [7, 7]));
-        assert!(!suits(false, false, &opts, [1, 1]));
-        assert!(!suits(true, false, &opts, [3, 3]) && !suits(false, true, &opts, [3, 3]));
+        assert!(suits(&opts, [3, 3]) && suits(&opts, [7, 7]));
+        assert!(!suits(&opts, [1, 1]));
         let strided = ConvOptions::new_with_padding([2, 2], [(1, 1), (1, 1)], [1, 1], 1);
         let grouped = ConvOptions::new_with_padding([1, 1], [(1, 1), (1, 1)], [1, 1], 2);
-        assert!(!suits(false, false, &strided, [3, 3]) && !suits(false, false, &grouped, [3, 3]));
+        assert!(!suits(&strided, [3, 3]) && !suits(&grouped, [3, 3]));
         assert!(!matmul_conv_applies(&Device::flex(), &opts, [3, 3]));
         assert!(!matmul_conv_applies(&Device::flex().autodiff(), &opts, [3, 3]));
+    }
+
+    /// Index tensors are kept per shape: asking twice gives the same values, and a new shape
+    /// gets its own.
+    #[test]
+    fn index_tensors_are_kept_per_shape() {
+        let device = Device::flex();
+        let a = WindowShape { input: [4, 5], kernel: [3, 3], padding: [(1, 1), (1, 1)], dilation: [1, 1] };
+        let b = WindowShape { input: [4, 6], ..a };
+        let first = window_indices(a, &device).into_data();
+        assert_eq!(first, window_indices(a, &device).into_data());
+        assert_eq!(window_indices(b, &device).dims(), [9 * 4 * 6]);
+        assert_eq!(first.shape().to_vec(), [9 * 4 * 5]);
     }
 }

@@ -1,0 +1,105 @@
+//! Formulations for GPU inference, and the switch that turns each one off.
+//!
+//! Design decision: on burn's wgpu backend a pass of the update loop is bound by how many kernels
+//! it launches (session 12's stage table: the synchronised stages sum to twice the unsynchronised
+//! pass, and the CPU spends more time issuing work than the GPU computing it). Where burn's stock
+//! composition of an operation launches many small kernels, GPU inference (a device other than
+//! the CPU, without autodiff) takes a formulation with fewer: the convolution as one matrix
+//! product over a column matrix gathered in one `select` (`matmul_conv`), the bilinear resize as
+//! burn's own `interpolate` kernel (`resample`), the pyramid lookup as one gather over all levels
+//! (`dgstereo_costvolume`). Each keeps the stock path as its reference and is tested against it on
+//! the CPU; each can be turned off with `DGSTEREO_GPU_STOCK` (comma-separated route names, or
+//! `all`; read once per process) so that a GPU run can measure what it gains.
+
+use std::sync::OnceLock;
+
+use burn::tensor::Device;
+
+/// A GPU inference formulation that `DGSTEREO_GPU_STOCK` can turn off.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GpuRoute {
+    /// Stride-1 convolutions as one matrix product (`conv`); off: burn's convolution.
+    MatmulConv,
+    /// The column matrix of that product gathered by one `select` (`im2col`); off: the shifted
+    /// windows sliced one by one and concatenated.
+    GatheredColumns,
+    /// Bilinear resizes as burn's `interpolate` (`resize`); off: the two interpolation-matrix
+    /// products (the training path).
+    Interpolate,
+    /// The pyramid lookup as one gather over all levels (`lookup`); off: one gather per level.
+    GatheredLookup,
+}
+
+impl GpuRoute {
+    /// The name `DGSTEREO_GPU_STOCK` knows the route by.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::MatmulConv => "conv",
+            Self::GatheredColumns => "im2col",
+            Self::Interpolate => "resize",
+            Self::GatheredLookup => "lookup",
+        }
+    }
+
+    /// Whether `DGSTEREO_GPU_STOCK` leaves this route on.
+    pub(crate) fn enabled(self) -> bool {
+        static OFF: OnceLock<Vec<String>> = OnceLock::new();
+        let off = OFF.get_or_init(|| {
+            // The previous switch of the convolution route, still honoured.
+            let legacy = std::env::var("DGSTEREO_GPU_CONV").is_ok_and(|v| v.eq_ignore_ascii_case("burn"));
+            let mut names = parse_names(&std::env::var("DGSTEREO_GPU_STOCK").unwrap_or_default());
+            if legacy {
+                names.push(Self::MatmulConv.name().to_string());
+            }
+            names
+        });
+        !switched_off(off, self)
+    }
+
+    /// Whether the route applies to work on `device`: GPU inference, and not switched off.
+    pub fn applies(self, device: &Device) -> bool {
+        gpu_inference(device) && self.enabled()
+    }
+}
+
+/// Inference on a device other than the CPU: no autodiff (training keeps the stock operations,
+/// whose backward passes keep less), not burn's Flex backend (whose place the host kernels take).
+pub fn gpu_inference(device: &Device) -> bool {
+    *device != Device::flex() && !device.is_autodiff()
+}
+
+/// The lower-cased, trimmed names of a comma-separated list.
+fn parse_names(list: &str) -> Vec<String> {
+    list.split(',').map(|s| s.trim().to_ascii_lowercase()).filter(|s| !s.is_empty()).collect()
+}
+
+/// Whether `names` turns `route` off (by its name or `all`).
+fn switched_off(names: &[String], route: GpuRoute) -> bool {
+    names.iter().any(|n| n == "all" || n == route.name())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn routes_are_switched_off_by_name_or_all() {
+        let names = parse_names(" Resize, lookup ,,");
+        assert_eq!(names, ["resize", "lookup"]);
+        assert!(switched_off(&names, GpuRoute::Interpolate) && switched_off(&names, GpuRoute::GatheredLookup));
+        assert!(!switched_off(&names, GpuRoute::MatmulConv) && !switched_off(&names, GpuRoute::GatheredColumns));
+        let all = parse_names("all");
+        for route in [GpuRoute::MatmulConv, GpuRoute::GatheredColumns, GpuRoute::Interpolate, GpuRoute::GatheredLookup]
+        {
+            assert!(switched_off(&all, route), "{route:?}");
+        }
+    }
+
+    /// The CPU never takes a GPU route, with or without autodiff.
+    #[test]
+    fn the_cpu_takes_no_route() {
+        let cpu = Device::flex();
+        assert!(!gpu_inference(&cpu) && !gpu_inference(&cpu.clone().autodiff()));
+        assert!(!GpuRoute::MatmulConv.applies(&cpu) && !GpuRoute::GatheredLookup.applies(&cpu));
+    }
+}
