@@ -7,14 +7,17 @@
 //! lack bilinear-resize backward), and it is exact to PyTorch's formula. For CPU inference
 //! ([`host_kernels_apply`]) the same interpolation runs as a host pass with the two taps of each
 //! output row and column, in parallel over channel planes: the products spend most of their work
-//! on the matrices' zeros (the GRUs' resizes between levels were 4 % of a CPU forward pass).
+//! on the matrices' zeros (the GRUs' resizes between levels were 4 % of a CPU forward pass). GPU
+//! inference ([`GpuRoute::Interpolate`]) takes burn's `interpolate`, one kernel where the products
+//! take two and upload their matrices on every call; training keeps the products everywhere.
 
-use burn::tensor::module::avg_pool2d;
-use burn::tensor::ops::AvgPoolOptions;
+use burn::tensor::module::{avg_pool2d, interpolate};
+use burn::tensor::ops::{AvgPoolOptions, InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::device::host_kernels_apply;
+use crate::gpu_routes::GpuRoute;
 use crate::tensor::{host_values, zeros_parallel};
 
 /// The two taps of each output sample of 1-D linear interpolation: `(x0, x1, w)`, the output
@@ -68,7 +71,18 @@ pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> T
     if host_kernels_apply(&x.device()) {
         return resize_bilinear_host(x, size, align_corners);
     }
+    if GpuRoute::Interpolate.applies(&x.device()) {
+        return resize_bilinear_by_interpolate(x, size, align_corners);
+    }
     resize_bilinear_by_matrices(x, size, align_corners)
+}
+
+/// [`resize_bilinear`] by burn's `interpolate` (forward only on the GPU backends).
+fn resize_bilinear_by_interpolate(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> Tensor<4> {
+    let mut options = InterpolateOptions::new(InterpolateMode::Bilinear);
+    options.align_corners = align_corners;
+    options.output_size = Some(size);
+    interpolate(x, options)
 }
 
 /// [`resize_bilinear`] by the two matrix products (the reference; every backend, with gradients).
@@ -174,14 +188,10 @@ pub fn average_pool_half(x: Tensor<4>) -> Tensor<4> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use burn::tensor::module::interpolate;
-    use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 
+    /// burn's resize: the reference.
     fn stock(x: Tensor<4>, size: [usize; 2], align: bool) -> Tensor<4> {
-        let mut o = InterpolateOptions::new(InterpolateMode::Bilinear);
-        o.align_corners = align;
-        o.output_size = Some(size);
-        interpolate(x, o)
+        resize_bilinear_by_interpolate(x, size, align)
     }
 
     #[test]
@@ -190,10 +200,14 @@ mod tests {
         let x = Tensor::<4>::random([2, 3, 7, 9], burn::tensor::Distribution::Default, &device);
         for size in [[14, 18], [4, 5], [7, 9], [13, 3]] {
             for align in [true, false] {
-                let a = resize_bilinear(x.clone(), size, align);
                 let b = stock(x.clone(), size, align);
-                let diff = crate::tensor::max_abs_diff(a, b);
-                assert!(diff < 1e-5, "size {size:?} align {align}: {diff}");
+                for (path, a) in [
+                    ("entry", resize_bilinear(x.clone(), size, align)),
+                    ("matrices", resize_bilinear_by_matrices(x.clone(), size, align)),
+                ] {
+                    let diff = crate::tensor::max_abs_diff(a, b.clone());
+                    assert!(diff < 1e-5, "{path}, size {size:?} align {align}: {diff}");
+                }
             }
         }
     }
