@@ -1,6 +1,6 @@
 //! Linear sampling along a row with zero padding, the 1-D `grid_sample` of the reference.
 
-use burn::tensor::{Int, Tensor};
+use burn::tensor::{Int, Tensor, TensorData};
 
 /// The integer taps and weights of sampling at `x + dx` for `dx = -r..=r+1`.
 ///
@@ -36,4 +36,78 @@ pub(crate) fn interpolate_taps(values: Tensor<2>, w: Tensor<2>, radius: usize) -
     let hi = values.slice([0..m, 1..n]);
     let w = w.expand([m, k]);
     lo * (w.clone().neg().add_scalar(1.0)) + hi * w
+}
+
+/// The looked-up levels of a pyramid side by side, and the per-level constants that let one
+/// lookup sample all of them with two gathers: the lower and the upper integer tap of every
+/// sample. The stock lookup runs a tap computation, a gather and a slice per level (on wgpu the
+/// upper taps' slice, one element off the binding alignment, is a copy kernel); this is the same
+/// arithmetic in a few fused kernels, for GPU inference.
+#[derive(Debug, Clone)]
+pub(crate) struct GatheredLevels {
+    /// `[M, Σ W_i]`: level `i` in the columns `offset_i .. offset_i + W_i`.
+    values: Tensor<2>,
+    /// `[1, L]`: `1 / 2^i`, the scale of a full-resolution position at level `i`.
+    scale: Tensor<2>,
+    /// `[1, L, 1]`: `W_i - 1`, the last column of level `i`.
+    last: Tensor<3>,
+    /// `[1, L, 1]`: `offset_i`, where level `i` starts.
+    offset: Tensor<3>,
+    /// `[1, 1, 2r+1]`: the tap offsets `-r ..= r`.
+    taps: Tensor<3>,
+    /// `Σ W_i - 1`, the last column of `values`.
+    columns_last: usize,
+}
+
+impl GatheredLevels {
+    /// Lays out `levels` (`[M, W_i]` each) side by side.
+    pub(crate) fn new(levels: &[Tensor<2>], radius: usize) -> Self {
+        let device = levels[0].device();
+        let widths: Vec<usize> = levels.iter().map(|l| l.dims()[1]).collect();
+        let offsets: Vec<f32> =
+            widths.iter().scan(0, |start, w| Some(std::mem::replace(start, *start + w) as f32)).collect();
+        let l = levels.len();
+        let row = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [l]), &device);
+        let k = 2 * radius + 1;
+        let taps: Vec<f32> = (0..k).map(|j| j as f32 - radius as f32).collect();
+        let total: usize = widths.iter().sum();
+        Self {
+            values: Tensor::cat(levels.to_vec(), 1),
+            scale: row((0..l).map(|i| 1.0 / (1u64 << i) as f32).collect()).reshape([1, l]),
+            last: row(widths.iter().map(|&w| w as f32 - 1.0).collect()).reshape([1, l, 1]),
+            offset: row(offsets).reshape([1, l, 1]),
+            taps: Tensor::<1>::from_data(TensorData::new(taps, [k]), &device).reshape([1, 1, k]),
+            columns_last: total.saturating_sub(1),
+        }
+    }
+
+    /// Linear samples at `x / 2^i + d`, `d = -r..=r`, of every level `i`, zero outside a level's
+    /// row: the stock lookup's values ([`taps`], [`interpolate_taps`]).
+    ///
+    /// # Shapes
+    /// - `x`: `[M, 1]`; output `[M, L·(2r+1)]`, level-major
+    pub(crate) fn lookup(&self, x: Tensor<2>) -> Tensor<2> {
+        let [m, _] = x.dims();
+        let [_, l, _] = self.last.dims();
+        let k = self.taps.dims()[2];
+        if self.values.dims()[1] == 0 {
+            return Tensor::zeros([m, l * k], &x.device());
+        }
+        let xi = x * self.scale.clone(); // [M, L]
+        let x0 = xi.clone().floor();
+        let w = (xi - x0.clone()).reshape([m, l, 1]);
+        let lower = x0.reshape([m, l, 1]) + self.taps.clone(); // [M, L, K]
+        let sample = |pos: Tensor<3>| {
+            let inside =
+                pos.clone().greater_equal_elem(0.0).float() * pos.clone().lower_equal(self.last.clone()).float();
+            let column = (pos.clamp_min(0.0).min_pair(self.last.clone().expand([m, l, k])) + self.offset.clone())
+                .clamp(0.0, self.columns_last as f64)
+                .int()
+                .reshape([m, l * k]);
+            self.values.clone().gather(1, column).reshape([m, l, k]) * inside
+        };
+        let upper = sample(lower.clone().add_scalar(1.0));
+        let lower = sample(lower);
+        (lower * w.clone().neg().add_scalar(1.0) + upper * w).reshape([m, l * k])
+    }
 }

@@ -1,15 +1,21 @@
 //! The materialised all-pairs pyramid ("reg").
 
 use burn::tensor::{Device, Tensor, TensorData};
+use dgstereo_core::gpu_routes::GpuRoute;
 
 use crate::host_lookup::{self, HostLevel};
-use crate::lookup::{interpolate_taps, taps};
+use crate::lookup::{GatheredLevels, interpolate_taps, taps};
 use crate::{CostVolume, LookupKernel};
 
 #[derive(Debug, Clone)]
 enum Storage {
     Tensors(Vec<Tensor<2>>),
-    Host { levels: Vec<HostLevel>, device: Device },
+    /// The stock levels and, for the lookup, the looked-up ones side by side (GPU inference).
+    Gathered(Vec<Tensor<2>>, Box<GatheredLevels>),
+    Host {
+        levels: Vec<HostLevel>,
+        device: Device,
+    },
 }
 
 /// All-pairs correlation per row and its average-pooled levels.
@@ -51,7 +57,12 @@ impl CorrelationPyramid {
                     let last = pyramid.last().expect("level 0").clone();
                     pyramid.push(pool_pairs(last));
                 }
-                Storage::Tensors(pyramid)
+                if GpuRoute::GatheredLookup.applies(&device) {
+                    let gathered = Box::new(GatheredLevels::new(&pyramid[..levels], radius));
+                    Storage::Gathered(pyramid, gathered)
+                } else {
+                    Storage::Tensors(pyramid)
+                }
             }
             LookupKernel::Host => {
                 let values = corr.into_data().convert::<f32>().try_into_vec::<f32>().expect("float correlation");
@@ -66,10 +77,21 @@ impl CorrelationPyramid {
         Self { pyramid, dims: [n, h, w1], levels, radius }
     }
 
-    /// The kernel this pyramid looks up with.
+    /// The stock pyramid looked up by one gather over all levels ([`GpuRoute::GatheredLookup`]),
+    /// on any device: what GPU inference runs, for the tests.
+    #[cfg(test)]
+    pub(crate) fn gathered(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize) -> Self {
+        let stock = Self::with_kernel(fmap1, fmap2, levels, radius, LookupKernel::Stock);
+        let Storage::Tensors(pyramid) = stock.pyramid else { unreachable!("the stock kernel stores tensors") };
+        let gathered = Box::new(GatheredLevels::new(&pyramid[..levels], radius));
+        Self { pyramid: Storage::Gathered(pyramid, gathered), ..stock }
+    }
+
+    /// The kernel this pyramid looks up with (the gathered lookup is the stock kernel's
+    /// operations, arranged for fewer launches).
     pub fn kernel(&self) -> LookupKernel {
         match self.pyramid {
-            Storage::Tensors(_) => LookupKernel::Stock,
+            Storage::Tensors(_) | Storage::Gathered(..) => LookupKernel::Stock,
             Storage::Host { .. } => LookupKernel::Host,
         }
     }
@@ -77,7 +99,7 @@ impl CorrelationPyramid {
     /// The stored levels (`levels + 1` of them), `[N·H·W1, W2 / 2^i]` each.
     pub fn levels(&self) -> Vec<Tensor<2>> {
         match &self.pyramid {
-            Storage::Tensors(t) => t.clone(),
+            Storage::Tensors(t) | Storage::Gathered(t, _) => t.clone(),
             Storage::Host { levels, device } => {
                 let rows = self.dims.iter().product::<usize>();
                 levels
@@ -113,6 +135,10 @@ impl CostVolume for CorrelationPyramid {
         let k = 2 * self.radius + 1;
         let pyramid = match &self.pyramid {
             Storage::Tensors(t) => t,
+            Storage::Gathered(_, gathered) => {
+                let out = gathered.lookup(coords_x.reshape([n * h * w1, 1]));
+                return out.reshape([n, h, w1, self.levels * k]).permute([0, 3, 1, 2]);
+            }
             Storage::Host { levels, device } => {
                 let coords = coords_x.into_data().convert::<f32>().try_into_vec::<f32>().expect("float coordinates");
                 let out = host_lookup::lookup(&levels[..self.levels], &coords, self.dims, self.radius);

@@ -111,6 +111,27 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    /// The gathered lookup (all levels in one gather, GPU inference) and the stock one agree to
+    /// 1e-5: batches, odd widths, levels pooled down to width 1 or 0, positions in and out of the
+    /// row.
+    #[test]
+    fn gathered_and_stock_lookups_agree(w in 1usize..40, h in 1usize..4, n in 1usize..3, levels in 1usize..7, radius in 0usize..5, seed in 0u64..1000, shift in -50f32..50.0) {
+        let c = 16;
+        let (f1, f2) = (features(n, c, h, w, seed), features(n, c, h, w, seed + 1));
+        let stock = CorrelationPyramid::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Stock);
+        let gathered = CorrelationPyramid::gathered(f1, f2, levels, radius);
+        let coords = coords(n, h, w, shift);
+        let a = stock.lookup(coords.clone());
+        let b = gathered.lookup(coords);
+        prop_assert_eq!(a.dims(), b.dims());
+        let diff = max_abs_diff(a, b);
+        prop_assert!(diff <= 1e-5, "differ by {}", diff);
+    }
+}
+
 /// Inference on the CPU picks the host kernel; an autodiff device keeps the differentiable one.
 #[test]
 fn kernel_follows_the_device() {
