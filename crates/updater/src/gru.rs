@@ -76,12 +76,14 @@ impl ConvGru {
         {
             return next;
         }
-        let x = Tensor::cat(inputs, 1);
-        let hx = Tensor::cat(vec![h.clone(), x.clone()], 1);
-        let zr = sigmoid(self.gates(hx) + ctx.zr.clone());
+        // `[h, x]` and `[r·h, x]` each as one concatenation of all parts (no `x` of its own: one
+        // copy fewer a step).
+        let with_inputs =
+            |first: Tensor<4>| Tensor::cat([first].into_iter().chain(inputs.iter().cloned()).collect(), 1);
+        let zr = sigmoid(self.gates(with_inputs(h.clone())) + ctx.zr.clone());
         let z = zr.clone().narrow(1, 0, hidden);
         let r = zr.narrow(1, hidden, hidden);
-        let q = tanh(conv2d_forward(&self.convq, Tensor::cat(vec![r * h.clone(), x], 1)) + ctx.q.clone());
+        let q = tanh(conv2d_forward(&self.convq, with_inputs(r * h.clone())) + ctx.q.clone());
         (z.clone().neg().add_scalar(1.0)) * h + z * q
     }
 
