@@ -142,13 +142,13 @@ impl WindowShape {
     ///
     /// # Shapes
     /// - `kh·kw·H_out·W_out` indices, tap-major
-    fn indices(&self) -> Vec<i64> {
+    fn indices(&self) -> Vec<i32> {
         let ([h, w], [kh, kw]) = (self.input, self.kernel);
         let [(top, bottom), (left, right)] = self.padding;
         let [dh, dw] = self.dilation;
         let out_h = (h + top + bottom).saturating_sub(dh * (kh - 1));
         let out_w = (w + left + right).saturating_sub(dw * (kw - 1));
-        let zero = (h * w) as i64;
+        let zero = i32::try_from(h * w).expect("an input plane of fewer than 2^31 pixels");
         let mut indices = Vec::with_capacity(kh * kw * out_h * out_w);
         for ky in 0..kh {
             for kx in 0..kw {
@@ -157,7 +157,7 @@ impl WindowShape {
                     for ox in 0..out_w {
                         let x = (ox + dw * kx).checked_sub(left).filter(|&x| x < w);
                         indices.push(match (y, x) {
-                            (Some(y), Some(x)) => (y * w + x) as i64,
+                            (Some(y), Some(x)) => (y * w + x) as i32,
                             _ => zero,
                         });
                     }
