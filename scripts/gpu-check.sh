@@ -11,8 +11,10 @@
 # A dry run of the plumbing on the CPU, with any release binary as .gpubin/dgstereo.xz:
 #   DEVICE=cpu SIZE=64x128 ITERS=2 OUT=/tmp/gpu-check bash scripts/gpu-check.sh
 # burn's kernel tuning is kept between leases: the database this script returns
-# ($OUT/autotune-default.db) goes to .gpubin/autotune-default.db here, and the next lease starts
-# from it (a fresh machine otherwise spends ~140 s tuning before the first timed pass).
+# ($OUT/autotune-default.db and its write-ahead log, $OUT/autotune-default.db-wal) goes to
+# .gpubin/ here, and the next lease starts from it (a fresh machine otherwise spends ~140 s tuning
+# before the first timed pass). The log holds the newest tunings; a stale log left beside a
+# replaced database (a warm machine's second call) corrupts it, so both are replaced together.
 set -uo pipefail
 OUT=${OUT:-/tmp/gpu-check-out}
 mkdir -p "$OUT"
@@ -21,7 +23,11 @@ ldconfig
 xz -dc .gpubin/dgstereo.xz > /tmp/dgstereo && chmod +x /tmp/dgstereo || exit 1
 export CUBECL_AUTOTUNE_LEVEL="${CUBECL_AUTOTUNE_LEVEL:-minimal}"
 mkdir -p target/environment
-if [ -f .gpubin/autotune-default.db ]; then cp .gpubin/autotune-default.db target/environment/default.db; fi
+if [ -f .gpubin/autotune-default.db ]; then
+    rm -f target/environment/default.db target/environment/default.db-*
+    cp .gpubin/autotune-default.db target/environment/default.db
+    if [ -f .gpubin/autotune-default.db-wal ]; then cp .gpubin/autotune-default.db-wal target/environment/default.db-wal; fi
+fi
 DEVICE="${DEVICE:-gpu}" SIZE="${SIZE:-375x1242}" ITERS="${ITERS:-32}"
 if command -v nvidia-smi >/dev/null; then
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv | tee "$OUT/gpu.txt"
@@ -41,6 +47,7 @@ step() {
     timeout "$limit" "$@" 2>&1 | tee -a "$OUT/log.txt"
     # Keep the tuning after every step: a later step may be cut off by the command's limit.
     cp target/environment/default.db "$OUT/autotune-default.db" 2>/dev/null || true
+    cp target/environment/default.db-wal "$OUT/autotune-default.db-wal" 2>/dev/null || true
 }
 
 kitti=(bench --device "$DEVICE" --size "$SIZE" --iters "$ITERS" --runs 3 --warmup 1)
