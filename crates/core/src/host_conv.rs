@@ -17,7 +17,7 @@
 //! `convolution` benchmarks).
 //!
 //! The `gemm` crate's entry point is an `unsafe fn` taking raw pointers and strides; it is called
-//! in one place, [`matmul_strided_with`], which every path's products go through and which
+//! in one place, `matmul_strided_with`, which every path's products go through and which
 //! asserts that every element its strides reach lies inside the slices it is given (the
 //! workspace's other `unsafe` blocks are the allocator setting, the SIGPIPE restore and the
 //! blocked Winograd path's AVX-512 intrinsics, whose loads and stores go through slices whose

@@ -42,7 +42,7 @@ fn linear_taps(n_in: usize, n_out: usize, align_corners: bool) -> Vec<(usize, us
 }
 
 /// The `n_out x n_in` matrix of 1-D linear interpolation, row-major (the taps of
-/// [`linear_taps`]).
+/// `linear_taps`).
 pub fn linear_weights(n_in: usize, n_out: usize, align_corners: bool) -> Vec<f32> {
     let mut m = vec![0f32; n_out * n_in];
     for (i, (x0, x1, w)) in linear_taps(n_in, n_out, align_corners).into_iter().enumerate() {
