@@ -23,6 +23,9 @@ pub enum GpuRoute {
     /// The column matrix of that product gathered by one `select` (`im2col`); off: the shifted
     /// windows sliced one by one and concatenated.
     GatheredColumns,
+    /// Strided convolutions through that product too, with gathered columns (`strided`); off:
+    /// burn's convolution.
+    StridedProducts,
     /// Bilinear resizes as burn's `interpolate` (`resize`); off: the two interpolation-matrix
     /// products (the training path).
     Interpolate,
@@ -36,6 +39,7 @@ impl GpuRoute {
         match self {
             Self::MatmulConv => "conv",
             Self::GatheredColumns => "im2col",
+            Self::StridedProducts => "strided",
             Self::Interpolate => "resize",
             Self::GatheredLookup => "lookup",
         }
@@ -89,8 +93,13 @@ mod tests {
         assert!(switched_off(&names, GpuRoute::Interpolate) && switched_off(&names, GpuRoute::GatheredLookup));
         assert!(!switched_off(&names, GpuRoute::MatmulConv) && !switched_off(&names, GpuRoute::GatheredColumns));
         let all = parse_names("all");
-        for route in [GpuRoute::MatmulConv, GpuRoute::GatheredColumns, GpuRoute::Interpolate, GpuRoute::GatheredLookup]
-        {
+        for route in [
+            GpuRoute::MatmulConv,
+            GpuRoute::GatheredColumns,
+            GpuRoute::StridedProducts,
+            GpuRoute::Interpolate,
+            GpuRoute::GatheredLookup,
+        ] {
             assert!(switched_off(&all, route), "{route:?}");
         }
     }

@@ -1,20 +1,19 @@
 //! A convolution as one matrix product over shifted copies of the input, for GPU inference.
 //!
 //! Design decision: burn 0.22's convolution on wgpu/Vulkan tunes between a direct kernel and
-//! implicit-GEMM kernels on the tensor cores (`simple_sync_cmma`). On the update loop's shapes
-//! (3x3 with 256 to 384 input channels) the implicit-GEMM kernels ask for 90 KB of workgroup
-//! memory where Vulkan allows 48 KB, so burn falls back to its direct kernel: about 2 TFLOP/s on
-//! an H200 in f16 and f32 alike, 47 % of a KITTI pass in the GRU at 1/4 resolution (burn's tuning
-//! database from the session 12 lease). burn's matrix product does run on the tensor cores at
-//! those sizes (its tuning picked `matmul_simple_cyclic_cmma_multi_rows`). So on devices other
-//! than the CPU a stride-1 convolution is built from burn's operations as an explicit im2col, the
-//! input's `kh·kw` shifted windows stacked along the channels (`[N, C·kh·kw, H_out·W_out]`), and
-//! one product with the weight as `[O, C·kh·kw]`. It costs the
-//! column matrix's memory (`kh·kw` times the input's), which a GPU has, and it differentiates on
-//! every backend, but autodiff would keep every column matrix for the backward pass, so training
-//! keeps burn's convolution ([`matmul_conv_applies`]). The CPU never takes it: its host kernels
-//! are faster there. burn's convolution stays the reference, and the tests check both agree,
-//! gradients included.
+//! implicit-GEMM kernels on the tensor cores (`simple_sync_cmma`). On the update loop's shapes (3x3
+//! with 256 to 384 input channels) the implicit-GEMM kernels ask for 90 KB of workgroup memory
+//! where Vulkan allows 48 KB, so burn falls back to its direct kernel: about 2 TFLOP/s on an H200
+//! in f16 and f32 alike, 47 % of a KITTI pass in the GRU at 1/4 resolution (burn's tuning database
+//! from the session 12 lease). burn's matrix product does run on the tensor cores at those sizes
+//! (its tuning picked `matmul_simple_cyclic_cmma_multi_rows`). So on devices other than the CPU a
+//! convolution is built from burn's operations as an explicit im2col, the input's `kh·kw` shifted
+//! windows stacked along the channels (`[N, C·kh·kw, H_out·W_out]`), and one product with the
+//! weight as `[O, C·kh·kw]`. It costs the column matrix's memory (`kh·kw` times the input's), which
+//! a GPU has, and it differentiates on every backend, but autodiff would keep every column matrix
+//! for the backward pass, so training keeps burn's convolution ([`matmul_conv_applies`]). The CPU
+//! never takes it: its host kernels are faster there. burn's convolution stays the reference, and
+//! the tests check both agree, gradients included.
 //!
 //! The column matrix is gathered in one `select` from the input with a zero column appended
 //! ([`Columns::Gathered`]): the shifted windows sliced one by one ([`Columns::Windows`]) cost a
@@ -22,10 +21,13 @@
 //! no view), ten kernels a 3x3 convolution and fifty for the motion encoder's 7x7, every
 //! iteration. The gathered rows are ordered `(c, ky, kx)`, the weight's own layout, so the weight
 //! needs no reordering either. The indices are built on the host once per shape and kept
-//! ([`window_indices`]).
+//! (`window_indices`).
 //!
-//! `DGSTEREO_GPU_STOCK=conv` turns the route off and `im2col` the gathered columns
-//! ([`crate::gpu_routes`]), so a GPU run can measure what each gains.
+//! The gathered columns take a stride as well, so the encoders' strided convolutions, which burn
+//! ran with its direct kernel (31 ms of a 0.2-s KITTI pass on an H200), take the product too.
+//!
+//! `DGSTEREO_GPU_STOCK=conv` turns the route off, `im2col` the gathered columns and `strided` the
+//! strided convolutions' share ([`crate::gpu_routes`]), so a GPU run can measure what each gains.
 
 use std::sync::{Mutex, PoisonError};
 
@@ -36,38 +38,43 @@ use crate::gpu_routes::GpuRoute;
 use crate::host_conv::conv_output_size;
 
 /// Whether a convolution with `options` and a `kh x kw` kernel on `device` takes
-/// [`conv2d_by_matmul`]: GPU inference ([`GpuRoute::MatmulConv`]), stride 1, groups 1, a kernel
-/// larger than 1x1 (burn runs 1x1 convolutions as a product already).
+/// [`conv2d_by_matmul`]: GPU inference ([`GpuRoute::MatmulConv`]), groups 1, and either stride 1
+/// with a kernel larger than 1x1 (burn runs those as a product already) or, with the gathered
+/// columns, any stride ([`GpuRoute::StridedProducts`]: burn's strided convolutions ran its direct
+/// kernel, 31 ms of a 0.2-s KITTI pass on an H200 in session 17's profile).
 pub fn matmul_conv_applies(device: &Device, options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
-    GpuRoute::MatmulConv.applies(device) && suits(options, kernel)
+    let strided = GpuRoute::GatheredColumns.enabled() && GpuRoute::StridedProducts.enabled();
+    GpuRoute::MatmulConv.applies(device) && suits(options, kernel, strided)
 }
 
-/// The shape rule of [`matmul_conv_applies`].
-fn suits(options: &ConvOptions<2>, [kh, kw]: [usize; 2]) -> bool {
-    options.stride == [1, 1] && options.groups == 1 && kh * kw > 1
+/// The shape rule of [`matmul_conv_applies`], `strided` saying whether strided convolutions take
+/// the product (only the gathered columns take a stride).
+fn suits(options: &ConvOptions<2>, [kh, kw]: [usize; 2], strided: bool) -> bool {
+    options.groups == 1 && if options.stride == [1, 1] { kh * kw > 1 } else { strided }
 }
 
 /// How the column matrix of [`conv2d_by_matmul`] is built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Columns {
     /// One `select` of precomputed indices from the input with a zero column appended; rows
-    /// `(c, ky, kx)`.
+    /// `(c, ky, kx)`; any stride.
     Gathered,
-    /// The input padded, its `kh·kw` shifted windows sliced and concatenated; rows `(ky, kx, c)`.
+    /// The input padded, its `kh·kw` shifted windows sliced and concatenated; rows `(ky, kx, c)`;
+    /// stride 1 only.
     Windows,
 }
 
-/// `conv2d(x, weight, bias, options)` for stride 1 and groups 1 as one matrix product over
-/// the input's shifted windows (explicit im2col from burn's operations), the columns gathered
-/// unless `DGSTEREO_GPU_STOCK` names `im2col`.
+/// `conv2d(x, weight, bias, options)` for groups 1 as one matrix product over the input's
+/// shifted windows (explicit im2col from burn's operations), the columns gathered unless
+/// `DGSTEREO_GPU_STOCK` names `im2col`.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`
 /// - output `[N, O, H_out, W_out]`, `H_out = H + top + bottom - dil·(kh - 1)` (likewise `W_out`)
 ///
 /// # Panics
-/// Where `options` has a stride other than 1 or groups, the channels do not match, or the padded
-/// input is smaller than the (dilated) kernel.
+/// Where `options` has groups, a stride other than 1 with the windows, the channels do not
+/// match, or the padded input is smaller than the (dilated) kernel.
 pub fn conv2d_by_matmul(
     x: Tensor<4>,
     weight: Tensor<4>,
@@ -86,7 +93,7 @@ pub fn conv2d_by_matmul_with(
     options: &ConvOptions<2>,
     columns: Columns,
 ) -> Tensor<4> {
-    assert!(options.stride == [1, 1] && options.groups == 1, "conv2d_by_matmul: stride 1 and groups 1 only");
+    assert!(options.groups == 1, "conv2d_by_matmul: groups 1 only");
     let [n, c, h, w] = x.dims();
     let [o, cw, kh, kw] = weight.dims();
     assert_eq!(c, cw, "conv2d_by_matmul: input has {c} channels, the weight expects {cw}");
@@ -94,14 +101,20 @@ pub fn conv2d_by_matmul_with(
     let k = kh * kw * c;
     let (columns, weight) = match columns {
         Columns::Gathered => {
-            let shape =
-                WindowShape { input: [h, w], kernel: [kh, kw], padding: options.padding, dilation: options.dilation };
+            let shape = WindowShape {
+                input: [h, w],
+                kernel: [kh, kw],
+                stride: options.stride,
+                padding: options.padding,
+                dilation: options.dilation,
+            };
             let indices = window_indices(shape, &x.device());
             let zero = Tensor::zeros([n, c, 1], &x.device());
             let flat = Tensor::cat(vec![x.reshape([n, c, h * w]), zero], 2);
             (flat.select(2, indices).reshape([n, k, out_h * out_w]), weight.reshape([1, o, k]))
         }
         Columns::Windows => {
+            assert!(options.stride == [1, 1], "conv2d_by_matmul: the windows take stride 1 only");
             let [(top, bottom), (left, right)] = options.padding;
             let [dh, dw] = options.dilation;
             let padded = if top + bottom + left + right > 0 {
@@ -132,6 +145,7 @@ pub fn conv2d_by_matmul_with(
 struct WindowShape {
     input: [usize; 2],
     kernel: [usize; 2],
+    stride: [usize; 2],
     padding: [(usize, usize); 2],
     dilation: [usize; 2],
 }
@@ -145,17 +159,17 @@ impl WindowShape {
     fn indices(&self) -> Vec<i32> {
         let ([h, w], [kh, kw]) = (self.input, self.kernel);
         let [(top, bottom), (left, right)] = self.padding;
-        let [dh, dw] = self.dilation;
-        let out_h = (h + top + bottom).saturating_sub(dh * (kh - 1));
-        let out_w = (w + left + right).saturating_sub(dw * (kw - 1));
+        let ([dh, dw], [sh, sw]) = (self.dilation, self.stride);
+        let out_h = (h + top + bottom).saturating_sub(dh * (kh - 1) + 1) / sh + 1;
+        let out_w = (w + left + right).saturating_sub(dw * (kw - 1) + 1) / sw + 1;
         let zero = i32::try_from(h * w).expect("an input plane of fewer than 2^31 pixels");
         let mut indices = Vec::with_capacity(kh * kw * out_h * out_w);
         for ky in 0..kh {
             for kx in 0..kw {
                 for oy in 0..out_h {
-                    let y = (oy + dh * ky).checked_sub(top).filter(|&y| y < h);
+                    let y = (oy * sh + dh * ky).checked_sub(top).filter(|&y| y < h);
                     for ox in 0..out_w {
-                        let x = (ox + dw * kx).checked_sub(left).filter(|&x| x < w);
+                        let x = (ox * sw + dw * kx).checked_sub(left).filter(|&x| x < w);
                         indices.push(match (y, x) {
                             (Some(y), Some(x)) => (y * w + x) as i32,
                             _ => zero,
@@ -203,6 +217,10 @@ mod tests {
         ConvOptions::new_with_padding([1, 1], padding, [dilation, dilation], 1)
     }
 
+    fn strided(stride: [usize; 2], padding: [(usize, usize); 2]) -> ConvOptions<2> {
+        ConvOptions::new_with_padding(stride, padding, [1, 1], 1)
+    }
+
     /// Largest difference from burn's convolution relative to its output's largest magnitude.
     fn relative_error(
         n: usize,
@@ -243,11 +261,29 @@ mod tests {
         }
     }
 
+    /// Strided convolutions (the encoders' stems and downsampling layers) take the gathered
+    /// columns only: even and odd sizes, 1x1, 3x3 and 7x7 kernels, a stride per axis, dilation.
+    #[test]
+    fn the_gathered_columns_take_a_stride() {
+        let same = [(1, 1), (1, 1)];
+        for (n, co, hw, k, opts) in [
+            (1, [3, 8], [12, 15], [7, 7], strided([2, 2], [(3, 3), (3, 3)])), // the stem
+            (2, [6, 5], [9, 10], [3, 3], strided([2, 2], same)),              // a layer's first block
+            (1, [6, 5], [9, 10], [1, 1], strided([2, 2], [(0, 0), (0, 0)])),  // its projection
+            (1, [4, 3], [8, 11], [3, 3], strided([1, 3], [(2, 0), (1, 2)])),  // a stride per axis
+            (1, [4, 3], [13, 11], [3, 3], ConvOptions::new_with_padding([2, 2], same, [2, 2], 1)),
+        ] {
+            let err = relative_error(n, co, hw, k, opts, Columns::Gathered);
+            assert!(err < 1e-5, "n {n} {co:?} {hw:?} {k:?}: {err}");
+        }
+    }
+
     /// The gathered indices of a small case, written out: a 2x3 input, a 3x3 kernel, padding 1;
     /// 6 is the appended zero.
     #[test]
     fn gathered_indices_read_the_window_or_the_zero() {
-        let shape = WindowShape { input: [2, 3], kernel: [3, 3], padding: [(1, 1), (1, 1)], dilation: [1, 1] };
+        let shape =
+            WindowShape { input: [2, 3], kernel: [3, 3], stride: [1, 1], padding: [(1, 1), (1, 1)], dilation: [1, 1] };
         let indices = shape.indices();
         assert_eq!(indices.len(), 9 * 6);
         assert_eq!(&indices[..6], &[6, 6, 6, 6, 0, 1]); // tap (0, 0): up and left
@@ -285,16 +321,20 @@ mod tests {
         }
     }
 
-    /// Stride-1 kernels larger than 1x1 suit the route; the CPU never takes it (its host kernels),
-    /// nor training, nor strided or grouped convolutions.
+    /// Stride-1 kernels larger than 1x1 suit the route, strided ones with the gathered columns;
+    /// the CPU never takes it (its host kernels), nor training, nor grouped convolutions.
     #[test]
     fn only_gpu_inference_takes_the_route() {
         let opts = options([(1, 1), (1, 1)], 1);
-        assert!(suits(&opts, [3, 3]) && suits(&opts, [7, 7]));
-        assert!(!suits(&opts, [1, 1]));
-        let strided = ConvOptions::new_with_padding([2, 2], [(1, 1), (1, 1)], [1, 1], 1);
+        for strided in [true, false] {
+            assert!(suits(&opts, [3, 3], strided) && suits(&opts, [7, 7], strided));
+            assert!(!suits(&opts, [1, 1], strided));
+        }
+        let strided = strided([2, 2], [(1, 1), (1, 1)]);
+        assert!(suits(&strided, [3, 3], true) && suits(&strided, [1, 1], true));
+        assert!(!suits(&strided, [3, 3], false));
         let grouped = ConvOptions::new_with_padding([1, 1], [(1, 1), (1, 1)], [1, 1], 2);
-        assert!(!suits(&strided, [3, 3]) && !suits(&grouped, [3, 3]));
+        assert!(!suits(&grouped, [3, 3], true) && !suits(&grouped, [3, 3], false));
         assert!(!matmul_conv_applies(&Device::flex(), &opts, [3, 3]));
         assert!(!matmul_conv_applies(&Device::flex().autodiff(), &opts, [3, 3]));
     }
@@ -304,7 +344,8 @@ mod tests {
     #[test]
     fn index_tensors_are_kept_per_shape() {
         let device = Device::flex();
-        let a = WindowShape { input: [4, 5], kernel: [3, 3], padding: [(1, 1), (1, 1)], dilation: [1, 1] };
+        let a =
+            WindowShape { input: [4, 5], kernel: [3, 3], stride: [1, 1], padding: [(1, 1), (1, 1)], dilation: [1, 1] };
         let b = WindowShape { input: [4, 6], ..a };
         let first = window_indices(a, &device).into_data();
         assert_eq!(first, window_indices(a, &device).into_data());
