@@ -26,6 +26,9 @@ pub enum GpuRoute {
     /// Strided convolutions through that product too, with gathered columns (`strided`); off:
     /// burn's convolution.
     StridedProducts,
+    /// Convolutions with few outputs as the product first and the shifted sum after
+    /// (`few-outputs`); off: the gathered columns.
+    FewOutputs,
     /// Bilinear resizes as burn's `interpolate` (`resize`); off: the two interpolation-matrix
     /// products (the training path).
     Interpolate,
@@ -40,6 +43,7 @@ impl GpuRoute {
             Self::MatmulConv => "conv",
             Self::GatheredColumns => "im2col",
             Self::StridedProducts => "strided",
+            Self::FewOutputs => "few-outputs",
             Self::Interpolate => "resize",
             Self::GatheredLookup => "lookup",
         }
@@ -97,6 +101,7 @@ mod tests {
             GpuRoute::MatmulConv,
             GpuRoute::GatheredColumns,
             GpuRoute::StridedProducts,
+            GpuRoute::FewOutputs,
             GpuRoute::Interpolate,
             GpuRoute::GatheredLookup,
         ] {

@@ -29,6 +29,8 @@
 //! `DGSTEREO_GPU_STOCK=conv` turns the route off, `im2col` the gathered columns and `strided` the
 //! strided convolutions' share ([`crate::gpu_routes`]), so a GPU run can measure what each gains.
 
+mod few_outputs;
+
 use std::sync::{Mutex, PoisonError};
 
 use burn::tensor::ops::{ConvOptions, PadMode};
@@ -66,7 +68,8 @@ pub enum Columns {
 
 /// `conv2d(x, weight, bias, options)` for groups 1 as one matrix product over the input's
 /// shifted windows (explicit im2col from burn's operations), the columns gathered unless
-/// `DGSTEREO_GPU_STOCK` names `im2col`.
+/// `DGSTEREO_GPU_STOCK` names `im2col`; with at most 4 outputs from at least 32 inputs the
+/// product comes first and the shift after (`few_outputs`) unless it names `few-outputs`.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`
@@ -81,8 +84,11 @@ pub fn conv2d_by_matmul(
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
 ) -> Tensor<4> {
-    let columns = if GpuRoute::GatheredColumns.enabled() { Columns::Gathered } else { Columns::Windows };
-    conv2d_by_matmul_with(x, weight, bias, options, columns)
+    let ([o, c, ..], columns) = (weight.dims(), GpuRoute::GatheredColumns.enabled());
+    if columns && GpuRoute::FewOutputs.enabled() && few_outputs::suits(options, o, c) {
+        return few_outputs::conv2d_product_first(x, weight, bias, options);
+    }
+    conv2d_by_matmul_with(x, weight, bias, options, if columns { Columns::Gathered } else { Columns::Windows })
 }
 
 /// [`conv2d_by_matmul`] with the column matrix built as `columns` says.
@@ -108,7 +114,7 @@ pub fn conv2d_by_matmul_with(
                 padding: options.padding,
                 dilation: options.dilation,
             };
-            let indices = window_indices(shape, &x.device());
+            let indices = window_indices(shape, 1, &x.device());
             let zero = Tensor::zeros([n, c, 1], &x.device());
             let flat = Tensor::cat(vec![x.reshape([n, c, h * w]), zero], 2);
             (flat.select(2, indices).reshape([n, k, out_h * out_w]), weight.reshape([1, o, k]))
@@ -186,22 +192,24 @@ impl WindowShape {
 /// of many sizes must not grow the cache without bound.
 const KEPT_INDEX_TENSORS: usize = 32;
 
-/// The indices of [`WindowShape::indices`] as a tensor on `device`, built once per shape and
-/// device and kept (up to [`KEPT_INDEX_TENSORS`], the oldest dropped first).
-fn window_indices(shape: WindowShape, device: &Device) -> Tensor<1, Int> {
-    type Kept = Vec<(WindowShape, Device, Tensor<1, Int>)>;
+/// The indices of [`WindowShape::indices`], `repeat` times over, as a tensor on `device`, built
+/// once per shape, repeat and device and kept (up to [`KEPT_INDEX_TENSORS`], the oldest dropped
+/// first).
+fn window_indices(shape: WindowShape, repeat: usize, device: &Device) -> Tensor<1, Int> {
+    type Kept = Vec<((WindowShape, usize), Device, Tensor<1, Int>)>;
     static KEPT: Mutex<Kept> = Mutex::new(Vec::new());
     let mut kept = KEPT.lock().unwrap_or_else(PoisonError::into_inner);
-    if let Some((_, _, t)) = kept.iter().find(|(s, d, _)| *s == shape && d == device) {
+    let key = (shape, repeat);
+    if let Some((_, _, t)) = kept.iter().find(|(k, d, _)| *k == key && d == device) {
         return t.clone();
     }
-    let values = shape.indices();
+    let values = shape.indices().repeat(repeat);
     let len = values.len();
     let tensor = Tensor::<1, Int>::from_data(TensorData::new(values, [len]), device);
     if kept.len() == KEPT_INDEX_TENSORS {
         kept.remove(0);
     }
-    kept.push((shape, device.clone(), tensor.clone()));
+    kept.push((key, device.clone(), tensor.clone()));
     tensor
 }
 
@@ -347,9 +355,9 @@ mod tests {
         let a =
             WindowShape { input: [4, 5], kernel: [3, 3], stride: [1, 1], padding: [(1, 1), (1, 1)], dilation: [1, 1] };
         let b = WindowShape { input: [4, 6], ..a };
-        let first = window_indices(a, &device).into_data();
-        assert_eq!(first, window_indices(a, &device).into_data());
-        assert_eq!(window_indices(b, &device).dims(), [9 * 4 * 6]);
+        let first = window_indices(a, 1, &device).into_data();
+        assert_eq!(first, window_indices(a, 1, &device).into_data());
+        assert_eq!(window_indices(b, 1, &device).dims(), [9 * 4 * 6]);
         assert_eq!(first.shape().to_vec(), [9 * 4 * 5]);
     }
 }
