@@ -49,14 +49,13 @@ pub(crate) struct GatheredLevels {
     values: Tensor<2>,
     /// `[1, L]`: `1 / 2^i`, the scale of a full-resolution position at level `i`.
     scale: Tensor<2>,
-    /// `[1, L, 1]`: `W_i - 1`, the last column of level `i`.
+    /// `[1, L, 1]`: `W_i - 1`, the last column of level `i` (-0.5 for an empty level, which
+    /// no integer position equals once clamped).
     last: Tensor<3>,
     /// `[1, L, 1]`: `offset_i`, where level `i` starts.
     offset: Tensor<3>,
     /// `[1, 1, 2r+1]`: the tap offsets `-r ..= r`.
     taps: Tensor<3>,
-    /// `Σ W_i - 1`, the last column of `values`.
-    columns_last: usize,
 }
 
 impl GatheredLevels {
@@ -70,14 +69,12 @@ impl GatheredLevels {
         let row = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [l]), &device);
         let k = 2 * radius + 1;
         let taps: Vec<f32> = (0..k).map(|j| j as f32 - radius as f32).collect();
-        let total: usize = widths.iter().sum();
         Self {
             values: Tensor::cat(levels.to_vec(), 1),
             scale: row((0..l).map(|i| 1.0 / (1u64 << i) as f32).collect()).reshape([1, l]),
-            last: row(widths.iter().map(|&w| w as f32 - 1.0).collect()).reshape([1, l, 1]),
+            last: row(widths.iter().map(|&w| if w == 0 { -0.5 } else { w as f32 - 1.0 }).collect()).reshape([1, l, 1]),
             offset: row(offsets).reshape([1, l, 1]),
             taps: Tensor::<1>::from_data(TensorData::new(taps, [k]), &device).reshape([1, 1, k]),
-            columns_last: total.saturating_sub(1),
         }
     }
 
@@ -98,12 +95,12 @@ impl GatheredLevels {
         let w = (xi - x0.clone()).reshape([m, l, 1]);
         let lower = x0.reshape([m, l, 1]) + self.taps.clone(); // [M, L, K]
         let sample = |pos: Tensor<3>| {
-            let inside =
-                pos.clone().greater_equal_elem(0.0).float() * pos.clone().lower_equal(self.last.clone()).float();
-            let column = (pos.clamp_min(0.0).min_pair(self.last.clone().expand([m, l, k])) + self.offset.clone())
-                .clamp(0.0, self.columns_last as f64)
-                .int()
-                .reshape([m, l * k]);
+            // The position clamped into its level's row; where clamping moved it, the sample lies
+            // outside the row and is zero. An empty level's bound, -0.5, moves every position.
+            let clamped = pos.clone().clamp_min(0.0).min_pair(self.last.clone().expand([m, l, k]));
+            let inside = clamped.clone().equal(pos).float();
+            // Truncation takes an empty level's -0.5 to the column before it: a valid index.
+            let column = (clamped + self.offset.clone()).int().reshape([m, l * k]);
             self.values.clone().gather(1, column).reshape([m, l, k]) * inside
         };
         let upper = sample(lower.clone().add_scalar(1.0));

@@ -132,6 +132,21 @@ proptest! {
     }
 }
 
+/// Levels pooled down to width 0 with integer positions at and around their (empty) rows: the
+/// gathered lookup's bound for an empty level must keep every sample there zero.
+#[test]
+fn gathered_lookup_of_empty_levels_is_zero() {
+    let (n, c, h, w, levels, radius) = (1, 8, 1, 3, 4, 2);
+    let (f1, f2) = (features(n, c, h, w, 3), features(n, c, h, w, 4));
+    let stock = CorrelationPyramid::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Stock);
+    let gathered = CorrelationPyramid::gathered(f1, f2, levels, radius);
+    for x in [-4.0f32, -1.0, 0.0, 1.0, 2.0, 4.0] {
+        let coords = from_vec(vec![x; n * h * w], [n, 1, h, w], &default_device());
+        let diff = max_abs_diff(stock.lookup(coords.clone()), gathered.lookup(coords));
+        assert!(diff <= 1e-6, "x = {x}: differ by {diff}");
+    }
+}
+
 /// Inference on the CPU picks the host kernel; an autodiff device keeps the differentiable one.
 #[test]
 fn kernel_follows_the_device() {
