@@ -12,6 +12,7 @@
 //! `all`; read once per process) so that a GPU run can measure what it gains.
 
 use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use burn::tensor::Device;
 
@@ -71,9 +72,21 @@ impl GpuRoute {
 }
 
 /// Inference on a device other than the CPU: no autodiff (training keeps the stock operations,
-/// whose backward passes keep less), not burn's Flex backend (whose place the host kernels take).
+/// whose backward passes keep less), not burn's Flex backend (whose place the host kernels take)
+/// unless [`set_routes_on_cpu`] asked for the routes there.
 pub fn gpu_inference(device: &Device) -> bool {
-    *device != Device::flex() && !device.is_autodiff()
+    !device.is_autodiff() && (*device != Device::flex() || ROUTES_ON_CPU.load(Ordering::Relaxed))
+}
+
+static ROUTES_ON_CPU: AtomicBool = AtomicBool::new(false);
+
+/// Lets CPU inference take the GPU routes too (off by default), for the whole process: with the
+/// host kernels off as well ([`crate::device::set_host_kernels`]), the CPU then computes what GPU
+/// inference computes, so the GPU's composition can be checked and debugged on a machine without
+/// a GPU (`dgstereo bench --kernels gpu-routes`). Where a host kernel is on and applies, it still
+/// runs first.
+pub fn set_routes_on_cpu(enabled: bool) {
+    ROUTES_ON_CPU.store(enabled, Ordering::Relaxed);
 }
 
 /// The lower-cased, trimmed names of a comma-separated list.

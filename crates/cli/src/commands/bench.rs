@@ -58,9 +58,11 @@ pub struct BenchArgs {
     /// The machine's peak GFLOP/s, for the share-of-peak column (2 cores here: ~200).
     #[arg(long, default_value_t = 200.0)]
     pub peak_gflops: f64,
-    /// CPU kernels: `host` (the hand-written convolution and lookup kernels, the default) or
-    /// `stock` (burn's operations only, the reference), to measure what the kernels gain.
-    #[arg(long, default_value = "host", value_parser = ["host", "stock"])]
+    /// CPU kernels: `host` (the hand-written convolution and lookup kernels, the default),
+    /// `stock` (burn's operations only, the reference), to measure what the kernels gain, or
+    /// `gpu-routes` (burn's operations arranged as GPU inference arranges them, to check the GPU's
+    /// composition on a CPU).
+    #[arg(long, default_value = "host", value_parser = ["host", "stock", "gpu-routes"])]
     pub kernels: String,
     /// Float precision of the whole forward pass: `f32`, `f16` or `bf16` (the host kernels are
     /// f32-only, so a half precision on the CPU runs burn's operations).
@@ -161,6 +163,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     };
     let precision = a.precision.parse::<Precision>()?;
     dgstereo_core::device::set_host_kernels(a.kernels == "host");
+    dgstereo_core::gpu_routes::set_routes_on_cpu(a.kernels == "gpu-routes");
     // The precision is set before the device's first tensor: burn fixes it there.
     let device = a.device.parse::<DeviceChoice>()?.device_with_precision(precision)?;
     let config = match &a.config {
@@ -200,8 +203,12 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let padded = padder.padded();
     let macs = StageMacs::new(&config, padded).forward(a.iters, 1);
     // What runs: the host kernels only on f32 CPU inference, whatever `--kernels` asked.
-    let kernels =
-        if a.kernels == "host" && !host_kernels_apply(&device) { "stock (host kernels inactive)" } else { &a.kernels };
+    let kernels = match (host_kernels_apply(&device), dgstereo_core::gpu_routes::gpu_inference(&device)) {
+        (true, _) => "host",
+        (false, true) => "gpu-routes",
+        (false, false) if a.kernels == "host" => "stock (host kernels inactive)",
+        (false, false) => "stock",
+    };
 
     let mut non_finite = 0;
     let mut predict = || -> anyhow::Result<(f64, f64)> {
