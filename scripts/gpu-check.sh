@@ -43,7 +43,7 @@ step() {
     local left=$((DEADLINE - SECONDS))
     if [ "$left" -lt 20 ]; then echo "- skipped (${SECONDS} s gone): $*" | tee -a "$OUT/log.txt"; return; fi
     [ "$limit" -gt "$left" ] && limit=$left
-    echo "+ [${SECONDS} s, limit ${limit} s] $*" | tee -a "$OUT/log.txt"
+    echo "+ [${SECONDS} s, limit ${limit} s] ${DGSTEREO_GPU_STOCK:+DGSTEREO_GPU_STOCK=$DGSTEREO_GPU_STOCK }$*" | tee -a "$OUT/log.txt"
     timeout "$limit" "$@" 2>&1 | tee -a "$OUT/log.txt"
     # Keep the tuning after every step: a later step may be cut off by the command's limit.
     cp target/environment/default.db "$OUT/autotune-default.db" 2>/dev/null || true
@@ -60,6 +60,12 @@ cones_scored() {
 }
 step 280 /tmp/dgstereo "${kitti[@]}" --precision f16 --stages
 cones_scored f16
+# What each GPU inference route gains (`dgstereo_core::gpu_routes`; DGSTEREO_GPU_STOCK turns the
+# named ones off): one process each, all routes on between them. Session 17 timed im2col, resize
+# and lookup; strided and few-outputs were added after its last lease.
+for routes in strided "" few-outputs "" im2col,strided,few-outputs,resize,lookup; do
+    DGSTEREO_GPU_STOCK=$routes step 60 /tmp/dgstereo "${kitti[@]}" --precision f16
+done
 step 200 /tmp/dgstereo "${kitti[@]}" --precision f32 --stages
 cones_scored f32
 echo "done after ${SECONDS} s" | tee -a "$OUT/log.txt"
