@@ -1,15 +1,18 @@
 //! Formulations for GPU inference, and the switch that turns each one off.
 //!
-//! Design decision: on burn's wgpu backend a pass of the update loop is bound by how many kernels
-//! it launches (session 12's stage table: the synchronised stages sum to twice the unsynchronised
-//! pass, and the CPU spends more time issuing work than the GPU computing it). Where burn's stock
-//! composition of an operation launches many small kernels, GPU inference (a device other than
-//! the CPU, without autodiff) takes a formulation with fewer: the convolution as one matrix
-//! product over a column matrix gathered in one `select` (`matmul_conv`), the bilinear resize as
-//! burn's own `interpolate` kernel (`resample`), the pyramid lookup as one gather over all levels
+//! Design decision: on burn's wgpu backend a pass of the update loop was bound by how many
+//! kernels it launched (session 12: the synchronised stages summed to twice the unsynchronised
+//! pass, and the CPU spent more time issuing work than the GPU computing it; session 17: ten or
+//! more kernels per 3x3 convolution). Where burn's stock composition of an operation launches
+//! many small kernels, or a slow one, GPU inference (a device other than the CPU, without
+//! autodiff) takes a formulation from burn's operations with fewer: convolutions as one matrix
+//! product over a column matrix gathered in one `select`, strided ones included, and with few
+//! outputs the product before the shift (`matmul_conv`); the bilinear resize as burn's own
+//! `interpolate` kernel (`resample`); the pyramid lookup as two gathers over all levels
 //! (`dgstereo_costvolume`). Each keeps the stock path as its reference and is tested against it on
-//! the CPU; each can be turned off with `DGSTEREO_GPU_STOCK` (comma-separated route names, or
-//! `all`; read once per process) so that a GPU run can measure what it gains.
+//! the CPU, one by one and as a whole network ([`set_routes_on_cpu`]); each can be turned off
+//! with `DGSTEREO_GPU_STOCK` (comma-separated route names, or `all`; read once per process) so
+//! that a GPU run can measure what it gains.
 
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -33,7 +36,7 @@ pub enum GpuRoute {
     /// Bilinear resizes as burn's `interpolate` (`resize`); off: the two interpolation-matrix
     /// products (the training path).
     Interpolate,
-    /// The pyramid lookup as one gather over all levels (`lookup`); off: one gather per level.
+    /// The pyramid lookup as two gathers over all levels (`lookup`); off: a gather per level.
     GatheredLookup,
 }
 

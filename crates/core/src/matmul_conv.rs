@@ -73,7 +73,8 @@ pub enum Columns {
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`
-/// - output `[N, O, H_out, W_out]`, `H_out = H + top + bottom - dil·(kh - 1)` (likewise `W_out`)
+/// - output `[N, O, H_out, W_out]`, `H_out = (H + top + bottom - dil·(kh - 1) - 1) / stride + 1`
+///   (likewise `W_out`)
 ///
 /// # Panics
 /// Where `options` has groups, a stride other than 1 with the windows, the channels do not

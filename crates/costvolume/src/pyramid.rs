@@ -77,7 +77,7 @@ impl CorrelationPyramid {
         Self { pyramid, dims: [n, h, w1], levels, radius }
     }
 
-    /// The stock pyramid looked up by one gather over all levels ([`GpuRoute::GatheredLookup`]),
+    /// The stock pyramid looked up by two gathers over all levels ([`GpuRoute::GatheredLookup`]),
     /// on any device: what GPU inference runs, for the tests.
     #[cfg(test)]
     pub(crate) fn gathered(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize) -> Self {

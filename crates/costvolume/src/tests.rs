@@ -114,7 +114,7 @@ proptest! {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(12))]
 
-    /// The gathered lookup (all levels in one gather, GPU inference) and the stock one agree to
+    /// The gathered lookup (two gathers over all levels, GPU inference) and the stock one agree to
     /// 1e-5: batches, odd widths, levels pooled down to width 1 or 0, positions in and out of the
     /// row.
     #[test]
