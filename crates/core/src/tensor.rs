@@ -9,7 +9,7 @@
 use std::ops::Deref;
 
 use burn::backend::flex::{Flex, FlexTensor};
-use burn::tensor::{DType, Device, Tensor, TensorData};
+use burn::tensor::{DType, Device, FloatDType, Tensor, TensorData};
 use rayon::prelude::*;
 
 /// A float32 tensor's values on the host, read-only: the tensor's own buffer where it is a
@@ -104,6 +104,11 @@ pub fn instance_norm(x: Tensor<4>, epsilon: f64) -> Tensor<4> {
     let centred = flat - mean;
     let var = centred.clone().square().mean_dim(2);
     (centred / var.add_scalar(epsilon).sqrt()).reshape([n, c, h, w])
+}
+
+/// `t` in the float dtype `dtype`: itself when it is already, else a cast.
+pub fn cast_float<const D: usize>(t: Tensor<D>, dtype: FloatDType) -> Tensor<D> {
+    if t.dtype() == DType::from(dtype) { t } else { t.cast(dtype) }
 }
 
 #[cfg(test)]

@@ -1,6 +1,7 @@
 //! Linear sampling along a row with zero padding, the 1-D `grid_sample` of the reference.
 
-use burn::tensor::{Int, Tensor, TensorData};
+use burn::tensor::{FloatDType, Int, Tensor, TensorData};
+use dgstereo_core::tensor::cast_float;
 
 /// The integer taps and weights of sampling at `x + dx` for `dx = -r..=r+1`.
 ///
@@ -13,14 +14,18 @@ use burn::tensor::{Int, Tensor, TensorData};
 ///   `[M, 2r+2]` (1 or 0) and `w` `[M, 1]`.
 pub(crate) fn taps(x: Tensor<2>, radius: usize, width: usize) -> (Tensor<2, Int>, Tensor<2>, Tensor<2>) {
     let [m, _] = x.dims();
-    let device = x.device();
+    // Everything in the positions' dtype (f32 in half precision too, see the model's forward).
+    let (device, dtype) = (x.device(), x.dtype());
     let x0 = x.clone().floor();
     let w = x - x0.clone();
     let n = 2 * radius + 2;
-    let offsets = Tensor::<1, Int>::arange(0..n as i64, &device).float().sub_scalar(radius as f64);
+    let offsets: Vec<f32> = (0..n).map(|j| j as f32 - radius as f32).collect();
+    let offsets = Tensor::<1>::from_data(TensorData::new(offsets, [n]), (&device, dtype));
     let pos = x0.expand([m, n]) + offsets.unsqueeze::<2>().expand([m, n]);
-    let inside =
-        pos.clone().greater_equal_elem(0.0).float() * pos.clone().lower_equal_elem((width as f64) - 1.0).float();
+    let inside = cast_float(
+        pos.clone().greater_equal_elem(0.0).float() * pos.clone().lower_equal_elem((width as f64) - 1.0).float(),
+        FloatDType::from(dtype),
+    );
     let idx = pos.clamp(0.0, (width as f64) - 1.0).int();
     (idx, inside, w)
 }
@@ -59,14 +64,14 @@ pub(crate) struct GatheredLevels {
 }
 
 impl GatheredLevels {
-    /// Lays out `levels` (`[M, W_i]` each) side by side.
+    /// Lays out `levels` (`[M, W_i]` each) side by side; the constants take the levels' dtype.
     pub(crate) fn new(levels: &[Tensor<2>], radius: usize) -> Self {
-        let device = levels[0].device();
+        let (device, dtype) = (levels[0].device(), levels[0].dtype());
         let widths: Vec<usize> = levels.iter().map(|l| l.dims()[1]).collect();
         let offsets: Vec<f32> =
             widths.iter().scan(0, |start, w| Some(std::mem::replace(start, *start + w) as f32)).collect();
         let l = levels.len();
-        let row = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [l]), &device);
+        let row = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [l]), (&device, dtype));
         let k = 2 * radius + 1;
         let taps: Vec<f32> = (0..k).map(|j| j as f32 - radius as f32).collect();
         Self {
@@ -74,7 +79,7 @@ impl GatheredLevels {
             scale: row((0..l).map(|i| 1.0 / (1u64 << i) as f32).collect()).reshape([1, l]),
             last: row(widths.iter().map(|&w| if w == 0 { -0.5 } else { w as f32 - 1.0 }).collect()).reshape([1, l, 1]),
             offset: row(offsets).reshape([1, l, 1]),
-            taps: Tensor::<1>::from_data(TensorData::new(taps, [k]), &device).reshape([1, 1, k]),
+            taps: Tensor::<1>::from_data(TensorData::new(taps, [k]), (&device, dtype)).reshape([1, 1, k]),
         }
     }
 
@@ -82,13 +87,13 @@ impl GatheredLevels {
     /// row: the stock lookup's values ([`taps`], [`interpolate_taps`]).
     ///
     /// # Shapes
-    /// - `x`: `[M, 1]`; output `[M, L·(2r+1)]`, level-major
+    /// - `x`: `[M, 1]`, in the levels' dtype; output `[M, L·(2r+1)]`, level-major
     pub(crate) fn lookup(&self, x: Tensor<2>) -> Tensor<2> {
         let [m, _] = x.dims();
         let [_, l, _] = self.last.dims();
         let k = self.taps.dims()[2];
         if self.values.dims()[1] == 0 {
-            return Tensor::zeros([m, l * k], &x.device());
+            return Tensor::zeros([m, l * k], (&x.device(), x.dtype()));
         }
         let xi = x * self.scale.clone(); // [M, L]
         let x0 = xi.clone().floor();
@@ -98,10 +103,10 @@ impl GatheredLevels {
             // The position clamped into its level's row; where clamping moved it, the sample lies
             // outside the row and is zero. An empty level's bound, -0.5, moves every position.
             let clamped = pos.clone().clamp_min(0.0).min_pair(self.last.clone().expand([m, l, k]));
-            let inside = clamped.clone().equal(pos).float();
+            let outside = clamped.clone().not_equal(pos);
             // Truncation takes an empty level's -0.5 to the column before it: a valid index.
             let column = (clamped + self.offset.clone()).int().reshape([m, l * k]);
-            self.values.clone().gather(1, column).reshape([m, l, k]) * inside
+            self.values.clone().gather(1, column).reshape([m, l, k]).mask_fill(outside, 0.0)
         };
         let upper = sample(lower.clone().add_scalar(1.0));
         let lower = sample(lower);

@@ -57,7 +57,7 @@ impl OnTheFlyCorrelation {
                         avg_pool2d(last, AvgPoolOptions::new([1, 2]))
                     } else {
                         let [n, c, h, _] = last.dims();
-                        Tensor::zeros([n, c, h, 0], &last.device())
+                        Tensor::zeros([n, c, h, 0], (&last.device(), last.dtype()))
                     });
                 }
                 Storage::Tensors { fmap1, pooled }
@@ -114,7 +114,7 @@ impl CostVolume for OnTheFlyCorrelation {
             let mut dots = Vec::with_capacity(taps_n);
             for t in 0..taps_n {
                 if width == 0 {
-                    dots.push(Tensor::<4>::zeros([n, 1, h, w1], &x.device()));
+                    dots.push(Tensor::<4>::zeros([n, 1, h, w1], (&x.device(), fmap1.dtype())));
                     continue;
                 }
                 let index = idx.clone().slice([0..m, t..t + 1]).reshape([n, 1, h, w1]).expand([n, c, h, w1]);

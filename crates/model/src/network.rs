@@ -5,10 +5,12 @@ use std::collections::BTreeMap;
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::activation::{relu, tanh};
-use burn::tensor::{Device, Tensor};
+use burn::tensor::{DType, Device, FloatDType, Tensor, TensorData};
 use dgstereo_core::DepthPrior;
+use dgstereo_core::device::float_dtype;
 use dgstereo_core::host_conv::{KeptWeights, conv2d_forward};
 use dgstereo_core::layers::{ConvInit, conv2d};
+use dgstereo_core::tensor::cast_float;
 use dgstereo_core::timing::{StageClock, timed};
 use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CostVolume};
 use dgstereo_encoder::{
@@ -191,6 +193,13 @@ impl RaftStereo {
             gates.push(g);
         }
 
+        // In half precision the correlation, its lookup, the match positions and the upsampling
+        // stay in f32, as in the reference's mixed precision (its `fmap1.float()` before the
+        // volume, its lookup and `coords1 + delta_flow` outside `autocast`): a half-precision
+        // position has a spacing of 1/4 pixel beyond 256, which the lookup's interpolation
+        // weights would inherit. The encoders and the update block run in the device's dtype.
+        let dtype = float_dtype(&fmap1.device());
+        let (fmap1, fmap2) = (cast_float(fmap1, FloatDType::F32), cast_float(fmap2, FloatDType::F32));
         let implementation = implementation.unwrap_or(self.correlation.implementation);
         let corr_fn =
             timed(&mut clock, "correlation build", || self.correlation.build_with(implementation, fmap1, fmap2));
@@ -206,11 +215,15 @@ impl RaftStereo {
         let grid = [h, w];
         let guidance =
             timed(&mut clock, "guidance", || prior.and_then(|p| self.guidance.feature(p.left.clone(), grid)));
-        let coords0 = Tensor::<1, burn::tensor::Int>::arange(0..w as i64, &device)
-            .float()
-            .reshape([1, 1, 1, w])
-            .expand([n, 1, h, w]);
-        let mut flow_x = flow_init.unwrap_or_else(|| Tensor::zeros([n, 1, h, w], &device));
+        let f32_on = (&device, DType::F32);
+        let coords0 =
+            Tensor::<1>::from_data(TensorData::new((0..w).map(|x| x as f32).collect::<Vec<_>>(), [w]), f32_on)
+                .reshape([1, 1, 1, w])
+                .expand([n, 1, h, w]);
+        let mut flow_x = match flow_init {
+            Some(flow) => cast_float(flow, FloatDType::F32),
+            None => Tensor::zeros([n, 1, h, w], f32_on),
+        };
         let zeros = Tensor::<4>::zeros([n, 1, h, w], &device);
         let factor = 1usize << self.n_downsample;
         let mut flow_up = Vec::new();
@@ -219,7 +232,9 @@ impl RaftStereo {
         let _kept = KeptWeights::new();
         for k in 0..iters {
             flow_x = flow_x.detach();
-            let corr = timed(&mut clock, "correlation lookup", || corr_fn.lookup(coords0.clone() + flow_x.clone()));
+            let corr = timed(&mut clock, "correlation lookup", || {
+                cast_float(corr_fn.lookup(coords0.clone() + flow_x.clone()), dtype)
+            });
             record!(format!("iter.{k}.corr"), &corr);
             if self.slow_fast_gru {
                 if levels == 3 {
@@ -229,9 +244,9 @@ impl RaftStereo {
                     self.update_block.update_coarse(&mut hidden, &gates, levels == 3, true, &mut clock);
                 }
             }
-            let flow = Tensor::cat(vec![flow_x.clone(), zeros.clone()], 1);
+            let flow = Tensor::cat(vec![cast_float(flow_x.clone(), dtype), zeros.clone()], 1);
             let out = self.update_block.step(&mut hidden, &gates, corr, flow, guidance.as_ref(), clock.as_deref_mut());
-            flow_x = flow_x + out.delta_x;
+            flow_x = flow_x + cast_float(out.delta_x, FloatDType::F32);
             for (i, hi) in hidden.iter().enumerate() {
                 record!(format!("iter.{k}.hidden.{i}"), hi);
             }
@@ -244,7 +259,9 @@ impl RaftStereo {
                 if !upsampled {
                     continue;
                 }
-                let up = timed(&mut clock, "convex upsample", || convex_upsample(flow_x.clone(), up_mask, factor));
+                let up = timed(&mut clock, "convex upsample", || {
+                    convex_upsample(flow_x.clone(), cast_float(up_mask, FloatDType::F32), factor)
+                });
                 record!(format!("iter.{k}.flow_up"), &up);
                 flow_up.push(up);
             }
