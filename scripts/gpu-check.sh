@@ -66,6 +66,15 @@ cones_scored f16
 for routes in strided "" few-outputs "" im2col,strided,few-outputs,resize,lookup; do
     DGSTEREO_GPU_STOCK=$routes step 60 /tmp/dgstereo "${kitti[@]}" --precision f16
 done
+# cubecl's per-kernel profile of one f16 pass (every kernel timed alone on the GPU, so the pass
+# runs slower), summarised by kernel name ($OUT/profile.txt) and kept whole (gzipped).
+printf '[profiling.logger]\nlevel = "basic"\nfile = "/tmp/cubecl-profile.log"\n' > cubecl.toml
+step 90 /tmp/dgstereo bench --device "$DEVICE" --size "$SIZE" --iters "$ITERS" --runs 1 --warmup 1 --precision f16
+rm -f cubecl.toml
+if [ -s /tmp/cubecl-profile.log ]; then
+    python3 scripts/cubecl-profile-summary.py /tmp/cubecl-profile.log > "$OUT/profile.txt" 2>&1
+    gzip -c /tmp/cubecl-profile.log > "$OUT/cubecl-profile.log.gz"
+fi
 step 200 /tmp/dgstereo "${kitti[@]}" --precision f32 --stages
 cones_scored f32
 echo "done after ${SECONDS} s" | tee -a "$OUT/log.txt"
