@@ -16,7 +16,7 @@
 //! the tests check both agree, gradients included.
 //!
 //! The column matrix is gathered in one `select` from the input with a zero column appended
-//! ([`Columns::Gathered`]): the shifted windows sliced one by one ([`Columns::Windows`]) cost a
+//! (`Columns::Gathered`): the shifted windows sliced one by one (`Columns::Windows`) cost a
 //! copy kernel each on wgpu (a window that starts off the 64-byte alignment of a binding offset is
 //! no view), ten kernels a 3x3 convolution and fifty for the motion encoder's 7x7, every
 //! iteration. The gathered rows are ordered `(c, ky, kx)`, the weight's own layout, so the weight
@@ -57,7 +57,7 @@ fn suits(options: &ConvOptions<2>, [kh, kw]: [usize; 2], strided: bool) -> bool 
 
 /// How the column matrix of [`conv2d_by_matmul`] is built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Columns {
+enum Columns {
     /// One `select` of precomputed indices from the input with a zero column appended; rows
     /// `(c, ky, kx)`; any stride.
     Gathered,
@@ -93,7 +93,7 @@ pub fn conv2d_by_matmul(
 }
 
 /// [`conv2d_by_matmul`] with the column matrix built as `columns` says.
-pub fn conv2d_by_matmul_with(
+fn conv2d_by_matmul_with(
     x: Tensor<4>,
     weight: Tensor<4>,
     bias: Option<Tensor<1>>,
