@@ -74,10 +74,7 @@ pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
 pub fn conv2d_relu_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     match conv_options(conv) {
         Some(options) if host_kernels_apply(&x.device()) => {
-            let bias = conv.bias.as_ref().map(|b| b.val());
-            on_host_buffers(x, conv.weight.val(), bias, |x, x_dims, wt, w_dims, bias| {
-                host_conv_slices(x, x_dims, wt, w_dims, bias, &options, Epilogue::Relu)
-            })
+            conv2d_host_relu(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options)
         }
         _ => burn::tensor::activation::relu(conv2d_forward(conv, x)),
     }
@@ -129,6 +126,22 @@ pub fn conv2d_op(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, optio
 pub fn conv2d_host(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: &ConvOptions<2>) -> Tensor<4> {
     on_host_buffers(x, weight, bias, |x, x_dims, wt, w_dims, bias| {
         host_conv_slices(x, x_dims, wt, w_dims, bias, options, Epilogue::Linear)
+    })
+}
+
+/// `relu(conv2d(x, weight, bias))` (groups = 1) on the host, the ReLU applied as the output is
+/// written.
+///
+/// # Shapes
+/// - as [`conv2d_host`]
+pub fn conv2d_host_relu(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: &ConvOptions<2>,
+) -> Tensor<4> {
+    on_host_buffers(x, weight, bias, |x, x_dims, wt, w_dims, bias| {
+        host_conv_slices(x, x_dims, wt, w_dims, bias, options, Epilogue::Relu)
     })
 }
 

@@ -89,7 +89,7 @@ impl ContextEncoder {
 
     /// The trunk output at 1/f (`[N, trunk[2], H/f, W/f]`).
     pub fn trunk(&self, image: Tensor<4>) -> Tensor<4> {
-        let x = self.norm1.forward_relu(conv2d_forward(&self.conv1, image), true);
+        let x = self.norm1.conv_forward_relu(&self.conv1, image, true);
         let x = forward_layer(&self.layer1, x);
         let x = forward_layer(&self.layer2, x);
         forward_layer(&self.layer3, x)

@@ -56,7 +56,7 @@ impl FeatureEncoder {
 
 impl FeatureExtractor for FeatureEncoder {
     fn features(&self, images: Tensor<4>) -> Tensor<4> {
-        let x = self.norm1.forward_relu(conv2d_forward(&self.conv1, images), true);
+        let x = self.norm1.conv_forward_relu(&self.conv1, images, true);
         let x = forward_layer(&self.layer1, x);
         let x = forward_layer(&self.layer2, x);
         let x = forward_layer(&self.layer3, x);

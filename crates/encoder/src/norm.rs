@@ -2,9 +2,11 @@
 
 use burn::module::{Module, Param};
 use burn::nn::Identity;
+use burn::nn::conv::Conv2d;
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::device::host_kernels_apply;
+use dgstereo_core::host_conv::{conv_options, conv2d_forward, conv2d_host, conv2d_host_relu};
 use dgstereo_core::host_norm::{PlaneNorm, normalize_planes};
 use dgstereo_core::tensor::{instance_norm, to_vec};
 use serde::{Deserialize, Serialize};
@@ -60,6 +62,34 @@ impl Norm {
             Self::Instance(n) => n.forward(x),
             Self::None(_) => x,
         }
+    }
+
+    /// `conv`, then this norm, then a ReLU when `relu_after`. For CPU inference
+    /// ([`host_kernels_apply`]) a frozen batch norm is folded into the convolution (its scale
+    /// into the weight, its shift into the bias), so the host convolution writes the normalised
+    /// (and rectified) output at once instead of a second pass over it; otherwise, and for the
+    /// other norms, the convolution and [`forward_relu`](Self::forward_relu).
+    ///
+    /// # Shapes
+    /// - `x`: `[N, C_in, H, W]`; output `[N, C_out, H_out, W_out]`
+    pub fn conv_forward_relu(&self, conv: &Conv2d, x: Tensor<4>, relu_after: bool) -> Tensor<4> {
+        if let (Self::Batch(bn), Some(options)) = (self, conv_options(conv))
+            && host_kernels_apply(&x.device())
+        {
+            let (scale, shift) = bn.scale_shift();
+            let o = scale.dims()[0];
+            let weight = conv.weight.val() * scale.clone().reshape([o, 1, 1, 1]);
+            let bias = match &conv.bias {
+                Some(b) => b.val() * scale + shift,
+                None => shift,
+            };
+            return if relu_after {
+                conv2d_host_relu(x, weight, Some(bias), &options)
+            } else {
+                conv2d_host(x, weight, Some(bias), &options)
+            };
+        }
+        self.forward_relu(conv2d_forward(conv, x), relu_after)
     }
 
     /// [`forward`](Self::forward), then a ReLU when `relu_after`. For CPU inference

@@ -3,7 +3,6 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::host_conv::conv2d_forward;
 use dgstereo_core::host_norm::add_relu;
 use dgstereo_core::layers::{ConvInit, conv2d};
 
@@ -50,10 +49,10 @@ impl ResidualBlock {
 
     /// Applies the block.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = self.norm1.forward_relu(conv2d_forward(&self.conv1, x.clone()), true);
-        let y = self.norm2.forward_relu(conv2d_forward(&self.conv2, y), true);
+        let y = self.norm1.conv_forward_relu(&self.conv1, x.clone(), true);
+        let y = self.norm2.conv_forward_relu(&self.conv2, y, true);
         let x = match (&self.downsample, &self.norm3) {
-            (Some(conv), Some(norm)) => norm.forward_relu(conv2d_forward(conv, x), false),
+            (Some(conv), Some(norm)) => norm.conv_forward_relu(conv, x, false),
             _ => x,
         };
         add_relu(x, y)
