@@ -74,7 +74,7 @@ pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
 pub fn conv2d_relu_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     match conv_options(conv) {
         Some(options) if host_kernels_apply(&x.device()) => {
-            conv2d_host_relu(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options)
+            conv2d_host_rectified(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options, true)
         }
         _ => burn::tensor::activation::relu(conv2d_forward(conv, x)),
     }
@@ -124,24 +124,23 @@ pub fn conv2d_op(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, optio
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`
 /// - output: `[N, O, H_out, W_out]` with `H_out = (H + 2·pad - dil·(kh - 1) - 1) / stride + 1`
 pub fn conv2d_host(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: &ConvOptions<2>) -> Tensor<4> {
-    on_host_buffers(x, weight, bias, |x, x_dims, wt, w_dims, bias| {
-        host_conv_slices(x, x_dims, wt, w_dims, bias, options, Epilogue::Linear)
-    })
+    conv2d_host_rectified(x, weight, bias, options, false)
 }
 
-/// `relu(conv2d(x, weight, bias))` (groups = 1) on the host, the ReLU applied as the output is
-/// written.
+/// [`conv2d_host`], rectified (`relu`) as the output is written when `relu`.
 ///
 /// # Shapes
 /// - as [`conv2d_host`]
-pub fn conv2d_host_relu(
+pub fn conv2d_host_rectified(
     x: Tensor<4>,
     weight: Tensor<4>,
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
+    relu: bool,
 ) -> Tensor<4> {
+    let epilogue = if relu { Epilogue::Relu } else { Epilogue::Linear };
     on_host_buffers(x, weight, bias, |x, x_dims, wt, w_dims, bias| {
-        host_conv_slices(x, x_dims, wt, w_dims, bias, options, Epilogue::Relu)
+        host_conv_slices(x, x_dims, wt, w_dims, bias, options, epilogue)
     })
 }
 

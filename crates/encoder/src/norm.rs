@@ -6,7 +6,7 @@ use burn::nn::conv::Conv2d;
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::device::host_kernels_apply;
-use dgstereo_core::host_conv::{conv_options, conv2d_forward, conv2d_host, conv2d_host_relu};
+use dgstereo_core::host_conv::{conv_options, conv2d_forward, conv2d_host_rectified};
 use dgstereo_core::host_norm::{PlaneNorm, normalize_planes};
 use dgstereo_core::tensor::{instance_norm, to_vec};
 use serde::{Deserialize, Serialize};
@@ -83,11 +83,7 @@ impl Norm {
                 Some(b) => b.val() * scale + shift,
                 None => shift,
             };
-            return if relu_after {
-                conv2d_host_relu(x, weight, Some(bias), &options)
-            } else {
-                conv2d_host(x, weight, Some(bias), &options)
-            };
+            return conv2d_host_rectified(x, weight, Some(bias), &options, relu_after);
         }
         self.forward_relu(conv2d_forward(conv, x), relu_after)
     }
