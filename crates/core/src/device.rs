@@ -149,7 +149,7 @@ pub fn cast_float_params<M: Module>(module: M, dtype: FloatDType) -> M {
     impl ModuleMapper for Caster {
         fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
             let dtype = self.0;
-            param.map(|t| if t.dtype() == dtype.into() { t } else { t.cast(dtype) })
+            param.map(|t| crate::tensor::cast_float(t, dtype))
         }
     }
     module.map(&mut Caster(dtype))
