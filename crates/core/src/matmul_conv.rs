@@ -108,14 +108,7 @@ fn conv2d_by_matmul_with(
     let k = kh * kw * c;
     let (columns, weight) = match columns {
         Columns::Gathered => {
-            let shape = WindowShape {
-                input: [h, w],
-                kernel: [kh, kw],
-                stride: options.stride,
-                padding: options.padding,
-                dilation: options.dilation,
-            };
-            let indices = window_indices(shape, 1, &x.device());
+            let indices = window_indices(WindowShape::new([h, w], [kh, kw], options), 1, &x.device());
             let zero = Tensor::zeros([n, c, 1], &x.device());
             let flat = Tensor::cat(vec![x.reshape([n, c, h * w]), zero], 2);
             (flat.select(2, indices).reshape([n, k, out_h * out_w]), weight.reshape([1, o, k]))
@@ -158,6 +151,12 @@ struct WindowShape {
 }
 
 impl WindowShape {
+    /// The windows of a `kh x kw` kernel over an `[h, w]` input with `options`.
+    fn new(input: [usize; 2], kernel: [usize; 2], options: &ConvOptions<2>) -> Self {
+        let (stride, padding, dilation) = (options.stride, options.padding, options.dilation);
+        Self { input, kernel, stride, padding, dilation }
+    }
+
     /// For each row `(ky, kx)` of a channel and each output pixel, the input pixel it reads
     /// (`y·W + x`), or `H·W` (the appended zero) where the window lies in the padding.
     ///
@@ -165,10 +164,10 @@ impl WindowShape {
     /// - `kh·kw·H_out·W_out` indices, tap-major
     fn indices(&self) -> Vec<i32> {
         let ([h, w], [kh, kw]) = (self.input, self.kernel);
-        let [(top, bottom), (left, right)] = self.padding;
+        let [(top, _), (left, _)] = self.padding;
         let ([dh, dw], [sh, sw]) = (self.dilation, self.stride);
-        let out_h = (h + top + bottom).saturating_sub(dh * (kh - 1) + 1) / sh + 1;
-        let out_w = (w + left + right).saturating_sub(dw * (kw - 1) + 1) / sw + 1;
+        let options = ConvOptions::new_with_padding(self.stride, self.padding, self.dilation, 1);
+        let [out_h, out_w] = conv_output_size("window indices", self.input, self.kernel, &options);
         let zero = i32::try_from(h * w).expect("an input plane of fewer than 2^31 pixels");
         let mut indices = Vec::with_capacity(kh * kw * out_h * out_w);
         for ky in 0..kh {
@@ -291,8 +290,7 @@ mod tests {
     /// 6 is the appended zero.
     #[test]
     fn gathered_indices_read_the_window_or_the_zero() {
-        let shape =
-            WindowShape { input: [2, 3], kernel: [3, 3], stride: [1, 1], padding: [(1, 1), (1, 1)], dilation: [1, 1] };
+        let shape = WindowShape::new([2, 3], [3, 3], &options([(1, 1), (1, 1)], 1));
         let indices = shape.indices();
         assert_eq!(indices.len(), 9 * 6);
         assert_eq!(&indices[..6], &[6, 6, 6, 6, 0, 1]); // tap (0, 0): up and left
@@ -353,8 +351,7 @@ mod tests {
     #[test]
     fn index_tensors_are_kept_per_shape() {
         let device = Device::flex();
-        let a =
-            WindowShape { input: [4, 5], kernel: [3, 3], stride: [1, 1], padding: [(1, 1), (1, 1)], dilation: [1, 1] };
+        let a = WindowShape::new([4, 5], [3, 3], &options([(1, 1), (1, 1)], 1));
         let b = WindowShape { input: [4, 6], ..a };
         let first = window_indices(a, 1, &device).into_data();
         assert_eq!(first, window_indices(a, 1, &device).into_data());

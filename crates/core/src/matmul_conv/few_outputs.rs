@@ -45,15 +45,9 @@ pub(super) fn conv2d_product_first(
     let weight = if n > 1 { weight.expand([n, o * taps, c]) } else { weight };
     let z = weight.matmul(x.reshape([n, c, h * w]));
     let z = Tensor::cat(vec![z, Tensor::zeros([n, o * taps, 1], &device)], 2);
-    let shape = WindowShape {
-        input: [h, w],
-        kernel: [kh, kw],
-        stride: [1, 1],
-        padding: options.padding,
-        dilation: options.dilation,
-    };
     // Row (o, t) reads tap t's window: the window indices once per output channel.
-    let indices = window_indices(shape, o, &device).reshape([1, o * taps, pixels]);
+    let indices =
+        window_indices(WindowShape::new([h, w], [kh, kw], options), o, &device).reshape([1, o * taps, pixels]);
     let indices = if n > 1 { indices.expand([n, o * taps, pixels]) } else { indices };
     let mut out = z.gather(2, indices).reshape([n, o, taps, pixels]).sum_dim(2).reshape([n, o, pixels]);
     if let Some(b) = bias {
