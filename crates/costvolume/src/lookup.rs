@@ -1,6 +1,6 @@
 //! Linear sampling along a row with zero padding, the 1-D `grid_sample` of the reference.
 
-use burn::tensor::{FloatDType, Int, Tensor, TensorData};
+use burn::tensor::{DType, Device, FloatDType, Int, Tensor, TensorData};
 use dgstereo_core::tensor::cast_float;
 
 /// The integer taps and weights of sampling at `x + dx` for `dx = -r..=r+1`.
@@ -19,8 +19,7 @@ pub(crate) fn taps(x: Tensor<2>, radius: usize, width: usize) -> (Tensor<2, Int>
     let x0 = x.clone().floor();
     let w = x - x0.clone();
     let n = 2 * radius + 2;
-    let offsets: Vec<f32> = (0..n).map(|j| j as f32 - radius as f32).collect();
-    let offsets = Tensor::<1>::from_data(TensorData::new(offsets, [n]), (&device, dtype));
+    let offsets = tap_offsets(n, radius, &device, dtype);
     let pos = x0.expand([m, n]) + offsets.unsqueeze::<2>().expand([m, n]);
     let inside = cast_float(
         pos.clone().greater_equal_elem(0.0).float() * pos.clone().lower_equal_elem((width as f64) - 1.0).float(),
@@ -28,6 +27,12 @@ pub(crate) fn taps(x: Tensor<2>, radius: usize, width: usize) -> (Tensor<2, Int>
     );
     let idx = pos.clamp(0.0, (width as f64) - 1.0).int();
     (idx, inside, w)
+}
+
+/// The tap offsets `-r, -r + 1, …` (`count` of them) as a tensor of `dtype` on `device`.
+fn tap_offsets(count: usize, radius: usize, device: &Device, dtype: DType) -> Tensor<1> {
+    let offsets: Vec<f32> = (0..count).map(|j| j as f32 - radius as f32).collect();
+    Tensor::from_data(TensorData::new(offsets, [count]), (device, dtype))
 }
 
 /// Combines the values at the `2r + 2` integer taps into the `2r + 1` linear samples.
@@ -73,13 +78,12 @@ impl GatheredLevels {
         let l = levels.len();
         let row = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [l]), (&device, dtype));
         let k = 2 * radius + 1;
-        let taps: Vec<f32> = (0..k).map(|j| j as f32 - radius as f32).collect();
         Self {
             values: Tensor::cat(levels.to_vec(), 1),
             scale: row((0..l).map(|i| 1.0 / (1u64 << i) as f32).collect()).reshape([1, l]),
             last: row(widths.iter().map(|&w| if w == 0 { -0.5 } else { w as f32 - 1.0 }).collect()).reshape([1, l, 1]),
             offset: row(offsets).reshape([1, l, 1]),
-            taps: Tensor::<1>::from_data(TensorData::new(taps, [k]), (&device, dtype)).reshape([1, 1, k]),
+            taps: tap_offsets(k, radius, &device, dtype).reshape([1, 1, k]),
         }
     }
 
