@@ -62,10 +62,14 @@ step 280 /tmp/dgstereo "${kitti[@]}" --precision f16 --stages
 cones_scored f16
 # What each GPU inference route gains (`dgstereo_core::gpu_routes`; DGSTEREO_GPU_STOCK turns the
 # named ones off): one process each, all routes on between them. Session 17 timed im2col, resize
-# and lookup; strided and few-outputs were added after its last lease.
-for routes in strided "" few-outputs "" im2col,strided,few-outputs,resize,lookup; do
+# and lookup; strided, few-outputs, epilogue and shared-columns came after its last lease.
+for routes in epilogue "" shared-columns "" strided few-outputs "" epilogue,shared-columns,strided,few-outputs; do
     DGSTEREO_GPU_STOCK=$routes step 60 /tmp/dgstereo "${kitti[@]}" --precision f16
 done
+# The paper's stereo model (DGIA fusion + Gradient-GRU; its prior's time is not included).
+if [ -f .gpubin/paper-model.toml ]; then
+    step 60 /tmp/dgstereo "${kitti[@]}" --precision f16 --config .gpubin/paper-model.toml
+fi
 # cubecl's per-kernel profile of one f16 pass (every kernel timed alone on the GPU, so the pass
 # runs slower), summarised by kernel name ($OUT/profile.txt) and kept whole (gzipped).
 printf '[profiling.logger]\nlevel = "basic"\nfile = "/tmp/cubecl-profile.log"\n' > cubecl.toml
@@ -75,6 +79,6 @@ if [ -s /tmp/cubecl-profile.log ]; then
     python3 scripts/cubecl-profile-summary.py /tmp/cubecl-profile.log > "$OUT/profile.txt" 2>&1
     gzip -c /tmp/cubecl-profile.log > "$OUT/cubecl-profile.log.gz"
 fi
-step 200 /tmp/dgstereo "${kitti[@]}" --precision f32 --stages
+step 120 /tmp/dgstereo "${kitti[@]}" --precision f32
 cones_scored f32
 echo "done after ${SECONDS} s" | tee -a "$OUT/log.txt"

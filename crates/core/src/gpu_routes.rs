@@ -7,7 +7,8 @@
 //! many small kernels, or a slow one, GPU inference (a device other than the CPU, without
 //! autodiff) takes a formulation from burn's operations with fewer: convolutions as one matrix
 //! product over a column matrix gathered in one `select`, strided ones included, and with few
-//! outputs the product before the shift (`matmul_conv`); the bilinear resize as burn's own
+//! outputs the product before the shift, the bias and activation after it in the product's own
+//! kernel (`matmul_conv`); the bilinear resize as burn's own
 //! `interpolate` kernel (`resample`); the pyramid lookup as two gathers over all levels
 //! (`dgstereo_costvolume`). Each keeps the stock path as its reference and is tested against it on
 //! the CPU, one by one and as a whole network ([`set_routes_on_cpu`]); each can be turned off
@@ -38,6 +39,14 @@ pub enum GpuRoute {
     Interpolate,
     /// The pyramid lookup as two gathers over all levels (`lookup`); off: a gather per level.
     GatheredLookup,
+    /// The bias, activation and other element-wise work after a convolution's product issued on
+    /// the product's own shape, with unpadded 1x1 convolutions taking the product too, so that
+    /// burn's fusion runs it in the product's kernel (`epilogue`); off: after the reshape to
+    /// NCHW, in kernels of their own, and burn's 1x1 convolution.
+    FusedEpilogue,
+    /// The ConvGRU's inputs gathered into columns once a step for its gates and its candidate
+    /// (`shared-columns`); off: `[h, x]` and `[r·h, x]` each gathered whole.
+    SharedColumns,
 }
 
 impl GpuRoute {
@@ -50,6 +59,8 @@ impl GpuRoute {
             Self::FewOutputs => "few-outputs",
             Self::Interpolate => "resize",
             Self::GatheredLookup => "lookup",
+            Self::FusedEpilogue => "epilogue",
+            Self::SharedColumns => "shared-columns",
         }
     }
 
@@ -120,6 +131,8 @@ mod tests {
             GpuRoute::FewOutputs,
             GpuRoute::Interpolate,
             GpuRoute::GatheredLookup,
+            GpuRoute::FusedEpilogue,
+            GpuRoute::SharedColumns,
         ] {
             assert!(switched_off(&all, route), "{route:?}");
         }

@@ -38,7 +38,7 @@ pub use crate::host_winograd::KeptWeights;
 use crate::host_winograd::{
     Conv3x3, split_first, split_row, split_second, winograd_conv, winograd_disabled, winograd_variant,
 };
-use crate::matmul_conv::{conv2d_by_matmul, matmul_conv_applies};
+use crate::matmul_conv::{conv2d_by_matmul, conv2d_by_matmul_then, matmul_conv_applies};
 use crate::tensor::reuse_buffer;
 
 /// Output pixels per tile (whole output rows, at least one): enough columns for an efficient
@@ -76,8 +76,56 @@ pub fn conv2d_relu_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
         Some(options) if host_kernels_apply(&x.device()) => {
             conv2d_host_rectified(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options, true)
         }
-        _ => burn::tensor::activation::relu(conv2d_forward(conv, x)),
+        _ => conv2d_forward_then(conv, x, burn::tensor::activation::relu),
     }
+}
+
+/// [`conv2d_forward`] followed by `then`, element-wise work on the output seen as
+/// `[N, O, H_out·W_out]` (see [`conv2d_op_then`]).
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; output `[N, O, H_out, W_out]`
+pub fn conv2d_forward_then(conv: &Conv2d, x: Tensor<4>, then: impl FnOnce(Tensor<3>) -> Tensor<3>) -> Tensor<4> {
+    match conv_options(conv) {
+        Some(options) => conv2d_op_then(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), options, then),
+        None => pixels_then(conv.forward(x), then),
+    }
+}
+
+/// [`conv2d_op`] followed by `then`, element-wise work on the output seen as
+/// `[N, O, H_out·W_out]` whose other operands the caller has flattened alike ([`flat_pixels`])
+/// before the call. On the GPU's product route `then` runs in the product's own kernel
+/// ([`crate::matmul_conv::conv2d_by_matmul_then`]); elsewhere after the convolution.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`; output `[N, O, H_out, W_out]`
+/// - `then` maps `[N, O, H_out·W_out]` to the same shape
+pub fn conv2d_op_then(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: ConvOptions<2>,
+    then: impl FnOnce(Tensor<3>) -> Tensor<3>,
+) -> Tensor<4> {
+    let device = x.device();
+    let [_, _, kh, kw] = weight.dims();
+    let host = options.groups == 1 && host_kernels_apply(&device);
+    if !host && matmul_conv_applies(&device, &options, [kh, kw]) {
+        return conv2d_by_matmul_then(x, weight, bias, &options, then);
+    }
+    pixels_then(conv2d_op(x, weight, bias, options), then)
+}
+
+/// `x` (`[N, C, H, W]`) as `[N, C, H·W]`, the shape [`conv2d_op_then`]'s `then` works on.
+pub fn flat_pixels(x: Tensor<4>) -> Tensor<3> {
+    let [n, c, h, w] = x.dims();
+    x.reshape([n, c, h * w])
+}
+
+/// `then` on `x` seen as `[N, C, H·W]`, the result as `[N, C, H, W]`.
+fn pixels_then(x: Tensor<4>, then: impl FnOnce(Tensor<3>) -> Tensor<3>) -> Tensor<4> {
+    let dims = x.dims();
+    then(flat_pixels(x)).reshape(dims)
 }
 
 /// What the host convolution does to each output value after adding the bias.

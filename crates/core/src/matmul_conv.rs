@@ -30,6 +30,9 @@
 //! strided convolutions' share ([`crate::gpu_routes`]), so a GPU run can measure what each gains.
 
 mod few_outputs;
+mod shared_columns;
+
+pub use shared_columns::SharedColumns;
 
 use std::sync::{Mutex, PoisonError};
 
@@ -41,18 +44,40 @@ use crate::host_conv::conv_output_size;
 
 /// Whether a convolution with `options` and a `kh x kw` kernel on `device` takes
 /// [`conv2d_by_matmul`]: GPU inference ([`GpuRoute::MatmulConv`]), groups 1, and either stride 1
-/// with a kernel larger than 1x1 (burn runs those as a product already) or, with the gathered
-/// columns, any stride ([`GpuRoute::StridedProducts`]: burn's strided convolutions ran its direct
-/// kernel, 31 ms of a 0.2-s KITTI pass on an H200 in session 17's profile).
+/// with a kernel larger than 1x1, or, with the gathered columns, any stride
+/// ([`GpuRoute::StridedProducts`]: burn's strided convolutions ran its direct kernel, 31 ms of a
+/// 0.2-s KITTI pass on an H200 in session 17's profile), or an unpadded 1x1 at stride 1 when the
+/// element-wise work after it joins the product's kernel ([`GpuRoute::FusedEpilogue`]; burn runs
+/// those as a product already, with the bias in a kernel of its own).
 pub fn matmul_conv_applies(device: &Device, options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
     let strided = GpuRoute::GatheredColumns.enabled() && GpuRoute::StridedProducts.enabled();
-    GpuRoute::MatmulConv.applies(device) && suits(options, kernel, strided)
+    GpuRoute::MatmulConv.applies(device) && suits(options, kernel, strided, GpuRoute::FusedEpilogue.enabled())
+}
+
+/// Whether convolutions with `options` and a `kh x kw` kernel on `device` share an input part's
+/// columns ([`SharedColumns`]): where they take [`conv2d_by_matmul`] with gathered columns and
+/// `DGSTEREO_GPU_STOCK` leaves `shared-columns` on.
+pub fn shared_columns_apply(device: &Device, options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
+    GpuRoute::SharedColumns.enabled()
+        && GpuRoute::GatheredColumns.enabled()
+        && matmul_conv_applies(device, options, kernel)
 }
 
 /// The shape rule of [`matmul_conv_applies`], `strided` saying whether strided convolutions take
-/// the product (only the gathered columns take a stride).
-fn suits(options: &ConvOptions<2>, [kh, kw]: [usize; 2], strided: bool) -> bool {
-    options.groups == 1 && if options.stride == [1, 1] { kh * kw > 1 } else { strided }
+/// the product (only the gathered columns take a stride), `pointwise` whether unpadded 1x1
+/// convolutions at stride 1 do.
+fn suits(options: &ConvOptions<2>, kernel: [usize; 2], strided: bool, pointwise: bool) -> bool {
+    options.groups == 1
+        && if options.stride == [1, 1] {
+            kernel != [1, 1] || (pointwise && is_pointwise(options, kernel))
+        } else {
+            strided
+        }
+}
+
+/// An unpadded 1x1 convolution at stride 1: a product with the input as it lies.
+fn is_pointwise(options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
+    kernel == [1, 1] && options.stride == [1, 1] && options.padding == [(0, 0), (0, 0)]
 }
 
 /// How the column matrix of [`conv2d_by_matmul`] is built.
@@ -85,33 +110,56 @@ pub fn conv2d_by_matmul(
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
 ) -> Tensor<4> {
-    let ([o, c, ..], columns) = (weight.dims(), GpuRoute::GatheredColumns.enabled());
-    if columns && GpuRoute::FewOutputs.enabled() && few_outputs::suits(options, o, c) {
-        return few_outputs::conv2d_product_first(x, weight, bias, options);
-    }
-    conv2d_by_matmul_with(x, weight, bias, options, if columns { Columns::Gathered } else { Columns::Windows })
+    conv2d_by_matmul_then(x, weight, bias, options, |out| out)
 }
 
-/// [`conv2d_by_matmul`] with the column matrix built as `columns` says.
+/// [`conv2d_by_matmul`] followed by `then`, element-wise work on the output as the product
+/// leaves it, `[N, O, H_out·W_out]`. The bias and `then` are issued on the product's own shape,
+/// every operand prepared before the product, so burn's fusion runs them in the product's kernel:
+/// it takes element-wise operations of the product's shape into its epilogue and stops at the
+/// first operation of another shape (the bias reshaped after the product was one, which left
+/// every bias add and activation of the update loop in kernels of their own). With
+/// `DGSTEREO_GPU_STOCK=epilogue` the old order returns, for comparison.
+///
+/// # Shapes
+/// - as [`conv2d_by_matmul`]; `then` maps `[N, O, H_out·W_out]` to the same shape
+pub fn conv2d_by_matmul_then(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: &ConvOptions<2>,
+    then: impl FnOnce(Tensor<3>) -> Tensor<3>,
+) -> Tensor<4> {
+    let ([o, c, ..], columns) = (weight.dims(), GpuRoute::GatheredColumns.enabled());
+    if columns && GpuRoute::FewOutputs.enabled() && few_outputs::suits(options, o, c) {
+        return few_outputs::conv2d_product_first(x, weight, bias, options, then);
+    }
+    conv2d_by_matmul_with(x, weight, bias, options, if columns { Columns::Gathered } else { Columns::Windows }, then)
+}
+
+/// [`conv2d_by_matmul_then`] with the column matrix built as `columns` says (an unpadded 1x1 at
+/// stride 1 takes the input as it lies either way).
 fn conv2d_by_matmul_with(
     x: Tensor<4>,
     weight: Tensor<4>,
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
     columns: Columns,
+    then: impl FnOnce(Tensor<3>) -> Tensor<3>,
 ) -> Tensor<4> {
     assert!(options.groups == 1, "conv2d_by_matmul: groups 1 only");
     let [n, c, h, w] = x.dims();
     let [o, cw, kh, kw] = weight.dims();
     assert_eq!(c, cw, "conv2d_by_matmul: input has {c} channels, the weight expects {cw}");
-    let [out_h, out_w] = conv_output_size("conv2d_by_matmul", [h, w], [kh, kw], options);
+    let out_size = conv_output_size("conv2d_by_matmul", [h, w], [kh, kw], options);
+    let [out_h, out_w] = out_size;
     let k = kh * kw * c;
+    // Before the product (see `finish`).
+    let bias = epilogue_bias(bias, o);
     let (columns, weight) = match columns {
+        _ if is_pointwise(options, [kh, kw]) => (x.reshape([n, c, h * w]), weight.reshape([1, o, k])),
         Columns::Gathered => {
-            let indices = window_indices(WindowShape::new([h, w], [kh, kw], options), 1, &x.device());
-            let zero = Tensor::zeros([n, c, 1], &x.device());
-            let flat = Tensor::cat(vec![x.reshape([n, c, h * w]), zero], 2);
-            (flat.select(2, indices).reshape([n, k, out_h * out_w]), weight.reshape([1, o, k]))
+            (gathered_columns(x, WindowShape::new([h, w], [kh, kw], options)), weight.reshape([1, o, k]))
         }
         Columns::Windows => {
             assert!(options.stride == [1, 1], "conv2d_by_matmul: the windows take stride 1 only");
@@ -133,11 +181,61 @@ fn conv2d_by_matmul_with(
         }
     };
     let weight = if n > 1 { weight.expand([n, o, k]) } else { weight };
-    let mut out = weight.matmul(columns);
-    if let Some(b) = bias {
-        out = out + b.reshape([1, o, 1]);
-    }
-    out.reshape([n, o, out_h, out_w])
+    finish(weight.matmul(columns), bias, then, out_size)
+}
+
+/// The column matrix of `x` for the windows of `shape`: one `select` of the kept indices
+/// ([`window_indices`]) from `x` with a zero column appended.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; output `[N, C·kh·kw, H_out·W_out]`, rows `(c, ky, kx)`
+fn gathered_columns(x: Tensor<4>, shape: WindowShape) -> Tensor<3> {
+    let [n, c, h, w] = x.dims();
+    let taps = shape.kernel[0] * shape.kernel[1];
+    let indices = window_indices(shape, 1, &x.device());
+    let pixels = indices.dims()[0] / taps;
+    let zero = Tensor::zeros([n, c, 1], &x.device());
+    let flat = Tensor::cat(vec![x.reshape([n, c, h * w]), zero], 2);
+    flat.select(2, indices).reshape([n, c * taps, pixels])
+}
+
+/// The bias as `[1, O, 1]`, reshaped before the product when the fused epilogue is on (see
+/// [`finish`]); as it is otherwise.
+enum EpilogueBias {
+    Flat(Tensor<3>),
+    Vector(Tensor<1>),
+}
+
+/// `bias` prepared for [`finish`], to be called before the product is issued.
+fn epilogue_bias(bias: Option<Tensor<1>>, o: usize) -> Option<EpilogueBias> {
+    bias.map(|b| {
+        if GpuRoute::FusedEpilogue.enabled() {
+            EpilogueBias::Flat(b.reshape([1, o, 1]))
+        } else {
+            EpilogueBias::Vector(b)
+        }
+    })
+}
+
+/// The product `out` (`[N, O, P]`) plus the bias, then `then`, as `[N, O, H_out, W_out]`. With the
+/// fused epilogue both run on the product's shape with the bias reshaped before the product
+/// ([`GpuRoute::FusedEpilogue`]); without, the bias is reshaped after the product and added after
+/// the reshape to NCHW, as before that route.
+fn finish(
+    out: Tensor<3>,
+    bias: Option<EpilogueBias>,
+    then: impl FnOnce(Tensor<3>) -> Tensor<3>,
+    [out_h, out_w]: [usize; 2],
+) -> Tensor<4> {
+    let [n, o, pixels] = out.dims();
+    let out = match bias {
+        None => out,
+        Some(EpilogueBias::Flat(b)) => out + b,
+        Some(EpilogueBias::Vector(b)) => {
+            (out.reshape([n, o, out_h, out_w]) + b.reshape([1, o, 1, 1])).reshape([n, o, pixels])
+        }
+    };
+    then(out).reshape([n, o, out_h, out_w])
 }
 
 /// What the gathered column indices depend on.
@@ -243,7 +341,7 @@ mod tests {
         let wt = Tensor::<4>::random([o, c, k[0], k[1]], Distribution::Normal(0.0, 0.3), &device);
         let b = Tensor::<1>::random([o], Distribution::Normal(0.0, 1.0), &device);
         let reference = conv2d(x.clone(), wt.clone(), Some(b.clone()), opts.clone());
-        let got = conv2d_by_matmul_with(x, wt, Some(b), &opts, columns);
+        let got = conv2d_by_matmul_with(x, wt, Some(b), &opts, columns, |t| t);
         assert_eq!(got.dims(), reference.dims());
         let scale = reference.clone().abs().max().into_scalar::<f32>().max(1e-6);
         max_abs_diff(got, reference) / scale
@@ -262,6 +360,7 @@ mod tests {
                 (2, [4, 3], [10, 12], [3, 3], options([(2, 2), (2, 2)], 2)), // dilated
                 (1, [6, 2], [7, 8], [1, 3], options([(0, 0), (1, 1)], 1)),   // not square
                 (1, [3, 5], [2, 3], [3, 3], options([(4, 4), (3, 3)], 1)),   // padding wider than the input
+                (2, [6, 5], [4, 7], [1, 1], options([(0, 0), (0, 0)], 1)),   // 1x1: the input as it lies
             ] {
                 let err = relative_error(n, co, hw, k, opts, columns);
                 assert!(err < 1e-5, "{columns:?} n {n} {co:?} {hw:?} {k:?}: {err}");
@@ -311,7 +410,8 @@ mod tests {
             let target = Tensor::<4>::random([2, 5, 6, 7], Distribution::Normal(0.0, 1.0), &device);
             let loss = |out: Tensor<4>| (out * target.clone()).sum();
             let g1 = loss(conv2d(x.clone(), wt.clone(), Some(b.clone()), opts.clone())).backward();
-            let g2 = loss(conv2d_by_matmul_with(x.clone(), wt.clone(), Some(b.clone()), &opts, columns)).backward();
+            let g2 =
+                loss(conv2d_by_matmul_with(x.clone(), wt.clone(), Some(b.clone()), &opts, columns, |t| t)).backward();
             for (name, a, b) in [
                 ("input", x.grad(&g1).unwrap(), x.grad(&g2).unwrap()),
                 ("weight", wt.grad(&g1).unwrap(), wt.grad(&g2).unwrap()),
@@ -328,22 +428,63 @@ mod tests {
         }
     }
 
-    /// Stride-1 kernels larger than 1x1 suit the route, strided ones with the gathered columns;
-    /// the CPU never takes it (its host kernels), nor training, nor grouped convolutions.
+    /// Stride-1 kernels larger than 1x1 suit the route, strided ones with the gathered columns,
+    /// unpadded 1x1 ones with the fused epilogue; the CPU never takes it (its host kernels), nor
+    /// training, nor grouped convolutions.
     #[test]
     fn only_gpu_inference_takes_the_route() {
         let opts = options([(1, 1), (1, 1)], 1);
+        let unpadded = options([(0, 0), (0, 0)], 1);
         for strided in [true, false] {
-            assert!(suits(&opts, [3, 3], strided) && suits(&opts, [7, 7], strided));
-            assert!(!suits(&opts, [1, 1], strided));
+            assert!(suits(&opts, [3, 3], strided, false) && suits(&opts, [7, 7], strided, false));
+            assert!(!suits(&opts, [1, 1], strided, true) && !suits(&unpadded, [1, 1], strided, false));
+            assert!(suits(&unpadded, [1, 1], strided, true));
         }
         let strided = strided([2, 2], [(1, 1), (1, 1)]);
-        assert!(suits(&strided, [3, 3], true) && suits(&strided, [1, 1], true));
-        assert!(!suits(&strided, [3, 3], false));
+        assert!(suits(&strided, [3, 3], true, false) && suits(&strided, [1, 1], true, false));
+        assert!(!suits(&strided, [3, 3], false, true));
         let grouped = ConvOptions::new_with_padding([1, 1], [(1, 1), (1, 1)], [1, 1], 2);
-        assert!(!suits(&grouped, [3, 3], true) && !suits(&grouped, [3, 3], false));
+        assert!(!suits(&grouped, [3, 3], true, true) && !suits(&grouped, [3, 3], false, true));
         assert!(!matmul_conv_applies(&Device::flex(), &opts, [3, 3]));
         assert!(!matmul_conv_applies(&Device::flex().autodiff(), &opts, [3, 3]));
+    }
+
+    /// The epilogue sees the biased product as `[N, O, H·W]`, with the bias reshaped before the
+    /// product or after it (the route off), on every way of building the product: the gathered
+    /// columns, the windows, a 1x1 on the input as it lies and the few-outputs product.
+    #[test]
+    fn the_epilogue_follows_the_biased_product() {
+        let device = Device::flex();
+        let same = options([(1, 1), (1, 1)], 1);
+        for (n, [c, o], [kh, kw], opts, columns) in [
+            (1, [8, 6], [3, 3], same.clone(), Columns::Gathered),
+            (2, [8, 6], [3, 3], same.clone(), Columns::Windows),
+            (2, [8, 6], [1, 1], options([(0, 0), (0, 0)], 1), Columns::Gathered),
+            (1, [40, 2], [3, 3], same, Columns::Gathered), // few outputs
+        ] {
+            let [h, w] = [5, 7];
+            let x = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+            let wt = Tensor::<4>::random([o, c, kh, kw], Distribution::Normal(0.0, 0.3), &device);
+            let b = Tensor::<1>::random([o], Distribution::Normal(0.0, 1.0), &device);
+            let extra = Tensor::<4>::random([n, o, h, w], Distribution::Normal(0.0, 1.0), &device);
+            let expected = burn::tensor::activation::sigmoid(
+                conv2d(x.clone(), wt.clone(), Some(b.clone()), opts.clone()) + extra.clone(),
+            );
+            let flat = extra.reshape([n, o, h * w]);
+            let then = |t: Tensor<3>| burn::tensor::activation::sigmoid(t + flat.clone());
+            let got = if o <= 4 {
+                few_outputs::conv2d_product_first(x.clone(), wt.clone(), Some(b.clone()), &opts, then)
+            } else {
+                conv2d_by_matmul_with(x.clone(), wt.clone(), Some(b.clone()), &opts, columns, then)
+            };
+            assert!(max_abs_diff(got, expected.clone()) < 1e-5, "{columns:?} {kh}x{kw} o {o}");
+            // Both placements of the bias in `finish`: flat before the product, or after it.
+            let product = conv2d(x, wt, None, opts).reshape([n, o, h * w]);
+            for bias in [EpilogueBias::Flat(b.clone().reshape([1, o, 1])), EpilogueBias::Vector(b.clone())] {
+                let got = finish(product.clone(), Some(bias), then, [h, w]);
+                assert!(max_abs_diff(got, expected.clone()) < 1e-5, "{columns:?} {kh}x{kw}: finish");
+            }
+        }
     }
 
     /// Index tensors are kept per shape: asking twice gives the same values, and a new shape

@@ -3,7 +3,7 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::host_conv::{conv2d_forward, conv2d_relu_forward};
+use dgstereo_core::host_conv::{conv2d_forward, conv2d_forward_then, conv2d_relu_forward};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::resample::{average_pool_half, resize_bilinear};
 use dgstereo_core::timing::{StageClock, timed};
@@ -106,7 +106,9 @@ impl MultiLevelUpdateBlock {
     /// # Shapes
     /// - `hidden_fine`: `[N, hidden, H, W]`; output `[N, 9·f², H, W]`
     pub fn upsample_mask(&self, hidden_fine: Tensor<4>) -> Tensor<4> {
-        conv2d_forward(&self.mask.conv2, conv2d_relu_forward(&self.mask.conv1, hidden_fine)).mul_scalar(0.25)
+        conv2d_forward_then(&self.mask.conv2, conv2d_relu_forward(&self.mask.conv1, hidden_fine), |m| {
+            m.mul_scalar(0.25)
+        })
     }
 
     /// Updates the coarser GRUs only (the slow-fast schedule's extra calls), timing them on

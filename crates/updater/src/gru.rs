@@ -14,8 +14,9 @@ use burn::tensor::{
     activation::{sigmoid, tanh},
 };
 use dgstereo_core::device::host_kernels_apply;
-use dgstereo_core::host_conv::{conv2d_forward, conv2d_op};
+use dgstereo_core::host_conv::{conv_options, conv2d_forward_then, conv2d_op_then, flat_pixels};
 use dgstereo_core::layers::{ConvInit, conv2d};
+use dgstereo_core::matmul_conv::{SharedColumns, shared_columns_apply};
 
 /// A ConvGRU whose gates also receive precomputed context terms.
 ///
@@ -80,11 +81,53 @@ impl ConvGru {
         // copy fewer a step).
         let with_inputs =
             |first: Tensor<4>| Tensor::cat([first].into_iter().chain(inputs.iter().cloned()).collect(), 1);
-        let zr = sigmoid(self.gates(with_inputs(h.clone())) + ctx.zr.clone());
-        let z = zr.clone().narrow(1, 0, hidden);
+        // The gates' context, the activations and the blend are each convolution's epilogue, on
+        // `[N, C, H·W]` with their operands flattened before it (GPU inference runs them in the
+        // product's kernel: `conv2d_op_then`). On the GPU the inputs' columns are gathered once
+        // for both convolutions (`SharedColumns`).
+        let shared = self.shared_columns(&inputs);
+        let zr_context = flat_pixels(ctx.zr.clone());
+        let gates = |zr: Tensor<3>| sigmoid(zr + zr_context);
+        let zr = match &shared {
+            Some(shared) => {
+                let (weight, bias) = self.gate_weights();
+                shared.conv_then(h.clone(), weight, bias, gates)
+            }
+            None => self.gates_then(with_inputs(h.clone()), gates),
+        };
+        let z = flat_pixels(zr.clone().narrow(1, 0, hidden));
         let r = zr.narrow(1, hidden, hidden);
-        let q = tanh(conv2d_forward(&self.convq, with_inputs(r * h.clone())) + ctx.q.clone());
-        (z.clone().neg().add_scalar(1.0)) * h + z * q
+        let (h_flat, q_context) = (flat_pixels(h.clone()), flat_pixels(ctx.q.clone()));
+        let blend = |q: Tensor<3>| {
+            let q = tanh(q + q_context);
+            (z.clone().neg().add_scalar(1.0)) * h_flat + z * q
+        };
+        match shared {
+            Some(shared) => {
+                let bias = self.convq.bias.as_ref().map(|b| b.val());
+                shared.conv_then(r * h, self.convq.weight.val(), bias, blend)
+            }
+            None => conv2d_forward_then(&self.convq, with_inputs(r * h), blend),
+        }
+    }
+
+    /// The inputs' columns for both convolutions of a step, where GPU inference shares them
+    /// (`shared_columns_apply`) and the candidate's convolution has the gates' geometry.
+    fn shared_columns(&self, inputs: &[Tensor<4>]) -> Option<SharedColumns> {
+        let options = self.gate_options();
+        let [_, _, kh, kw] = self.convz.weight.dims();
+        let device = inputs.first()?.device();
+        if !shared_columns_apply(&device, &options, [kh, kw]) || conv_options(&self.convq) != Some(options.clone()) {
+            return None;
+        }
+        let x = if inputs.len() == 1 { inputs[0].clone() } else { Tensor::cat(inputs.to_vec(), 1) };
+        Some(SharedColumns::gather(x, [kh, kw], &options))
+    }
+
+    /// The gates' convolution options: `convz`'s, padded to keep the size.
+    fn gate_options(&self) -> ConvOptions<2> {
+        let [_, _, kh, kw] = self.convz.weight.dims();
+        ConvOptions::new(self.convz.stride, [kh / 2, kw / 2], self.convz.dilation, self.convz.groups)
     }
 
     /// `[convz(hx), convr(hx)]` as one convolution of the concatenated weights.
@@ -92,10 +135,14 @@ impl ConvGru {
     /// # Shapes
     /// - `hx`: `[N, hidden + input_dim, H, W]`; output `[N, 2·hidden, H, W]`
     pub fn gates(&self, hx: Tensor<4>) -> Tensor<4> {
+        self.gates_then(hx, |zr| zr)
+    }
+
+    /// [`Self::gates`] followed by `then` on its output seen as `[N, 2·hidden, H·W]`
+    /// (`conv2d_op_then`).
+    fn gates_then(&self, hx: Tensor<4>, then: impl FnOnce(Tensor<3>) -> Tensor<3>) -> Tensor<4> {
         let (weight, bias) = self.gate_weights();
-        let [_, _, kh, kw] = weight.dims();
-        let options = ConvOptions::new(self.convz.stride, [kh / 2, kw / 2], self.convz.dilation, self.convz.groups);
-        conv2d_op(hx, weight, bias, options)
+        conv2d_op_then(hx, weight, bias, self.gate_options(), then)
     }
 
     /// The weights and biases of `convz` and `convr` stacked along the output channels: the one

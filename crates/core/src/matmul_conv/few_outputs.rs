@@ -11,7 +11,7 @@
 use burn::tensor::Tensor;
 use burn::tensor::ops::ConvOptions;
 
-use super::{WindowShape, window_indices};
+use super::{WindowShape, epilogue_bias, finish, window_indices};
 use crate::host_conv::conv_output_size;
 
 /// The most output channels that take the product first.
@@ -25,7 +25,8 @@ pub(super) fn suits(options: &ConvOptions<2>, o: usize, c: usize) -> bool {
 }
 
 /// `conv2d(x, weight, bias, options)` (stride 1, groups 1) as the product of the weight with
-/// the input, then the sum of the product's shifted planes.
+/// the input, then the sum of the product's shifted planes, then `then` on `[N, O, H_out·W_out]`
+/// (as `super::conv2d_by_matmul_then`).
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`; output `[N, O, H_out, W_out]`
@@ -34,12 +35,14 @@ pub(super) fn conv2d_product_first(
     weight: Tensor<4>,
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
+    then: impl FnOnce(Tensor<3>) -> Tensor<3>,
 ) -> Tensor<4> {
     let device = x.device();
     let [n, c, h, w] = x.dims();
     let [o, _, kh, kw] = weight.dims();
     let [out_h, out_w] = conv_output_size("conv2d_product_first", [h, w], [kh, kw], options);
     let (taps, pixels) = (kh * kw, out_h * out_w);
+    let bias = epilogue_bias(bias, o);
     // Rows (o, ky, kx) of Z, each a plane of the input's size.
     let weight = weight.permute([0, 2, 3, 1]).reshape([1, o * taps, c]);
     let weight = if n > 1 { weight.expand([n, o * taps, c]) } else { weight };
@@ -49,11 +52,8 @@ pub(super) fn conv2d_product_first(
     let indices =
         window_indices(WindowShape::new([h, w], [kh, kw], options), o, &device).reshape([1, o * taps, pixels]);
     let indices = if n > 1 { indices.expand([n, o * taps, pixels]) } else { indices };
-    let mut out = z.gather(2, indices).reshape([n, o, taps, pixels]).sum_dim(2).reshape([n, o, pixels]);
-    if let Some(b) = bias {
-        out = out + b.reshape([1, o, 1]);
-    }
-    out.reshape([n, o, out_h, out_w])
+    let out = z.gather(2, indices).reshape([n, o, taps, pixels]).sum_dim(2).reshape([n, o, pixels]);
+    finish(out, bias, then, [out_h, out_w])
 }
 
 #[cfg(test)]
@@ -88,7 +88,7 @@ mod tests {
             let scale = reference.clone().abs().max().into_scalar::<f32>();
             // Directly, and through the route's entry, which picks it for these shapes.
             for got in [
-                conv2d_product_first(x.clone(), wt.clone(), Some(b.clone()), &options),
+                conv2d_product_first(x.clone(), wt.clone(), Some(b.clone()), &options, |t| t),
                 super::super::conv2d_by_matmul(x, wt, Some(b), &options),
             ] {
                 assert_eq!(got.dims(), reference.dims());
