@@ -67,9 +67,7 @@ for routes in epilogue "" shared-columns "" strided few-outputs "" epilogue,shar
     DGSTEREO_GPU_STOCK=$routes step 60 /tmp/dgstereo "${kitti[@]}" --precision f16
 done
 # The paper's stereo model (DGIA fusion + Gradient-GRU; its prior's time is not included).
-if [ -f .gpubin/paper-model.toml ]; then
-    step 60 /tmp/dgstereo "${kitti[@]}" --precision f16 --config .gpubin/paper-model.toml
-fi
+step 60 /tmp/dgstereo "${kitti[@]}" --precision f16 --config scripts/paper-model.toml
 # cubecl's per-kernel profile of one f16 pass (every kernel timed alone on the GPU, so the pass
 # runs slower), summarised by kernel name ($OUT/profile.txt) and kept whole (gzipped).
 printf '[profiling.logger]\nlevel = "basic"\nfile = "/tmp/cubecl-profile.log"\n' > cubecl.toml
