@@ -65,8 +65,11 @@ impl SharedColumns {
         let out_size = conv_output_size("SharedColumns", [h, w], self.kernel, &self.options);
         let taps = kh * kw;
         let bias = epilogue_bias(bias, o);
+        // Rows `(c, ky, kx)`: a part's input channels are one run of columns of the flattened
+        // weight, a strided view (narrowing the 4-D weight first would make the reshape a copy).
+        let flat = weight.reshape([1, o, c * taps]);
         let weight_of = |start: usize, channels: usize| {
-            let part = weight.clone().narrow(1, start, channels).reshape([1, o, channels * taps]);
+            let part = flat.clone().narrow(2, start * taps, channels * taps);
             if n > 1 { part.expand([n, o, channels * taps]) } else { part }
         };
         // The shared part's product first, so that it is ready before the second product and its
