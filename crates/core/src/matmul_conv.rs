@@ -110,7 +110,7 @@ pub fn conv2d_by_matmul(
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
 ) -> Tensor<4> {
-    conv2d_by_matmul_then(x, weight, bias, options, |out| out)
+    by_matmul(x, weight, bias, options, false, |out| out)
 }
 
 /// [`conv2d_by_matmul`] followed by `then`, element-wise work on the output as the product
@@ -130,7 +130,21 @@ pub fn conv2d_by_matmul_then(
     options: &ConvOptions<2>,
     then: impl FnOnce(Tensor<3>) -> Tensor<3>,
 ) -> Tensor<4> {
+    by_matmul(x, weight, bias, options, GpuRoute::FusedEpilogue.enabled(), then)
+}
+
+/// [`conv2d_by_matmul_then`] with the bias reshaped before the product where `fused` (see
+/// [`epilogue_bias`]).
+fn by_matmul(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: &ConvOptions<2>,
+    fused: bool,
+    then: impl FnOnce(Tensor<3>) -> Tensor<3>,
+) -> Tensor<4> {
     let ([o, c, ..], columns) = (weight.dims(), GpuRoute::GatheredColumns.enabled());
+    let bias = epilogue_bias(bias, o, fused);
     if columns && GpuRoute::FewOutputs.enabled() && few_outputs::suits(options, o, c) {
         return few_outputs::conv2d_product_first(x, weight, bias, options, then);
     }
@@ -142,7 +156,7 @@ pub fn conv2d_by_matmul_then(
 fn conv2d_by_matmul_with(
     x: Tensor<4>,
     weight: Tensor<4>,
-    bias: Option<Tensor<1>>,
+    bias: Option<EpilogueBias>,
     options: &ConvOptions<2>,
     columns: Columns,
     then: impl FnOnce(Tensor<3>) -> Tensor<3>,
@@ -154,8 +168,6 @@ fn conv2d_by_matmul_with(
     let out_size = conv_output_size("conv2d_by_matmul", [h, w], [kh, kw], options);
     let [out_h, out_w] = out_size;
     let k = kh * kw * c;
-    // Before the product (see `finish`).
-    let bias = epilogue_bias(bias, o);
     let (columns, weight) = match columns {
         _ if is_pointwise(options, [kh, kw]) => (x.reshape([n, c, h * w]), weight.reshape([1, o, k])),
         Columns::Gathered => {
@@ -199,22 +211,19 @@ fn gathered_columns(x: Tensor<4>, shape: WindowShape) -> Tensor<3> {
     flat.select(2, indices).reshape([n, c * taps, pixels])
 }
 
-/// The bias as `[1, O, 1]`, reshaped before the product when the fused epilogue is on (see
-/// [`finish`]); as it is otherwise.
+/// The bias as [`finish`] adds it: as `[1, O, 1]`, reshaped before the product, or as it is.
 enum EpilogueBias {
     Flat(Tensor<3>),
     Vector(Tensor<1>),
 }
 
-/// `bias` prepared for [`finish`], to be called before the product is issued.
-fn epilogue_bias(bias: Option<Tensor<1>>, o: usize) -> Option<EpilogueBias> {
-    bias.map(|b| {
-        if GpuRoute::FusedEpilogue.enabled() {
-            EpilogueBias::Flat(b.reshape([1, o, 1]))
-        } else {
-            EpilogueBias::Vector(b)
-        }
-    })
+/// `bias` prepared for [`finish`] before the product is issued: reshaped there where `fused`
+/// (a convolution with an epilogue and the route on), else as it is. A convolution without an
+/// epilogue keeps the old placement: the encoders' convolutions, each followed by a norm, fused
+/// worse with the bias in the product's block (87 more kernels before the update loop of a 64x128
+/// pass, cubecl's kernel log on lavapipe).
+fn epilogue_bias(bias: Option<Tensor<1>>, o: usize, fused: bool) -> Option<EpilogueBias> {
+    bias.map(|b| if fused { EpilogueBias::Flat(b.reshape([1, o, 1])) } else { EpilogueBias::Vector(b) })
 }
 
 /// The product `out` (`[N, O, P]`) plus the bias, then `then`, as `[N, O, H_out, W_out]`. With the
@@ -341,7 +350,7 @@ mod tests {
         let wt = Tensor::<4>::random([o, c, k[0], k[1]], Distribution::Normal(0.0, 0.3), &device);
         let b = Tensor::<1>::random([o], Distribution::Normal(0.0, 1.0), &device);
         let reference = conv2d(x.clone(), wt.clone(), Some(b.clone()), opts.clone());
-        let got = conv2d_by_matmul_with(x, wt, Some(b), &opts, columns, |t| t);
+        let got = conv2d_by_matmul_with(x, wt, epilogue_bias(Some(b), o, true), &opts, columns, |t| t);
         assert_eq!(got.dims(), reference.dims());
         let scale = reference.clone().abs().max().into_scalar::<f32>().max(1e-6);
         max_abs_diff(got, reference) / scale
@@ -410,8 +419,15 @@ mod tests {
             let target = Tensor::<4>::random([2, 5, 6, 7], Distribution::Normal(0.0, 1.0), &device);
             let loss = |out: Tensor<4>| (out * target.clone()).sum();
             let g1 = loss(conv2d(x.clone(), wt.clone(), Some(b.clone()), opts.clone())).backward();
-            let g2 =
-                loss(conv2d_by_matmul_with(x.clone(), wt.clone(), Some(b.clone()), &opts, columns, |t| t)).backward();
+            let g2 = loss(conv2d_by_matmul_with(
+                x.clone(),
+                wt.clone(),
+                epilogue_bias(Some(b.clone()), 5, true),
+                &opts,
+                columns,
+                |t| t,
+            ))
+            .backward();
             for (name, a, b) in [
                 ("input", x.grad(&g1).unwrap(), x.grad(&g2).unwrap()),
                 ("weight", wt.grad(&g1).unwrap(), wt.grad(&g2).unwrap()),
@@ -450,7 +466,7 @@ mod tests {
     }
 
     /// The epilogue sees the biased product as `[N, O, H·W]`, with the bias reshaped before the
-    /// product or after it (the route off), on every way of building the product: the gathered
+    /// product or added after it (no epilogue, or the route off), on every way of building the product: the gathered
     /// columns, the windows, a 1x1 on the input as it lies and the few-outputs product.
     #[test]
     fn the_epilogue_follows_the_biased_product() {
@@ -472,17 +488,14 @@ mod tests {
             );
             let flat = extra.reshape([n, o, h * w]);
             let then = |t: Tensor<3>| burn::tensor::activation::sigmoid(t + flat.clone());
-            let got = if o <= 4 {
-                few_outputs::conv2d_product_first(x.clone(), wt.clone(), Some(b.clone()), &opts, then)
-            } else {
-                conv2d_by_matmul_with(x.clone(), wt.clone(), Some(b.clone()), &opts, columns, then)
-            };
-            assert!(max_abs_diff(got, expected.clone()) < 1e-5, "{columns:?} {kh}x{kw} o {o}");
-            // Both placements of the bias in `finish`: flat before the product, or after it.
-            let product = conv2d(x, wt, None, opts).reshape([n, o, h * w]);
-            for bias in [EpilogueBias::Flat(b.clone().reshape([1, o, 1])), EpilogueBias::Vector(b.clone())] {
-                let got = finish(product.clone(), Some(bias), then, [h, w]);
-                assert!(max_abs_diff(got, expected.clone()) < 1e-5, "{columns:?} {kh}x{kw}: finish");
+            for fused in [true, false] {
+                let bias = epilogue_bias(Some(b.clone()), o, fused);
+                let got = if o <= 4 {
+                    few_outputs::conv2d_product_first(x.clone(), wt.clone(), bias, &opts, then)
+                } else {
+                    conv2d_by_matmul_with(x.clone(), wt.clone(), bias, &opts, columns, then)
+                };
+                assert!(max_abs_diff(got, expected.clone()) < 1e-5, "{columns:?} {kh}x{kw} o {o} fused {fused}");
             }
         }
     }

@@ -11,7 +11,7 @@
 use burn::tensor::Tensor;
 use burn::tensor::ops::ConvOptions;
 
-use super::{WindowShape, epilogue_bias, finish, window_indices};
+use super::{EpilogueBias, WindowShape, finish, window_indices};
 use crate::host_conv::conv_output_size;
 
 /// The most output channels that take the product first.
@@ -29,11 +29,12 @@ pub(super) fn suits(options: &ConvOptions<2>, o: usize, c: usize) -> bool {
 /// (as `super::conv2d_by_matmul_then`).
 ///
 /// # Shapes
-/// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`; output `[N, O, H_out, W_out]`
+/// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]` as `super::epilogue_bias`
+///   prepared it; output `[N, O, H_out, W_out]`
 pub(super) fn conv2d_product_first(
     x: Tensor<4>,
     weight: Tensor<4>,
-    bias: Option<Tensor<1>>,
+    bias: Option<EpilogueBias>,
     options: &ConvOptions<2>,
     then: impl FnOnce(Tensor<3>) -> Tensor<3>,
 ) -> Tensor<4> {
@@ -42,7 +43,6 @@ pub(super) fn conv2d_product_first(
     let [o, _, kh, kw] = weight.dims();
     let [out_h, out_w] = conv_output_size("conv2d_product_first", [h, w], [kh, kw], options);
     let (taps, pixels) = (kh * kw, out_h * out_w);
-    let bias = epilogue_bias(bias, o);
     // Rows (o, ky, kx) of Z, each a plane of the input's size.
     let weight = weight.permute([0, 2, 3, 1]).reshape([1, o * taps, c]);
     let weight = if n > 1 { weight.expand([n, o * taps, c]) } else { weight };
@@ -88,7 +88,13 @@ mod tests {
             let scale = reference.clone().abs().max().into_scalar::<f32>();
             // Directly, and through the route's entry, which picks it for these shapes.
             for got in [
-                conv2d_product_first(x.clone(), wt.clone(), Some(b.clone()), &options, |t| t),
+                conv2d_product_first(
+                    x.clone(),
+                    wt.clone(),
+                    super::super::epilogue_bias(Some(b.clone()), o, true),
+                    &options,
+                    |t| t,
+                ),
                 super::super::conv2d_by_matmul(x, wt, Some(b), &options),
             ] {
                 assert_eq!(got.dims(), reference.dims());

@@ -14,6 +14,7 @@ use burn::tensor::Tensor;
 use burn::tensor::ops::ConvOptions;
 
 use super::{WindowShape, epilogue_bias, finish, gathered_columns};
+use crate::gpu_routes::GpuRoute;
 use crate::host_conv::conv_output_size;
 
 /// The gathered column matrix of the part of a convolution's input that several convolutions
@@ -64,7 +65,7 @@ impl SharedColumns {
         assert!(c == c_first + self.channels && [kh, kw] == self.kernel, "SharedColumns: the weight does not fit");
         let out_size = conv_output_size("SharedColumns", [h, w], self.kernel, &self.options);
         let taps = kh * kw;
-        let bias = epilogue_bias(bias, o);
+        let bias = epilogue_bias(bias, o, GpuRoute::FusedEpilogue.enabled());
         // Rows `(c, ky, kx)`: a part's input channels are one run of columns of the flattened
         // weight, a strided view (narrowing the 4-D weight first would make the reshape a copy).
         let flat = weight.reshape([1, o, c * taps]);
