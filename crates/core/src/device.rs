@@ -53,9 +53,9 @@ impl DeviceChoice {
     pub fn device_with_precision(self, precision: Precision) -> crate::Result<Device> {
         match self {
             Self::Cpu => configured(Device::flex(), precision),
-            #[cfg(feature = "gpu")]
-            Self::Gpu => configured_gpu(Device::vulkan(Default::default()), precision),
-            #[cfg(not(feature = "gpu"))]
+            #[cfg(any(feature = "gpu", feature = "gpu-wgsl"))]
+            Self::Gpu => configured_gpu(gpu_device(), precision),
+            #[cfg(not(any(feature = "gpu", feature = "gpu-wgsl")))]
             Self::Gpu => Err(crate::Error::Config(
                 "this binary was built without the GPU backend; rebuild with `--features gpu`".into(),
             )),
@@ -159,7 +159,7 @@ pub fn cast_float_params<M: Module>(module: M, dtype: FloatDType) -> M {
 /// without a usable Vulkan adapter gives an error here instead of a panic inside the backend
 /// later (burn's wgpu runtime panics when it finds no adapter, and asking whether the adapter
 /// computes in a dtype starts that runtime). The panic hook is silenced meanwhile.
-#[cfg(feature = "gpu")]
+#[cfg(any(feature = "gpu", feature = "gpu-wgsl"))]
 fn configured_gpu(device: Device, precision: Precision) -> crate::Result<Device> {
     let previous = std::panic::take_hook();
     std::panic::set_hook(Box::new(|_| {}));
@@ -176,6 +176,19 @@ fn configured_gpu(device: Device, precision: Precision) -> crate::Result<Device>
                 .into(),
         ))
     })
+}
+
+/// The GPU: burn's wgpu backend pinned to Vulkan (SPIR-V kernels).
+#[cfg(feature = "gpu")]
+fn gpu_device() -> Device {
+    Device::vulkan(Default::default())
+}
+
+/// The GPU of the `gpu-wgsl` build: burn's wgpu backend on whichever adapter it finds, with WGSL
+/// kernels (a software Vulkan driver's compiler takes these where it crashes on the SPIR-V ones).
+#[cfg(all(feature = "gpu-wgsl", not(feature = "gpu")))]
+fn gpu_device() -> Device {
+    Device::wgpu(Default::default())
 }
 
 /// The default device: the Flex CPU backend.
