@@ -115,9 +115,10 @@ pub fn conv2d_by_matmul(
 
 /// [`conv2d_by_matmul`] followed by `then`, element-wise work on the output as the product
 /// leaves it, `[N, O, H_out·W_out]`. The bias and `then` are issued on the product's own shape,
-/// every operand prepared before the product, so burn's fusion runs them in the product's kernel:
-/// it takes element-wise operations of the product's shape into its epilogue and stops at the
-/// first operation of another shape (the bias reshaped after the product was one, which left
+/// every operand prepared before the product, so burn's fusion takes them into the product's
+/// epilogue (run inside the product's kernel or as one fused kernel after it, as its autotune
+/// picks): it takes element-wise operations of the product's shape and stops at the first
+/// operation of another shape (the bias reshaped after the product was one, which left
 /// every bias add and activation of the update loop in kernels of their own). With
 /// `DGSTEREO_GPU_STOCK=epilogue` the old order returns, for comparison.
 ///
