@@ -107,13 +107,11 @@ pub fn conv2d_op_then(
     options: ConvOptions<2>,
     then: impl FnOnce(Tensor<3>) -> Tensor<3>,
 ) -> Tensor<4> {
-    let device = x.device();
     let [_, _, kh, kw] = weight.dims();
-    let host = options.groups == 1 && host_kernels_apply(&device);
-    if !host && matmul_conv_applies(&device, &options, [kh, kw]) {
-        return conv2d_by_matmul_then(x, weight, bias, &options, then);
+    match conv_path(&x.device(), &options, [kh, kw]) {
+        ConvPath::Product => conv2d_by_matmul_then(x, weight, bias, &options, then),
+        ConvPath::Host | ConvPath::Burn => pixels_then(conv2d_op(x, weight, bias, options), then),
     }
-    pixels_then(conv2d_op(x, weight, bias, options), then)
 }
 
 /// `x` (`[N, C, H, W]`) as `[N, C, H·W]`, the shape [`conv2d_op_then`]'s `then` works on.
@@ -155,14 +153,32 @@ pub fn conv_options(conv: &Conv2d) -> Option<ConvOptions<2>> {
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`; output `[N, O, H_out, W_out]`
 pub fn conv2d_op(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: ConvOptions<2>) -> Tensor<4> {
-    let device = x.device();
     let [_, _, kh, kw] = weight.dims();
-    if options.groups == 1 && host_kernels_apply(&device) {
-        conv2d_host(x, weight, bias, &options)
-    } else if matmul_conv_applies(&device, &options, [kh, kw]) {
-        conv2d_by_matmul(x, weight, bias, &options)
+    match conv_path(&x.device(), &options, [kh, kw]) {
+        ConvPath::Host => conv2d_host(x, weight, bias, &options),
+        ConvPath::Product => conv2d_by_matmul(x, weight, bias, &options),
+        ConvPath::Burn => conv2d(x, weight, bias, options),
+    }
+}
+
+/// Where [`conv2d_op`] and [`conv2d_op_then`] compute a convolution.
+enum ConvPath {
+    /// The host kernel (CPU inference, groups 1).
+    Host,
+    /// One matrix product ([`crate::matmul_conv`], GPU inference).
+    Product,
+    /// burn's operation.
+    Burn,
+}
+
+/// The [`ConvPath`] of a convolution with `options` and a `kh x kw` kernel on `device`.
+fn conv_path(device: &Device, options: &ConvOptions<2>, kernel: [usize; 2]) -> ConvPath {
+    if options.groups == 1 && host_kernels_apply(device) {
+        ConvPath::Host
+    } else if matmul_conv_applies(device, options, kernel) {
+        ConvPath::Product
     } else {
-        conv2d(x, weight, bias, options)
+        ConvPath::Burn
     }
 }
 
