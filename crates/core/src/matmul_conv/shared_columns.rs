@@ -8,7 +8,7 @@
 //! columns are gathered once ([`SharedColumns::gather`]) and each convolution adds the product
 //! with its own first part's columns to the shared part's product
 //! ([`SharedColumns::conv_then`]); the sum, the bias and the epilogue join the second product's
-//! epilogue (`super::finish`). It costs a second product per convolution (12 more kernels an
+//! epilogue (`super::finish`). It costs a second product per convolution (9 to 12 more kernels an
 //! iteration on lavapipe) for a third less gather traffic at 1/4.
 
 use burn::tensor::Tensor;
