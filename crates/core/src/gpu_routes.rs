@@ -7,13 +7,13 @@
 //! many small kernels, or a slow one, GPU inference (a device other than the CPU, without
 //! autodiff) takes a formulation from burn's operations with fewer: convolutions as one matrix
 //! product over a column matrix gathered in one `select`, strided ones included, and with few
-//! outputs the product before the shift, the bias and activation after it in the product's own
-//! kernel, the ConvGRU's inputs gathered into columns once for both its products
+//! outputs the product before the shift, the bias and activation after it in the product's
+//! epilogue, the ConvGRU's inputs gathered into columns once for both its products
 //! (`matmul_conv`); the bilinear resize as burn's own `interpolate` kernel (`resample`); the
-//! pyramid lookup as two gathers over all levels (`dgstereo_costvolume`). Each keeps the stock path as its reference and is tested against it on
-//! the CPU, one by one and as a whole network ([`set_routes_on_cpu`]); each can be turned off
-//! with `DGSTEREO_GPU_STOCK` (comma-separated route names, or `all`; read once per process) so
-//! that a GPU run can measure what it gains.
+//! pyramid lookup as two gathers over all levels (`dgstereo_costvolume`). Each keeps the stock
+//! path as its reference and is tested against it on the CPU, one by one and as a whole network
+//! ([`set_routes_on_cpu`]); each can be turned off with `DGSTEREO_GPU_STOCK` (comma-separated
+//! route names, or `all`; read once per process) so that a GPU run can measure what it gains.
 
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, Ordering};
