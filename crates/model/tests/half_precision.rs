@@ -85,22 +85,31 @@ fn float_dtypes(network: &RaftStereo) -> Vec<(DType, String)> {
     seen
 }
 
+/// The bundled weights' model configuration (from their metadata).
+fn bundled_config() -> ModelConfig {
+    let json = checkpoint::safetensors_metadata(&weights(), "model_config").unwrap().expect("config in the metadata");
+    serde_json::from_str(&json).unwrap()
+}
+
+/// The synthetic pair as `[1, 3, H, W]` tensors on `device`.
+fn pair_on(device: &burn::tensor::Device) -> (Tensor<4>, Tensor<4>) {
+    let (left, right) = pair();
+    (from_vec(left, [1, 3, H, W], device), from_vec(right, [1, 3, H, W], device))
+}
+
 /// The disparity of the synthetic pair on `device` (whose precision is already set), with the
 /// bundled weights cast to that precision.
 fn predict(device: &burn::tensor::Device) -> Tensor<4> {
     let path = weights();
     let dtype = DType::from(float_dtype(device));
-    let json = checkpoint::safetensors_metadata(&path, "model_config").unwrap().expect("config in the metadata");
-    let config: ModelConfig = serde_json::from_str(&json).unwrap();
+    let config = bundled_config();
     let fresh = config.init(device).unwrap();
     assert_eq!(float_dtypes(&fresh).iter().map(|d| d.0).collect::<Vec<_>>(), [dtype], "fresh weights");
     // burn's store keeps the file's f32; the cast brings every tensor to the device's dtype.
     let network = cast_float_params(checkpoint::load_safetensors(fresh, &path).unwrap(), float_dtype(device));
     assert_eq!(float_dtypes(&network).iter().map(|d| d.0).collect::<Vec<_>>(), [dtype], "{:?}", float_dtypes(&network));
     let model = StereoModel::new(network, config, device.clone());
-    let (left, right) = pair();
-    let left = from_vec(left, [1, 3, H, W], device);
-    let right = from_vec(right, [1, 3, H, W], device);
+    let (left, right) = pair_on(device);
     model.predict(left, right, None, ITERS, false, None).unwrap().last()
 }
 
@@ -108,11 +117,8 @@ fn predict(device: &burn::tensor::Device) -> Tensor<4> {
 /// half-precision `dtype`): the encoders, the update block and the lookup's output (the motion
 /// encoder's input) in `dtype`; the correlation volume, its lookup and the positions in f32.
 fn check_mixed_precision_dtypes(device: &burn::tensor::Device, dtype: DType) {
-    let json = checkpoint::safetensors_metadata(&weights(), "model_config").unwrap().expect("config in the metadata");
-    let config: ModelConfig = serde_json::from_str(&json).unwrap();
-    let network = config.init(device).unwrap();
-    let (left, right) = pair();
-    let (left, right) = (from_vec(left, [1, 3, H, W], device), from_vec(right, [1, 3, H, W], device));
+    let network = bundled_config().init(device).unwrap();
+    let (left, right) = pair_on(device);
     let mut trace = dgstereo_model::Trace::new();
     let options = dgstereo_model::ForwardOptions { trace: Some(&mut trace), ..Default::default() };
     let out = network.forward_flow(left, right, None, 1, options);
@@ -165,8 +171,9 @@ fn half_precision_child() {
     assert!(!dgstereo_core::device::host_kernels_apply(&device), "the f32 host kernels must stand aside");
     check_mixed_precision_dtypes(&device, DType::from(precision.float_dtype()));
     let disparity = predict(&device);
-    // The weights and the update loop are in `dtype` (checked in `predict`); the match positions
-    // and the upsampled disparity stay f32, as in the reference's mixed precision.
+    // The weights (checked in `predict`) and the update loop (`check_mixed_precision_dtypes`) are
+    // in the half precision; the match positions and the upsampled disparity stay f32, as in the
+    // reference's mixed precision.
     assert_eq!(disparity.dtype(), DType::F32, "the disparity is kept in f32");
     let bytes: Vec<u8> = to_vec(disparity).iter().flat_map(|v| v.to_le_bytes()).collect();
     std::fs::write(std::env::var(CHILD_OUT_ENV).unwrap(), bytes).unwrap();
