@@ -16,8 +16,20 @@ pub struct StageSeconds {
     pub name: &'static str,
     /// Wall-clock seconds, all calls together.
     pub seconds: f64,
+    /// CPU seconds of the whole process (all threads) over the same spans; `NaN` where the
+    /// system does not report them ([`process_cpu_seconds`]).
+    pub cpu_seconds: f64,
     /// How many times it ran.
     pub calls: usize,
+}
+
+impl StageSeconds {
+    /// Cores busy on average while the stage ran: CPU over wall-clock seconds (`NaN` where
+    /// either is unknown or zero). A stage below the machine's core count left cores idle
+    /// (serial work, or waiting on each other).
+    pub fn cores_busy(&self) -> f64 {
+        if self.seconds > 0.0 { self.cpu_seconds / self.seconds } else { f64::NAN }
+    }
 }
 
 /// Stages in order of their first call, with their accumulated times.
@@ -46,19 +58,21 @@ impl StageClock {
         }
     }
 
-    /// Runs `f`, adding its wall-clock time to stage `name`.
+    /// Runs `f`, adding its wall-clock and CPU time to stage `name`.
     pub fn time<T>(&mut self, name: &'static str, f: impl FnOnce() -> T) -> T {
         self.wait();
-        let start = Instant::now();
+        let (start, cpu_start) = (Instant::now(), process_cpu_seconds());
         let out = f();
         self.wait();
         let seconds = start.elapsed().as_secs_f64();
+        let cpu_seconds = process_cpu_seconds().zip(cpu_start).map_or(f64::NAN, |(end, start)| end - start);
         match self.stages.iter_mut().find(|s| s.name == name) {
             Some(s) => {
                 s.seconds += seconds;
+                s.cpu_seconds += cpu_seconds;
                 s.calls += 1;
             }
-            None => self.stages.push(StageSeconds { name, seconds, calls: 1 }),
+            None => self.stages.push(StageSeconds { name, seconds, cpu_seconds, calls: 1 }),
         }
         out
     }
@@ -66,6 +80,24 @@ impl StageClock {
     /// The stages timed so far, in order of their first call.
     pub fn stages(&self) -> &[StageSeconds] {
         &self.stages
+    }
+}
+
+/// CPU seconds (user and system, all threads) this process has used so far, to the
+/// nanosecond (`CLOCK_PROCESS_CPUTIME_ID`); `None` other than on Linux with glibc.
+pub fn process_cpu_seconds() -> Option<f64> {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        let mut now = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+        // SAFETY: `clock_gettime` writes one `timespec` through the valid pointer it is given
+        // and reads nothing else.
+        #[allow(unsafe_code)]
+        let status = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut now) };
+        (status == 0).then(|| now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9)
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        None
     }
 }
 
@@ -92,6 +124,21 @@ mod tests {
         let s = clock.stages();
         assert_eq!(s.iter().map(|s| (s.name, s.calls)).collect::<Vec<_>>(), vec![("a", 2), ("b", 1)]);
         assert!(s[1].seconds >= 0.002);
+        // Sleeping takes no CPU time; a busy stage takes about its wall-clock time on one core.
+        if process_cpu_seconds().is_some() {
+            assert!(s[1].cpu_seconds < 0.5 * s[1].seconds, "{:?}", s[1]);
+            let spin = timed(&mut Some(&mut clock), "spin", || {
+                let start = Instant::now();
+                let mut x = 0u64;
+                while start.elapsed().as_secs_f64() < 0.02 {
+                    x = std::hint::black_box(x.wrapping_add(1));
+                }
+                x
+            });
+            assert!(spin > 0);
+            let spun = &clock.stages()[2];
+            assert!(spun.cores_busy() > 0.5 && spun.cores_busy() < 1.5, "{spun:?}");
+        }
         let mut none: Option<&mut StageClock> = None;
         assert_eq!(timed(&mut none, "a", || 3), 3);
     }

@@ -21,6 +21,8 @@ pub struct StageTime {
     pub name: &'static str,
     /// Wall-clock seconds, all calls together.
     pub seconds: f64,
+    /// CPU seconds of the whole process over the same spans (`NaN` where unknown).
+    pub cpu_seconds: f64,
     /// How many times it ran (iterations for the update stages).
     pub calls: usize,
     /// Multiply-accumulates, all calls together (0 for memory-bound stages).
@@ -105,6 +107,7 @@ pub fn profile_forward(
         .map(|s| StageTime {
             name: s.name,
             seconds: s.seconds,
+            cpu_seconds: s.cpu_seconds,
             calls: s.calls,
             // The interpolations' count is per update iteration (several calls each).
             macs: if s.name == "interpolation" {

@@ -21,6 +21,7 @@ use anyhow::{Context, bail};
 use burn::tensor::{Distribution, Tensor};
 use clap::Args;
 use dgstereo_core::device::{Precision, host_kernels_apply};
+use dgstereo_core::timing::process_cpu_seconds;
 use dgstereo_core::{DepthPrior, DeviceChoice, InputPadder};
 use dgstereo_costvolume::CorrelationImplementation;
 use dgstereo_model::flops::StageMacs;
@@ -95,18 +96,6 @@ pub fn peak_memory_bytes() -> Option<u64> {
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
-}
-
-/// CPU seconds (user + system, all threads) this process has used, from `/proc/self/stat`
-/// (clock ticks of 1/100 s, Linux's `USER_HZ`). On a loaded machine this moves far less than the
-/// wall clock, so it is what to compare between two builds when other jobs share the cores.
-pub fn process_cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
-    let rest = &stat[stat.rfind(')')? + 2..];
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
-    Some(ticks / 100.0)
 }
 
 /// The processor's name from the first `model name` line of a `/proc/cpuinfo` text.
@@ -297,22 +286,29 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         let profile = profile_forward(&network, &net_config, pl, pr, pp.as_ref(), a.iters)?;
         let total = profile.total_seconds();
         println!();
-        println!("| stage | calls | time (s) | share of time | GFLOP/s | share of peak |");
-        println!("|---|---:|---:|---:|---:|---:|");
+        println!("| stage | calls | time (s) | share of time | cores busy | GFLOP/s | share of peak |");
+        println!("|---|---:|---:|---:|---:|---:|---:|");
         for s in &profile.stages {
             let (gf, peak) = match s.gflops() {
                 Some(g) => (format!("{g:.1}"), format!("{:.0} %", 100.0 * g / a.peak_gflops)),
                 None => ("-".into(), "-".into()),
             };
+            let busy = if s.cpu_seconds.is_finite() && s.seconds > 0.0 {
+                format!("{:.2}", s.cpu_seconds / s.seconds)
+            } else {
+                "-".into()
+            };
             println!(
-                "| {} | {} | {:.3} | {:.1} % | {gf} | {peak} |",
+                "| {} | {} | {:.3} | {:.1} % | {busy} | {gf} | {peak} |",
                 s.name,
                 s.calls,
                 s.seconds,
                 100.0 * s.seconds / total
             );
         }
-        println!("| total | | {total:.3} | 100 % | | |");
+        let cpu: f64 = profile.stages.iter().map(|s| s.cpu_seconds).sum();
+        let busy = if cpu.is_finite() && total > 0.0 { format!("{:.2}", cpu / total) } else { "-".into() };
+        println!("| total | | {total:.3} | 100 % | {busy} | | |");
     }
     match peak_memory_bytes() {
         Some(b) => println!("peak memory (VmHWM, whole process) {:.0} MiB", b as f64 / (1024.0 * 1024.0)),
@@ -352,7 +348,7 @@ mod tests {
 
     #[test]
     fn peak_memory_and_cpu_time_are_read_on_linux() {
-        if cfg!(target_os = "linux") {
+        if cfg!(all(target_os = "linux", target_env = "gnu")) {
             assert!(peak_memory_bytes().unwrap() > 0);
             let before = process_cpu_seconds().unwrap();
             let mut x = 0u64;
