@@ -93,7 +93,7 @@ pub fn process_cpu_seconds() -> Option<f64> {
         // and reads nothing else.
         #[allow(unsafe_code)]
         let status = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut now) };
-        (status == 0).then(|| now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9)
+        (status == 0).then_some(now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9)
     }
     #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
     {
