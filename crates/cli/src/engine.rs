@@ -391,6 +391,9 @@ impl Engine {
         } else {
             (left.clone(), right.clone())
         };
+        // The last pass's freed buffers go back to the system where this pass's size differs;
+        // a pass of the same size (the next frame, the mirrored pass) reuses them.
+        dgstereo_core::allocator::release_before_pass([l.height, l.width]);
         let corr = self.choose_corr(l.width, l.height);
         let (lt, rt) = (image_tensor(&l, &self.device), image_tensor(&r, &self.device));
         let prior_start = Instant::now();
@@ -407,9 +410,6 @@ impl Engine {
         let pred = self.model.predict(lt, rt, prior.as_ref(), self.iters, false, Some(corr))?;
         let small = disparity_map(pred.last());
         drop(pred);
-        // The pass's freed buffers back to the system before the next pair (or the mirrored
-        // pass), whose full-resolution tensors would otherwise add to them.
-        dgstereo_core::allocator::release_freed_memory();
         let info = RunInfo { network_size: (l.width, l.height), corr, rejected: None, prior_seconds };
         Ok((disparity_to_size(&small, w, h)?, info))
     }

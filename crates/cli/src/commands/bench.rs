@@ -202,6 +202,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let mut non_finite = 0;
     let mut predict = || -> anyhow::Result<(f64, f64)> {
         let cpu = process_cpu_seconds();
+        // As `infer` does before each pair (outside the timed span): every run has one size, so
+        // the passes reuse each other's freed buffers.
+        dgstereo_core::allocator::release_before_pass([h, w]);
         let start = Instant::now();
         let computed = match &provider {
             Some(p) => {
@@ -222,9 +225,6 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         let data = out.last().into_data(); // waits for asynchronous backends
         let wall = start.elapsed().as_secs_f64();
         let cpu = process_cpu_seconds().zip(cpu).map_or(f64::NAN, |(b, a)| b - a);
-        // Between passes, as `infer` does between pairs (outside the timed span; the next pass
-        // faults its pages in again inside its own).
-        dgstereo_core::allocator::release_freed_memory();
         // Outside both timed spans: a narrow precision that overflowed times a meaningless map.
         non_finite = data.convert::<f32>().iter::<f32>().filter(|v| !v.is_finite()).count();
         Ok((wall, cpu))
