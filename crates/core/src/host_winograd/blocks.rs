@@ -36,6 +36,9 @@ use super::*;
 
 /// Tiles per block: the vectors of the transforms and the kernel's columns.
 const LANES: usize = 32;
+/// Lanes a row of a block's transform buffers holds: [`LANES`] and room for one more vector of
+/// the widest set (16 lanes), so a vector may be stored at any lane (see [`gather_row`]).
+const ROW: usize = LANES + 16;
 /// Output channels per kernel step.
 const ROWS: usize = 8;
 /// Positions of the transformed tile, α² of F(4x4).
@@ -258,7 +261,7 @@ impl Band<'_> {
     fn transform_inputs<S: Simd>(&self, image: &[f32], start: usize, lanes: usize, v: &mut [f32]) {
         let g = self.g;
         // d[j][lane] of one input row, then its row transform rows[i][jj][lane].
-        let mut d = [[0.0f32; LANES]; 6];
+        let mut d = [[0.0f32; ROW]; 6];
         let mut rows = [[[0.0f32; LANES]; 6]; 6];
         for ci in 0..g.c {
             let channel = &image[ci * g.h * g.w..][..g.h * g.w];
@@ -276,7 +279,7 @@ impl Band<'_> {
                     }
                 }
                 for l in (0..LANES).step_by(S::WIDTH) {
-                    let t = input_1d(load6::<S>(&d.as_flattened()[l..], LANES));
+                    let t = input_1d(load6::<S>(&d.as_flattened()[l..], ROW));
                     for (jj, t) in t.into_iter().enumerate() {
                         t.store(&mut row_t[jj][l..]);
                     }
@@ -353,7 +356,7 @@ impl Band<'_> {
     fn transform_outputs<S: Simd>(&self, mm: &[f32], start: usize, lanes: usize, planes: &mut [&mut [f32]]) {
         let g = self.g;
         let relu = self.epilogue == Epilogue::Relu;
-        let mut y = [[[0.0f32; LANES]; 4]; 4];
+        let mut y = [[[0.0f32; ROW]; 4]; 4];
         for (oc, plane) in planes.iter_mut().enumerate() {
             let m = &mm[oc * K2 * LANES..][..K2 * LANES];
             let add = S::splat(self.bias.map_or(0.0, |b| b[oc]));
@@ -391,62 +394,63 @@ impl Band<'_> {
 }
 
 /// Fills `d[j][lane0 + n] = line[4·(tx0 + n) + j - pw]` (zero outside the row) for the `count`
-/// tiles of one segment: whole vectors of lanes by [`Simd::deinterleave4`], from the row where
-/// the vector's values lie inside it, else from a zero-padded copy; single lanes where a vector
-/// would cross the segment's ends.
+/// tiles of one segment, a whole vector of lanes at a time by [`Simd::deinterleave4`]: from the
+/// row where the vector's values lie inside it, else from a zero-padded copy of the part that
+/// does. A segment's last vector may reach past its `count` tiles: the lanes it fills there
+/// belong to the block's next segments, which are filled after it, or lie past the block's
+/// lanes (`d`'s rows have room for a vector at any lane, [`ROW`]).
+///
+/// Before, a vector ran only where it fitted the segment and single lanes did the rest: at the
+/// 1/4 grid of 384x448 (28 tiles a row) 12 of every 28 lanes. Whole vectors, one image, min ms
+/// of 15, two processes alternating in four rounds: 64 -> 64 at 96x112 3.49-3.57 -> 3.12, 96 ->
+/// 96 6.58 -> 5.89-6.00, 128 -> 128 9.92-9.98 -> 9.13-9.37, 128 -> 126 10.20-10.37 -> 9.56-10.04,
+/// 64 -> 64 at 192x224 11.30-11.75 -> 10.92-11.07; KITTI's 1/4 grid (78 tiles a row) unchanged.
 #[inline(always)]
-fn gather_row<S: Simd>(line: &[f32], pw: usize, tx0: usize, count: usize, lane0: usize, d: &mut [[f32; LANES]; 6]) {
+fn gather_row<S: Simd>(line: &[f32], pw: usize, tx0: usize, count: usize, lane0: usize, d: &mut [[f32; ROW]; 6]) {
     let w = S::WIDTH;
-    let mut stage = [0.0f32; LANES * 4 + 4];
-    let mut n = 0;
-    while n < count {
+    // Values x0 - pw .. x0 - pw + 4w + 4 of the row (the last two unused).
+    let span = 4 * w + 4;
+    let mut stage = [0.0f32; ROW * 4 + 4];
+    for n in (0..count).step_by(w) {
         let (lane, x0) = (lane0 + n, 4 * (tx0 + n));
-        if lane % w == 0 && n + w <= count {
-            // Values x0 - pw .. x0 - pw + 4w + 4 of the row (the last two unused).
-            let span = 4 * w + 4;
-            let src = if x0 >= pw && x0 - pw + span <= line.len() {
-                &line[x0 - pw..][..span]
-            } else {
-                let stage = &mut stage[..span];
-                for (k, value) in stage.iter_mut().enumerate() {
-                    *value = padded_value(line, pw, x0 + k);
-                }
-                &*stage
-            };
-            let [p0, p1, p2, p3] = S::deinterleave4(src);
-            let [q0, q1, _, _] = S::deinterleave4(&src[4..]);
-            for (j, phase) in [p0, p1, p2, p3, q0, q1].into_iter().enumerate() {
-                phase.store(&mut d[j][lane..]);
-            }
-            n += w;
+        let src = if x0 >= pw && x0 - pw + span <= line.len() {
+            &line[x0 - pw..][..span]
         } else {
-            for (j, dj) in d.iter_mut().enumerate() {
-                dj[lane] = padded_value(line, pw, x0 + j);
+            let stage = &mut stage[..span];
+            stage.fill(0.0);
+            // Row positions start - pw .. end - pw lie inside the span and the row.
+            let (start, end) = (x0.max(pw), (x0 + span).min(pw + line.len()));
+            if start < end {
+                stage[start - x0..end - x0].copy_from_slice(&line[start - pw..end - pw]);
             }
-            n += 1;
+            &*stage
+        };
+        let [p0, p1, p2, p3] = S::deinterleave4(src);
+        let [q0, q1, _, _] = S::deinterleave4(&src[4..]);
+        for (j, phase) in [p0, p1, p2, p3, q0, q1].into_iter().enumerate() {
+            phase.store(&mut d[j][lane..]);
         }
     }
 }
 
 /// Writes `line[4·(tx0 + n) + s] = y[s][lane0 + n]` for the `count` tiles of one segment,
-/// clipped to the row: whole vectors of lanes by [`Simd::interleave4`] where they fit, else lane
-/// by lane.
+/// clipped to the row, a whole vector of lanes at a time by [`Simd::interleave4`]: straight into
+/// the row where the vector's values fit it, else through a copy. A vector that reaches past the
+/// segment's tiles inside the row writes tiles of the same row that a later block writes again
+/// (a segment ends at the row's end or at the block's).
 #[inline(always)]
-fn scatter_row<S: Simd>(y: &[[f32; LANES]; 4], tx0: usize, count: usize, lane0: usize, line: &mut [f32]) {
+fn scatter_row<S: Simd>(y: &[[f32; ROW]; 4], tx0: usize, count: usize, lane0: usize, line: &mut [f32]) {
     let w = S::WIDTH;
-    let mut n = 0;
-    while n < count {
+    let mut stage = [0.0f32; ROW * 4];
+    for n in (0..count).step_by(w) {
         let (lane, x0) = (lane0 + n, 4 * (tx0 + n));
-        if lane % w == 0 && n + w <= count && x0 + 4 * w <= line.len() {
-            let phases =
-                [S::load(&y[0][lane..]), S::load(&y[1][lane..]), S::load(&y[2][lane..]), S::load(&y[3][lane..])];
+        let phases = [S::load(&y[0][lane..]), S::load(&y[1][lane..]), S::load(&y[2][lane..]), S::load(&y[3][lane..])];
+        if x0 + 4 * w <= line.len() {
             S::interleave4(phases, &mut line[x0..]);
-            n += w;
         } else {
-            for s in 0..4.min(line.len() - x0) {
-                line[x0 + s] = y[s][lane];
-            }
-            n += 1;
+            let len = (4 * (count - n)).min(line.len() - x0);
+            S::interleave4(phases, &mut stage);
+            line[x0..x0 + len].copy_from_slice(&stage[..len]);
         }
     }
 }
