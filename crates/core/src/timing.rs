@@ -17,19 +17,11 @@ pub struct StageSeconds {
     /// Wall-clock seconds, all calls together.
     pub seconds: f64,
     /// CPU seconds of the whole process (all threads) over the same spans; `NaN` where the
-    /// system does not report them ([`process_cpu_seconds`]).
+    /// system does not report them ([`process_cpu_seconds`]). Over `seconds`: the cores busy
+    /// on average while the stage ran.
     pub cpu_seconds: f64,
     /// How many times it ran.
     pub calls: usize,
-}
-
-impl StageSeconds {
-    /// Cores busy on average while the stage ran: CPU over wall-clock seconds (`NaN` where
-    /// either is unknown or zero). A stage below the machine's core count left cores idle
-    /// (serial work, or waiting on each other).
-    pub fn cores_busy(&self) -> f64 {
-        if self.seconds > 0.0 { self.cpu_seconds / self.seconds } else { f64::NAN }
-    }
 }
 
 /// Stages in order of their first call, with their accumulated times.
@@ -124,9 +116,10 @@ mod tests {
         let s = clock.stages();
         assert_eq!(s.iter().map(|s| (s.name, s.calls)).collect::<Vec<_>>(), vec![("a", 2), ("b", 1)]);
         assert!(s[1].seconds >= 0.002);
-        // Sleeping takes no CPU time; a busy stage takes about its wall-clock time on one core.
+        // A stage that spins one thread takes CPU time: at least a good part of its wall-clock
+        // time (the clock counts the whole process, so other tests' threads may add to it; no
+        // upper bound holds).
         if process_cpu_seconds().is_some() {
-            assert!(s[1].cpu_seconds < 0.5 * s[1].seconds, "{:?}", s[1]);
             let spin = timed(&mut Some(&mut clock), "spin", || {
                 let start = Instant::now();
                 let mut x = 0u64;
@@ -137,7 +130,7 @@ mod tests {
             });
             assert!(spin > 0);
             let spun = &clock.stages()[2];
-            assert!(spun.cores_busy() > 0.5 && spun.cores_busy() < 1.5, "{spun:?}");
+            assert!(spun.cpu_seconds.is_finite() && spun.cpu_seconds >= 0.3 * spun.seconds, "{spun:?}");
         }
         let mut none: Option<&mut StageClock> = None;
         assert_eq!(timed(&mut none, "a", || 3), 3);

@@ -34,6 +34,12 @@ impl StageTime {
     pub fn gflops(&self) -> Option<f64> {
         (self.macs > 0 && self.seconds > 0.0).then(|| 2.0 * self.macs as f64 / self.seconds / 1e9)
     }
+
+    /// Cores busy on average while the stage ran (CPU over wall-clock seconds): below the
+    /// machine's core count, cores sat idle. `None` where the CPU time is unknown.
+    pub fn cores_busy(&self) -> Option<f64> {
+        (self.cpu_seconds.is_finite() && self.seconds > 0.0).then(|| self.cpu_seconds / self.seconds)
+    }
 }
 
 /// The stages of one profiled pass, in execution order, and its final low-resolution flow.

@@ -293,11 +293,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
                 Some(g) => (format!("{g:.1}"), format!("{:.0} %", 100.0 * g / a.peak_gflops)),
                 None => ("-".into(), "-".into()),
             };
-            let busy = if s.cpu_seconds.is_finite() && s.seconds > 0.0 {
-                format!("{:.2}", s.cpu_seconds / s.seconds)
-            } else {
-                "-".into()
-            };
+            let busy = s.cores_busy().map_or("-".into(), |b| format!("{b:.2}"));
             println!(
                 "| {} | {} | {:.3} | {:.1} % | {busy} | {gf} | {peak} |",
                 s.name,
