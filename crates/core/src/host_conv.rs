@@ -372,10 +372,10 @@ pub(crate) fn conv_output_size(
 /// `out` (images of `o` output planes of `plane` values each) cut into parallel jobs of one image
 /// and one band of `band_len` values of every plane: job `image·bands + band` holds that band's
 /// slice of each of the image's planes, in plane order (the last band may be shorter).
-pub(crate) fn band_jobs(out: &mut [f32], o: usize, plane: usize, band_len: usize) -> Vec<Vec<&mut [f32]>> {
+pub(crate) fn band_jobs<T>(out: &mut [T], o: usize, plane: usize, band_len: usize) -> Vec<Vec<&mut [T]>> {
     let bands = plane.div_ceil(band_len);
     let images = out.len() / (o * plane).max(1);
-    let mut jobs: Vec<Vec<&mut [f32]>> = (0..images * bands).map(|_| Vec::with_capacity(o)).collect();
+    let mut jobs: Vec<Vec<&mut [T]>> = (0..images * bands).map(|_| Vec::with_capacity(o)).collect();
     for (i, dst) in out.chunks_mut(plane).enumerate() {
         for (band, rows) in dst.chunks_mut(band_len).enumerate() {
             jobs[(i / o) * bands + band].push(rows);

@@ -58,6 +58,7 @@ mod simd;
 mod split;
 mod weight_cache;
 
+use std::mem::MaybeUninit;
 use std::ops::Range;
 use std::sync::OnceLock;
 
@@ -65,7 +66,7 @@ use burn::tensor::ops::ConvOptions;
 use rayon::prelude::*;
 
 use crate::host_conv::{Epilogue, band_jobs, conv_output_size, matmul_strided};
-use crate::tensor::reuse_buffer;
+use crate::tensor::{reuse_buffer, unwritten, written};
 pub(crate) use split::{Pending, first as split_first, second as split_second};
 pub use weight_cache::KeptWeights;
 use weight_cache::transformed_weights;
@@ -294,13 +295,14 @@ impl Plan {
         x: &[f32],
         o: usize,
         extras: &mut [E],
-        body: impl Fn(usize, &[f32], Vec<&mut [f32]>, &mut E, &mut [Vec<f32>; 3]) + Sync,
+        body: impl Fn(usize, &[f32], Vec<&mut [MaybeUninit<f32>]>, &mut E, &mut [Vec<f32>; 3]) + Sync,
     ) -> (Vec<f32>, [usize; 4]) {
         let (c, h, w) = (self.tiling.c, self.tiling.h, self.tiling.w);
         assert_eq!(x.len(), self.n * c * h * w, "winograd_conv: the input is not [{}, {c}, {h}, {w}]", self.n);
         assert_eq!(extras.len(), self.jobs());
         let plane = self.out_h * self.tiling.out_w;
-        let mut out = crate::tensor::zeros_parallel(self.n * o * plane);
+        // Not zeroed first: the output transforms write every value (below).
+        let mut out = unwritten(self.n * o * plane);
         // One job per (image, band) with its rows of every output plane: disjoint slices.
         let jobs = band_jobs(&mut out, o, plane, self.tiling.m * self.band_rows * self.tiling.out_w);
         debug_assert_eq!(jobs.len(), self.jobs());
@@ -308,6 +310,12 @@ impl Plan {
             let image = &x[(job / self.bands) * c * h * w..][..c * h * w];
             BUFFERS.with_borrow_mut(|buffers| body(job, image, planes, extra, buffers));
         });
+        // SAFETY: the jobs' band rows of every plane cover the whole output, and every body ends
+        // with an output transform that writes each value of its band rows: `transform_outputs`
+        // whole output rows, `blocks`' `scatter_row` every tile of every tile row, clipped to
+        // the plane (tested on odd sizes, paddings and batches against burn's convolution).
+        #[allow(unsafe_code)]
+        let out = unsafe { written(out) };
         (out, [self.n, o, self.out_h, self.tiling.out_w])
     }
 }
@@ -488,7 +496,7 @@ pub(crate) fn split_row<const M: usize>(line: &[f32], pw: usize, mut dst: [&mut 
 fn transform_outputs(
     variant: &Variant,
     mm: &[f32],
-    planes: Vec<&mut [f32]>,
+    planes: Vec<&mut [MaybeUninit<f32>]>,
     bias: Option<&[f32]>,
     epilogue: Epilogue,
     g: Tiling,
@@ -522,22 +530,23 @@ fn transform_outputs(
     }
 }
 
-/// Writes one output row from its `M` column streams (`row[M·tx + s] = streams[s][tx] + add`,
-/// then ReLU when `RELU`), in row order: with `M` known at compile time the stores are
-/// contiguous, where `M` strided scalar passes over the row were the output transform's hot spot.
+/// Writes one output row, every value of it, from its `M` column streams (`row[M·tx + s] =
+/// streams[s][tx] + add`, then ReLU when `RELU`), in row order: with `M` known at compile time
+/// the stores are contiguous, where `M` strided scalar passes over the row were the output
+/// transform's hot spot.
 #[inline(always)]
-fn interleave<const M: usize, const RELU: bool>(row: &mut [f32], streams: [&[f32]; M], add: f32) {
+fn interleave<const M: usize, const RELU: bool>(row: &mut [MaybeUninit<f32>], streams: [&[f32]; M], add: f32) {
     let finish = |v: f32| if RELU { (v + add).max(0.0) } else { v + add };
     let whole = row.len() / M;
     let streams = streams.map(|s| &s[..row.len().div_ceil(M)]);
     let (body, tail) = row.split_at_mut(whole * M);
     for (tx, out) in body.chunks_exact_mut(M).enumerate() {
         for s in 0..M {
-            out[s] = finish(streams[s][tx]);
+            out[s].write(finish(streams[s][tx]));
         }
     }
     for (s, d) in tail.iter_mut().enumerate() {
-        *d = finish(streams[s][whole]);
+        d.write(finish(streams[s][whole]));
     }
 }
 

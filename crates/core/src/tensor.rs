@@ -6,6 +6,7 @@
 //! shared buffer, then copies it again to raise its alignment), and those copies ran on one
 //! thread between the parallel kernels (8 % of a CPU forward pass's time).
 
+use std::mem::MaybeUninit;
 use std::ops::Deref;
 
 use burn::backend::flex::{Flex, FlexTensor};
@@ -61,6 +62,33 @@ pub fn zeros_parallel(len: usize) -> Vec<f32> {
     let mut v = Vec::with_capacity(len);
     v.par_extend(rayon::iter::repeat_n(0.0f32, len));
     v
+}
+
+/// A buffer of `len` values not yet written, for an output that a parallel pass writes whole:
+/// no zeros first. Zero-filling every host output before the kernel overwrote it was about 4 %
+/// of a CPU pass's samples, mostly the Winograd convolutions' outputs. [`written`] turns it
+/// into values once every element is written.
+///
+/// In tests and debug builds the buffer starts as NaN, so a value the pass failed to write shows
+/// in the output (as stale memory from a buffer of the same size, freed a moment ago, might not).
+pub(crate) fn unwritten(len: usize) -> Box<[MaybeUninit<f32>]> {
+    let mut buffer = Box::new_uninit_slice(len);
+    if cfg!(any(test, debug_assertions)) {
+        buffer.iter_mut().for_each(|v| {
+            v.write(f32::NAN);
+        });
+    }
+    buffer
+}
+
+/// The values of a buffer from [`unwritten`], every element of which has been written.
+///
+/// # Safety
+/// Every element of `buffer` must have been written (`MaybeUninit::write` or a copy into it).
+#[allow(unsafe_code)]
+pub(crate) unsafe fn written(buffer: Box<[MaybeUninit<f32>]>) -> Vec<f32> {
+    // SAFETY: the caller guarantees that every element is initialised.
+    unsafe { buffer.assume_init() }.into_vec()
 }
 
 /// The first `len` elements of a reused scratch buffer, grown (with zeros) only when shorter.

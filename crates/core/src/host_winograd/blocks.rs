@@ -29,6 +29,7 @@
 // Elsewhere than on x86-64 only the tests run the blocks (with the portable vectors).
 #![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 
+use std::mem::MaybeUninit;
 use std::sync::OnceLock;
 
 use super::simd::{self, Simd};
@@ -135,7 +136,7 @@ impl Isa {
     }
 
     #[allow(unsafe_code)]
-    fn run(self, band: &Band, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f32], mm: &mut [f32]) {
+    fn run(self, band: &Band, image: &[f32], planes: &mut [&mut [MaybeUninit<f32>]], v: &mut [f32], mm: &mut [f32]) {
         match self {
             // SAFETY: `detect` returns `Avx512` only where the processor has AVX-512 and FMA.
             #[cfg(target_arch = "x86_64")]
@@ -148,7 +149,7 @@ impl Isa {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,fma")]
-fn band_avx512(band: &Band, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f32], mm: &mut [f32]) {
+fn band_avx512(band: &Band, image: &[f32], planes: &mut [&mut [MaybeUninit<f32>]], v: &mut [f32], mm: &mut [f32]) {
     band.run::<simd::Avx512>(image, planes, v, mm)
 }
 
@@ -226,7 +227,7 @@ impl Band<'_> {
     /// Runs every block of the band: `v` holds a block's transformed inputs (`[36][C][LANES]`),
     /// `mm` its products (`[O][36][LANES]`).
     #[inline(always)]
-    fn run<S: Simd>(&self, image: &[f32], planes: &mut [&mut [f32]], v: &mut [f32], mm: &mut [f32]) {
+    fn run<S: Simd>(&self, image: &[f32], planes: &mut [&mut [MaybeUninit<f32>]], v: &mut [f32], mm: &mut [f32]) {
         let total = self.tile_rows.len() * self.g.tiles_w;
         for start in (0..total).step_by(LANES) {
             let lanes = (total - start).min(LANES);
@@ -353,7 +354,13 @@ impl Band<'_> {
     /// `Y = Aᵀ M A` of the block's first `lanes` tiles, plus the bias and the epilogue, into the
     /// band's output rows.
     #[inline(always)]
-    fn transform_outputs<S: Simd>(&self, mm: &[f32], start: usize, lanes: usize, planes: &mut [&mut [f32]]) {
+    fn transform_outputs<S: Simd>(
+        &self,
+        mm: &[f32],
+        start: usize,
+        lanes: usize,
+        planes: &mut [&mut [MaybeUninit<f32>]],
+    ) {
         let g = self.g;
         let relu = self.epilogue == Epilogue::Relu;
         let mut y = [[[0.0f32; ROW]; 4]; 4];
@@ -439,9 +446,9 @@ fn gather_row<S: Simd>(line: &[f32], pw: usize, tx0: usize, count: usize, lane0:
 /// segment's tiles inside the row writes tiles of the same row that a later block writes again
 /// (a segment ends at the row's end or at the block's).
 #[inline(always)]
-fn scatter_row<S: Simd>(y: &[[f32; ROW]; 4], tx0: usize, count: usize, lane0: usize, line: &mut [f32]) {
+fn scatter_row<S: Simd>(y: &[[f32; ROW]; 4], tx0: usize, count: usize, lane0: usize, line: &mut [MaybeUninit<f32>]) {
     let w = S::WIDTH;
-    let mut stage = [0.0f32; ROW * 4];
+    let mut stage = [MaybeUninit::new(0.0f32); ROW * 4];
     for n in (0..count).step_by(w) {
         let (lane, x0) = (lane0 + n, 4 * (tx0 + n));
         let phases = [S::load(&y[0][lane..]), S::load(&y[1][lane..]), S::load(&y[2][lane..]), S::load(&y[3][lane..])];

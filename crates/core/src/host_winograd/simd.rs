@@ -6,6 +6,8 @@
 // Elsewhere than on x86-64 only the tests use these vectors.
 #![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 
+use std::mem::MaybeUninit;
+
 /// A vector of [`Simd::WIDTH`] `f32` lanes.
 pub(super) trait Simd: Copy {
     /// Lanes per vector.
@@ -26,8 +28,9 @@ pub(super) trait Simd: Copy {
     fn max(self, b: Self) -> Self;
     /// The four phases of `4·WIDTH` values: `phases[j]` lane `l` is `src[4·l + j]`.
     fn deinterleave4(src: &[f32]) -> [Self; 4];
-    /// The inverse of [`Simd::deinterleave4`]: `dst[4·l + j] = phases[j]` lane `l`.
-    fn interleave4(phases: [Self; 4], dst: &mut [f32]);
+    /// The inverse of [`Simd::deinterleave4`]: writes `dst[4·l + j] = phases[j]` lane `l`, all
+    /// `4·WIDTH` values (into an output not yet written, [`crate::tensor::unwritten`]).
+    fn interleave4(phases: [Self; 4], dst: &mut [MaybeUninit<f32>]);
 }
 
 /// Four lanes of plain Rust, for the tests of the block logic on any processor.
@@ -72,11 +75,11 @@ impl Simd for Portable {
         std::array::from_fn(|j| Self(std::array::from_fn(|l| src[4 * l + j])))
     }
     #[inline(always)]
-    fn interleave4(phases: [Self; 4], dst: &mut [f32]) {
+    fn interleave4(phases: [Self; 4], dst: &mut [MaybeUninit<f32>]) {
         let dst = &mut dst[..16];
         for l in 0..4 {
             for (j, phase) in phases.iter().enumerate() {
-                dst[4 * l + j] = phase.0[l];
+                dst[4 * l + j].write(phase.0[l]);
             }
         }
     }
@@ -88,6 +91,7 @@ pub(super) use x86::Avx512;
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     use std::arch::x86_64::*;
+    use std::mem::MaybeUninit;
 
     use super::Simd;
 
@@ -149,7 +153,7 @@ mod x86 {
             }
         }
         #[inline(always)]
-        fn interleave4([p0, p1, p2, p3]: [Self; 4], dst: &mut [f32]) {
+        fn interleave4([p0, p1, p2, p3]: [Self; 4], dst: &mut [MaybeUninit<f32>]) {
             let (low, high) = (index(&LOW), index(&HIGH));
             let out = unsafe {
                 let (even_ab, even_cd) =
@@ -164,10 +168,11 @@ mod x86 {
                 ]
             };
             let dst = &mut dst[..64];
-            Self(out[0]).store(dst);
-            Self(out[1]).store(&mut dst[16..]);
-            Self(out[2]).store(&mut dst[32..]);
-            Self(out[3]).store(&mut dst[48..]);
+            // Stores into memory not yet written are fine through a raw pointer (`MaybeUninit`
+            // has the layout of `f32`); the slice is 64 long.
+            for (q, value) in out.into_iter().enumerate() {
+                unsafe { _mm512_storeu_ps(dst[16 * q..].as_mut_ptr().cast::<f32>(), value) }
+            }
         }
     }
 
@@ -203,8 +208,10 @@ mod tests {
         for (j, &phase) in phases.iter().enumerate() {
             assert_eq!(lanes(phase), (0..w).map(|l| src[4 * l + j]).collect::<Vec<_>>(), "phase {j}, width {w}");
         }
-        let mut back = vec![0.0; 4 * w];
+        let mut back = vec![MaybeUninit::new(f32::NAN); 4 * w];
         S::interleave4(phases, &mut back);
+        // SAFETY: every element was initialised (with NaN, then by `interleave4`).
+        let back: Vec<f32> = back.into_iter().map(|v| unsafe { v.assume_init() }).collect();
         assert_eq!(back, src, "width {w}");
 
         let (a, b) = (S::load(&src), S::load(&src[w..]));
