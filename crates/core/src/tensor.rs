@@ -91,6 +91,29 @@ pub(crate) unsafe fn written(buffer: Box<[MaybeUninit<f32>]>) -> Vec<f32> {
     unsafe { buffer.assume_init() }.into_vec()
 }
 
+/// `planes` planes of `plane` values each, plane `i` the first `plane` values of `values(i)`,
+/// computed in parallel and written once: no zeros first (see [`unwritten`]).
+///
+/// # Panics
+/// When `values(i)` yields fewer than `plane` values.
+pub fn planes_from<I: Iterator<Item = f32>>(
+    planes: usize,
+    plane: usize,
+    values: impl Fn(usize) -> I + Sync,
+) -> Vec<f32> {
+    let mut out = unwritten(planes * plane);
+    out.par_chunks_mut(plane.max(1)).enumerate().for_each(|(i, dst)| {
+        let written = dst.iter_mut().zip(values(i)).map(|(d, v)| d.write(v)).count();
+        assert_eq!(written, dst.len(), "planes_from: plane {i} has {written} of {} values", dst.len());
+    });
+    // SAFETY: every plane's values were all written (asserted above; a failed assertion panics
+    // out of the parallel loop before this line).
+    #[allow(unsafe_code)]
+    unsafe {
+        written(out)
+    }
+}
+
 /// The first `len` elements of a reused scratch buffer, grown (with zeros) only when shorter.
 /// Resizing a thread's buffer down for a small convolution and up again for the next large one
 /// wrote zeros over the regrown part every time (1-1.5 % of a CPU forward pass); the callers
@@ -144,6 +167,17 @@ mod tests {
     use burn::tensor::Distribution;
 
     use super::*;
+
+    /// Every plane gets its values in order; a plane short of values is refused (a panic, not
+    /// a buffer with unwritten values).
+    #[test]
+    fn planes_from_writes_every_plane_and_refuses_short_ones() {
+        let out = planes_from(3, 4, |i| (0..4).map(move |j| (10 * i + j) as f32));
+        assert_eq!(out, [0., 1., 2., 3., 10., 11., 12., 13., 20., 21., 22., 23.]);
+        assert!(planes_from(0, 4, |_| std::iter::empty()).is_empty());
+        let short = std::panic::catch_unwind(|| planes_from(2, 4, |i| (0..4 - i).map(|j| j as f32)));
+        assert!(short.is_err());
+    }
 
     #[test]
     fn host_values_borrow_a_shared_flex_buffer_and_copy_otherwise() {

@@ -15,7 +15,7 @@
 
 use burn::tensor::{Tensor, TensorData};
 use dgstereo_core::host_conv::{conv_options, conv2d_host_shared_first, conv2d_host_shared_second, conv2d_host_slices};
-use dgstereo_core::tensor::{host_values, zeros_parallel};
+use dgstereo_core::tensor::{host_values, planes_from, zeros_parallel};
 use rayon::prelude::*;
 
 use super::gru::{ConvGru, GateContext};
@@ -109,14 +109,11 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, inputs: &[Ten
 
     // Pass one: z (kept) and r·h: into its own buffer where the candidate's x channels are
     // pending, else over h's planes of `hx` (the x planes stay).
-    let mut z = zeros_parallel(n * c * plane);
-    z.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
+    let z = planes_from(n * c, plane, |i| {
         let (b, ch) = (i / c, i % c);
         let g = &gates[(b * 2 * c + ch) * plane..][..plane];
         let k = &zr_ctx[(b * 2 * c + ch) * plane..][..plane];
-        for ((d, g), k) in dst.iter_mut().zip(g).zip(k) {
-            *d = sigmoid(g + k);
-        }
+        g.iter().zip(k).map(|(g, k)| sigmoid(g + k))
     });
     // The reset gate's pre-activation and context of h's channel plane `i` (image-major).
     let reset = |i: usize| {
@@ -125,12 +122,9 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, inputs: &[Ten
     };
     let q = match pending {
         Some(pending) => {
-            let mut rh = zeros_parallel(n * c * plane);
-            rh.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
+            let rh = planes_from(n * c, plane, |i| {
                 let ((g, k), h) = (reset(i), &hv[i * plane..][..plane]);
-                for (((d, h), g), k) in dst.iter_mut().zip(h).zip(g).zip(k) {
-                    *d = h * sigmoid(g + k);
-                }
+                h.iter().zip(g).zip(k).map(|((h, g), k)| h * sigmoid(g + k))
             });
             conv2d_host_shared_second(pending, &rh, [n, c, hh, ww], q_bias.as_deref()).0
         }
@@ -147,14 +141,10 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, inputs: &[Ten
     let q_ctx = host_values(ctx.q.clone());
 
     // Pass two: the new state.
-    let mut out = zeros_parallel(n * c * plane);
-    out.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
+    let out = planes_from(n * c, plane, |i| {
         let s = i * plane;
         let (z, h, q, k) = (&z[s..s + plane], &hv[s..s + plane], &q[s..s + plane], &q_ctx[s..s + plane]);
-        for (j, d) in dst.iter_mut().enumerate() {
-            let cand = tanh_fast(q[j] + k[j]);
-            *d = (1.0 - z[j]) * h[j] + z[j] * cand;
-        }
+        z.iter().zip(h).zip(q).zip(k).map(|(((z, h), q), k)| (1.0 - z) * h + z * tanh_fast(q + k))
     });
     Some(Tensor::from_data(TensorData::new(out, [n, c, hh, ww]), &device))
 }
