@@ -464,8 +464,9 @@ mod tests {
     }
 
     /// The epilogue sees the biased product as `[N, O, H·W]`, with the bias reshaped before the
-    /// product or added after it (no epilogue, or the route off), on every way of building the product: the gathered
-    /// columns, the windows, a 1x1 on the input as it lies and the few-outputs product.
+    /// product or added after it (no epilogue, or the route off), on every way of building the
+    /// product: the gathered columns, the windows, a 1x1 on the input as it lies and the
+    /// few-outputs product.
     #[test]
     fn the_epilogue_follows_the_biased_product() {
         let device = Device::flex();

@@ -103,8 +103,8 @@ pub fn planes_from<I: Iterator<Item = f32>>(
 ) -> Vec<f32> {
     let mut out = unwritten(planes * plane);
     out.par_chunks_mut(plane.max(1)).enumerate().for_each(|(i, dst)| {
-        let written = dst.iter_mut().zip(values(i)).map(|(d, v)| d.write(v)).count();
-        assert_eq!(written, dst.len(), "planes_from: plane {i} has {written} of {} values", dst.len());
+        let count = dst.iter_mut().zip(values(i)).map(|(d, v)| d.write(v)).count();
+        assert_eq!(count, dst.len(), "planes_from: plane {i} has {count} of {} values", dst.len());
     });
     // SAFETY: every plane's values were all written (asserted above; a failed assertion panics
     // out of the parallel loop before this line).

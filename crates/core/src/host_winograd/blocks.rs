@@ -29,7 +29,6 @@
 // Elsewhere than on x86-64 only the tests run the blocks (with the portable vectors).
 #![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 
-use std::mem::MaybeUninit;
 use std::sync::OnceLock;
 
 use super::simd::{self, Simd};
