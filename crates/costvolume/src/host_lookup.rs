@@ -11,7 +11,7 @@
 
 use std::sync::Arc;
 
-use dgstereo_core::tensor::zeros_parallel;
+use dgstereo_core::tensor::{planes_from, zeros_parallel};
 use rayon::prelude::*;
 
 /// One pyramid level on the host: `rows` rows of `width` correlations.
@@ -82,16 +82,9 @@ pub fn lookup(levels: &[HostLevel], coords: &[f32], [n, h, w1]: [usize; 3], radi
 /// # Shapes
 /// - `by_pixel`: `[N, plane, channels]` row-major; output `[N, channels, plane]`
 pub(crate) fn pixels_to_planes(by_pixel: &[f32], n: usize, plane: usize, channels: usize) -> Vec<f32> {
-    let mut out = zeros_parallel(n * channels * plane);
-    if plane == 0 || channels == 0 {
-        return out;
-    }
-    out.par_chunks_mut(plane).enumerate().for_each(|(p, dst)| {
+    planes_from(n * channels, plane, |p| {
         let (b, c) = (p / channels, p % channels);
         let src = &by_pixel[b * plane * channels..(b + 1) * plane * channels];
-        for (j, d) in dst.iter_mut().enumerate() {
-            *d = src[j * channels + c];
-        }
-    });
-    out
+        (0..plane).map(move |j| src[j * channels + c])
+    })
 }
