@@ -262,8 +262,9 @@ impl Plan {
         // alternating both rules, 25 rounds, min (median) ms: GRU 1/8 pair of 384x448 31.9 (45.8)
         // -> 25.2 (39.1), GRU 1/16 8.5 (13.7) -> 7.4 (11.7), GRU 1/8 of KITTI 59.2 (84.4) -> 47.5
         // (73.8); the 1/4 grids and the encoders' layers within the noise.
-        let min_bands = rayon::current_num_threads().div_ceil(n.max(1));
-        let bands = tiles_h.div_ceil(by_size).max(min_bands).min(tiles_h);
+        let threads = rayon::current_num_threads();
+        let min_bands = threads.div_ceil(n.max(1));
+        let bands = balanced_bands(tiles_h.div_ceil(by_size).max(min_bands), tiles_h, n, threads);
         let band_rows = tiles_h.div_ceil(bands);
         let bands = tiles_h.div_ceil(band_rows);
         let tiling = Tiling { c, h, w, ph, pw, out_w, m, tiles_w };
@@ -318,6 +319,23 @@ impl Plan {
         let out = unsafe { written(out) };
         (out, [self.n, o, self.out_h, self.tiling.out_w])
     }
+}
+
+/// `bands` (at most `tiles_h`) raised so that the `n · bands` jobs split evenly over `threads`
+/// where the tile rows allow: 3 bands of one image on 2 threads leave one thread idle for a
+/// third of the convolution (the 1/4 grid of 320x736, 20 tile rows: 1.56 of 2 cores busy in
+/// the GRU 1/4, the motion encoder and the flow head).
+fn balanced_bands(bands: usize, tiles_h: usize, n: usize, threads: usize) -> usize {
+    let (n, threads) = (n.max(1), threads.max(1));
+    // Bands per image that make the job count a multiple of the thread count.
+    let step = threads / gcd(threads, n);
+    let balanced = bands.next_multiple_of(step);
+    if balanced <= tiles_h { balanced } else { bands.min(tiles_h) }
+}
+
+/// Greatest common divisor.
+fn gcd(a: usize, b: usize) -> usize {
+    if b == 0 { a } else { gcd(b, a % b) }
 }
 
 /// `dst = Σ coefs[q]·src(q)` over the nonzero coefficients (each `src(q)` at least as long as
@@ -650,5 +668,27 @@ mod tests {
         let [f2, f4] = case(1, [384, 128], [12, 14], [(1, 1), (1, 1)], true);
         println!("C=384, O=128, 12x14: max error F(2x2) {f2:e}, F(4x4) {f4:e} of the largest sum of |products|");
         assert!(f2 <= 1e-5 && f4 <= 4e-5, "{f2} {f4}");
+    }
+
+    /// The band count splits the jobs evenly over the threads where the tile rows allow.
+    #[test]
+    fn bands_split_evenly_over_the_threads() {
+        // One image on 2 threads: 3 bands become 4 (the 1/4 grid of 320x736, 20 tile rows).
+        assert_eq!(balanced_bands(3, 20, 1, 2), 4);
+        assert_eq!(balanced_bands(2, 24, 1, 2), 2);
+        // Two images: 3 bands give 6 jobs already.
+        assert_eq!(balanced_bands(3, 20, 2, 2), 3);
+        // Never more bands than tile rows.
+        assert_eq!(balanced_bands(3, 3, 1, 2), 3);
+        assert_eq!(balanced_bands(5, 4, 1, 2), 4);
+        // 4 threads, 2 images: bands in pairs.
+        assert_eq!(balanced_bands(3, 20, 2, 4), 4);
+        // Plan on the 320x736 1/4 grid (384 -> 128 at 80x184, F(4x4)): an even number of jobs
+        // on 2 threads, every tile row in one band.
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let plan = pool.install(|| Plan::new(&F4, [1, 384, 80, 184], [(1, 1), (1, 1)]));
+        assert_eq!(plan.jobs() % 2, 0, "{} jobs", plan.jobs());
+        let rows: usize = (0..plan.jobs()).map(|job| plan.tile_rows(job).len()).sum();
+        assert_eq!(rows, plan.tiles_h);
     }
 }
