@@ -92,7 +92,7 @@ pub(crate) unsafe fn written(buffer: Box<[MaybeUninit<f32>]>) -> Vec<f32> {
 }
 
 /// `planes` planes of `plane` values each, plane `i` the first `plane` values of `values(i)`,
-/// computed in parallel and written once: no zeros first (see [`unwritten`]).
+/// computed in parallel and written once: no zeros first (as with the crate's `unwritten` buffers).
 ///
 /// # Panics
 /// When `values(i)` yields fewer than `plane` values.

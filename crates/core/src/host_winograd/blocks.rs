@@ -12,9 +12,9 @@
 //! and the output transform (`O x 36 x LANES`) straight into the output rows. Every step is
 //! vectorised over the block's tiles.
 //!
-//! The kernel keeps 8 output channels by 32 tiles of sums in 16 vector registers and adds one
-//! input channel's products per step (two vector loads and eight broadcasts for sixteen fused
-//! multiply-adds). The transforms are the factored F(4x4) formulas ([`input_1d`],
+//! The kernel keeps 8 output channels by 48 tiles of sums in 24 vector registers and adds one
+//! input channel's products per step (three vector loads and eight broadcasts for 24 fused
+//! multiply-adds; 32 tiles in 16 registers until session 20, see [`LANES`]). The transforms are the factored F(4x4) formulas ([`input_1d`],
 //! [`output_1d`]); the tiles' input columns are split into their four phases, and the output
 //! tiles' columns merged back into rows, by vector shuffles ([`Simd::deinterleave4`]). The
 //! band body is compiled for AVX-512 and runs where the processor has it ([`Isa`]; elsewhere
@@ -34,8 +34,16 @@ use std::sync::OnceLock;
 use super::simd::{self, Simd};
 use super::*;
 
-/// Tiles per block: the vectors of the transforms and the kernel's columns.
-const LANES: usize = 32;
+/// Tiles per block: the vectors of the transforms and the kernel's columns. 48 (three
+/// AVX-512 vectors a kernel step) rather than 32 since session 20, on the AMD EPYC (Zen 4):
+/// min of 25, three rounds alternating, 32 -> 48, ms: 64->64 at 384x448 41.2-43.5 -> 39.0-40.4,
+/// 96->96 at 192x224 14.4-16.3 -> 13.4-13.6, 128->128 at 96x112 6.0-7.1 -> 6.0, 128->256 at
+/// 96x112 11.3-12.8 -> 10.9-11.4, at 96x312 29.7-31.0 -> 30.7-32.1 (the one shape it loses), 64->64
+/// at 96x112 1.86-1.93 -> 1.86-2.16. 64 tiles by 6 output channels (four vectors) lost
+/// everywhere (64->64 at 384x448 43.4-46.0 ms).
+const LANES: usize = 48;
+/// Vectors of tiles per kernel step (of the widest set, 16 lanes).
+const VECS: usize = 3;
 /// Lanes a row of a block's transform buffers holds: [`LANES`] and room for one more vector of
 /// the widest set (16 lanes), so a vector may be stored at any lane (see [`gather_row`]).
 const ROW: usize = LANES + 16;
@@ -323,7 +331,7 @@ impl Band<'_> {
         }
     }
 
-    /// `M_k = U_k V_k` for the 36 positions: `mm[o][k][lane]`, two vectors of lanes by
+    /// `M_k = U_k V_k` for the 36 positions: `mm[o][k][lane]`, [`VECS`] vectors of lanes by
     /// [`ROWS`] output channels of sums at a time.
     #[inline(always)]
     fn products<S: Simd>(&self, v: &[f32], mm: &mut [f32]) {
@@ -334,21 +342,23 @@ impl Band<'_> {
             let vk = &v[k * c * LANES..][..c * LANES].as_chunks::<LANES>().0[..c];
             for group in 0..groups {
                 let uk = &self.packed[(k * groups + group) * c * ROWS..][..c * ROWS].as_chunks::<ROWS>().0[..c];
-                for half in (0..LANES).step_by(2 * w) {
-                    let mut acc = [[S::splat(0.0); 2]; ROWS];
+                for half in (0..LANES).step_by(VECS * w) {
+                    let mut acc = [[S::splat(0.0); VECS]; ROWS];
                     for ci in 0..c {
                         let (u, vv) = (&uk[ci], &vk[ci]);
-                        let x = [S::load(&vv[half..]), S::load(&vv[half + w..])];
+                        let x = [S::load(&vv[half..]), S::load(&vv[half + w..]), S::load(&vv[half + 2 * w..])];
                         for r in 0..ROWS {
                             let b = S::splat(u[r]);
                             acc[r][0] = b.mul_add(x[0], acc[r][0]);
                             acc[r][1] = b.mul_add(x[1], acc[r][1]);
+                            acc[r][2] = b.mul_add(x[2], acc[r][2]);
                         }
                     }
                     for (r, sums) in acc.iter().enumerate() {
                         let dst = &mut mm[((group * ROWS + r) * K2 + k) * LANES + half..];
                         sums[0].store(dst);
                         sums[1].store(&mut dst[w..]);
+                        sums[2].store(&mut dst[2 * w..]);
                     }
                 }
             }
