@@ -12,16 +12,16 @@
 //! and the output transform (`O x 36 x LANES`) straight into the output rows. Every step is
 //! vectorised over the block's tiles.
 //!
-//! The kernel keeps 8 output channels by 48 tiles of sums in 24 vector registers and adds one
-//! input channel's products per step (three vector loads and eight broadcasts for 24 fused
-//! multiply-adds; 32 tiles in 16 registers until session 20, see [`LANES`]). The transforms are the factored F(4x4) formulas ([`input_1d`],
-//! [`output_1d`]); the tiles' input columns are split into their four phases, and the output
-//! tiles' columns merged back into rows, by vector shuffles ([`Simd::deinterleave4`]). The
-//! band body is compiled for AVX-512 and runs where the processor has it ([`Isa`]; elsewhere
-//! the band path runs); the vectors are `std::arch` intrinsics behind the small [`Simd`]
-//! trait. What it took, measured on a 64-channel layer: the same loops over fixed-size arrays
-//! left to the autovectoriser ran about 10x slower (sums kept in memory, scalar fused
-//! multiply-adds); a closure or an array `map` inside the body is compiled without the body's
+//! The kernel keeps 8 output channels by 48 tiles of sums in 24 vector registers and adds one input
+//! channel's products per step (three vector loads and eight broadcasts for 24 fused multiply-adds;
+//! 32 tiles in 16 registers until session 20, see [`LANES`]). The transforms are the factored
+//! F(4x4) formulas ([`input_1d`], [`output_1d`]); the tiles' input columns are split into their
+//! four phases, and the output tiles' columns merged back into rows, by vector shuffles
+//! ([`Simd::deinterleave4`]). The band body is compiled for AVX-512 and runs where the processor
+//! has it ([`Isa`]; elsewhere the band path runs); the vectors are `std::arch` intrinsics behind
+//! the small [`Simd`] trait. What it took, measured on a 64-channel layer: the same loops over
+//! fixed-size arrays left to the autovectoriser ran about 10x slower (sums kept in memory, scalar
+//! fused multiply-adds); a closure or an array `map` inside the body is compiled without the body's
 //! instruction set, so the intrinsics in it become calls (20-30 % slower); prefetching the input
 //! rows two channels ahead ([`PREFETCH_CHANNELS`]) took 8 % (64 channels) to 20 % (96 channels)
 //! off.
