@@ -27,15 +27,17 @@
 //!   every transform step is a combination of long contiguous vectors (see
 //!   [`transform_inputs`]).
 //! - Band size: [`Variant::band_tiles`] tiles, measured, but at least one band per rayon thread
-//!   so every core has work on small grids (see [`Plan::new`]).
+//!   so every core has work on small grids, and a job count the threads share evenly where the
+//!   tile rows allow (see [`Plan::new`], [`balanced_bands`]).
 //! - Which variant ([`winograd_variant`]): F(4x4) where the grid has enough tiles, F(2x2) on
 //!   smaller grids, im2col below [`MIN_CHANNELS`] channels or [`MIN_TILES`] tiles.
 //! - F(4x4) with few channels (`C·O` up to 128·256: the encoders' 64- to 128-channel layers, the
-//!   motion encoder, the flow head's first layer) runs in blocks of 48 tiles instead of bands
-//!   where the processor has AVX-512 ([`blocks`]): the transforms and our own product kernel work on data that stay in
-//!   the core's caches, a quarter to a third faster on the 64- and 96-channel layers (even at
-//!   128); the bands stay for the GRUs' 384 input channels, where the `gemm` crate's products
-//!   over hundreds of tiles per read of the weights win.
+//!   motion encoder, the flow head's and the mask head's first layers) runs in blocks of 48 tiles
+//!   instead of bands where the processor has AVX-512 ([`blocks`]): the transforms and our own
+//!   product kernel work on data that stay in the core's caches, a quarter to a third faster on
+//!   the 64- and 96-channel layers (even at 128); the bands stay for the GRUs' 384 input
+//!   channels, where the `gemm` crate's products over hundreds of tiles per read of the weights
+//!   win.
 //!
 //! Numerics: F(2x2)'s transforms hold only 0, ±1 and ±½, so they are exact up to the rounding
 //! of their additions: a max error of about 1e-6 of the output's magnitude against burn's

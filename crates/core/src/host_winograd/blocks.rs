@@ -42,8 +42,10 @@ use super::*;
 /// at 96x112 1.86-1.93 -> 1.86-2.16. 64 tiles by 6 output channels (four vectors) lost
 /// everywhere (64->64 at 384x448 43.4-46.0 ms).
 const LANES: usize = 48;
-/// Vectors of tiles per kernel step (of the widest set, 16 lanes).
+/// Vectors of tiles per kernel step (of the widest set, 16 lanes); [`Band::products`] is
+/// written out for three.
 const VECS: usize = 3;
+const _: () = assert!(VECS == 3 && LANES == VECS * 16);
 /// Lanes a row of a block's transform buffers holds: [`LANES`] and room for one more vector of
 /// the widest set (16 lanes), so a vector may be stored at any lane (see [`gather_row`]).
 const ROW: usize = LANES + 16;
@@ -62,7 +64,7 @@ const K2: usize = 36;
 /// (16.9), at 96x312 39.4 (44.2) -> 34.3 (38.7); 128->126 at 96x112 14.4 (18.2) -> 13.7 (16.7);
 /// 384->128 at 96x112 34.5 (39.4) -> 46.5 (52.5). Raised from `128·128` to `128·256` on the
 /// AMD EPYC (Zen 4, AVX-512, 1 MiB L2 per core; session 20), where the blocks won for the
-/// flow head's and the context heads' 128->256 (min of 25 in three alternating rounds, bands
+/// flow head's and the mask head's first layers, 128->256 (min of 25 in three alternating rounds, bands
 /// -> blocks, ms): at 96x112 15.5-16.0 -> 13.6-15.0, at 80x184 20.4-23.4 -> 17.3-18.4, at
 /// 96x312 39.3-44.5 -> 32.5-33.8, at 24x28 2.3-2.5 -> 2.2; at 48x56 mixed (5.2-5.9 -> 5.1-6.0).
 /// Not measured on the Xeon at this shape.
@@ -346,6 +348,8 @@ impl Band<'_> {
                     let mut acc = [[S::splat(0.0); VECS]; ROWS];
                     for ci in 0..c {
                         let (u, vv) = (&uk[ci], &vk[ci]);
+                        // Written out for the three vectors (`VECS`): `array::from_fn` or a
+                        // closure here would be compiled without the body's instruction set.
                         let x = [S::load(&vv[half..]), S::load(&vv[half + w..]), S::load(&vv[half + 2 * w..])];
                         for r in 0..ROWS {
                             let b = S::splat(u[r]);
