@@ -323,21 +323,41 @@ impl Plan {
     }
 }
 
-/// `bands` (at most `tiles_h`) raised so that the `n · bands` jobs split evenly over `threads`
-/// where the tile rows allow: 3 bands of one image on 2 threads leave one thread idle for a
-/// third of the convolution (the 1/4 grid of 320x736, 20 tile rows: 1.56 of 2 cores busy in
-/// the GRU 1/4, the motion encoder and the flow head).
+/// The band count, from `bands` up to `bands + threads` (at most `tiles_h`), whose `n · bands`
+/// jobs the `threads` finish soonest ([`longest_thread`]); the fewest bands among equals, since
+/// every band reads the whole transformed weight. 3 bands of one image on 2 threads left one
+/// thread idle for a third of the convolution (the 1/4 grid of 320x736, 20 tile rows: 1.56 of 2
+/// cores busy in the GRU 1/4, the motion encoder and the flow head); 4 bands of 5 rows share
+/// evenly.
 fn balanced_bands(bands: usize, tiles_h: usize, n: usize, threads: usize) -> usize {
-    let (n, threads) = (n.max(1), threads.max(1));
-    // Bands per image that make the job count a multiple of the thread count.
-    let step = threads / gcd(threads, n);
-    let balanced = bands.next_multiple_of(step);
-    if balanced <= tiles_h { balanced } else { bands.min(tiles_h) }
+    if tiles_h == 0 {
+        return 0;
+    }
+    let first = bands.clamp(1, tiles_h.max(1));
+    let mut best = (usize::MAX, first);
+    for candidate in first..=(bands + threads).min(tiles_h).max(first) {
+        let rows = tiles_h.div_ceil(candidate);
+        let count = tiles_h.div_ceil(rows);
+        let span = longest_thread(rows, tiles_h, count, n.max(1), threads.max(1));
+        if span < best.0 {
+            best = (span, count);
+        }
+    }
+    best.1
 }
 
-/// Greatest common divisor.
-fn gcd(a: usize, b: usize) -> usize {
-    if b == 0 { a } else { gcd(b, a % b) }
+/// Tile rows of the most loaded thread when `n` images' `count` bands of `rows` tile rows (the
+/// last one shorter, `tiles_h` in all) go to `threads` threads, each job to the least loaded
+/// thread, longest first: the work-stealing pool's schedule at best.
+fn longest_thread(rows: usize, tiles_h: usize, count: usize, n: usize, threads: usize) -> usize {
+    let mut loads = vec![0; threads];
+    let last = tiles_h - rows * (count - 1);
+    let jobs = std::iter::repeat_n(rows, n * (count - 1)).chain(std::iter::repeat_n(last, n));
+    for job in jobs {
+        let least = loads.iter_mut().min().expect("at least one thread");
+        *least += job;
+    }
+    loads.into_iter().max().unwrap_or(0)
 }
 
 /// `dst = Σ coefs[q]·src(q)` over the nonzero coefficients (each `src(q)` at least as long as
@@ -683,8 +703,15 @@ mod tests {
         // Never more bands than tile rows.
         assert_eq!(balanced_bands(3, 3, 1, 2), 3);
         assert_eq!(balanced_bands(5, 4, 1, 2), 4);
-        // 4 threads, 2 images: bands in pairs.
+        // 4 threads, 2 images: 4 bands of 5 rows, 8 jobs.
         assert_eq!(balanced_bands(3, 20, 2, 4), 4);
+        // 17 rows on 4 threads: 5 bands (4, 4, 4, 4, 1) finish after 5 rows; a multiple of the
+        // threads (8 asked, 6 of 3 rows) after 6.
+        assert_eq!(balanced_bands(5, 17, 1, 4), 5);
+        assert_eq!(longest_thread(4, 17, 5, 1, 4), 5);
+        assert_eq!(longest_thread(3, 17, 6, 1, 4), 6);
+        // One thread: the bands asked for.
+        assert_eq!(balanced_bands(3, 20, 1, 1), 3);
         // Plan on the 320x736 1/4 grid (384 -> 128 at 80x184, F(4x4)): an even number of jobs
         // on 2 threads, every tile row in one band.
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
