@@ -333,9 +333,9 @@ fn balanced_bands(bands: usize, tiles_h: usize, n: usize, threads: usize) -> usi
     if tiles_h == 0 {
         return 0;
     }
-    let first = bands.clamp(1, tiles_h.max(1));
+    let first = bands.clamp(1, tiles_h);
     let mut best = (usize::MAX, first);
-    for candidate in first..=(bands + threads).min(tiles_h).max(first) {
+    for candidate in first..=(bands + threads).min(tiles_h) {
         let rows = tiles_h.div_ceil(candidate);
         let count = tiles_h.div_ceil(rows);
         let span = longest_thread(rows, tiles_h, count, n.max(1), threads.max(1));
@@ -692,7 +692,7 @@ mod tests {
         assert!(f2 <= 1e-5 && f4 <= 4e-5, "{f2} {f4}");
     }
 
-    /// The band count splits the jobs evenly over the threads where the tile rows allow.
+    /// The band count is the one the threads finish soonest, fewest bands among equals.
     #[test]
     fn bands_split_evenly_over_the_threads() {
         // One image on 2 threads: 3 bands become 4 (the 1/4 grid of 320x736, 20 tile rows).
