@@ -45,10 +45,12 @@ const LANES: usize = 48;
 /// Vectors of tiles per kernel step (of the widest set, 16 lanes); [`Band::products`] is
 /// written out for three.
 const VECS: usize = 3;
-const _: () = assert!(VECS == 3 && LANES == VECS * 16);
+const _: () = assert!(VECS == 3 && LANES == VECS * WIDEST);
+/// Lanes of the widest vector set (AVX-512).
+const WIDEST: usize = 16;
 /// Lanes a row of a block's transform buffers holds: [`LANES`] and room for one more vector of
-/// the widest set (16 lanes), so a vector may be stored at any lane (see [`gather_row`]).
-const ROW: usize = LANES + 16;
+/// the widest set, so a vector may be stored at any lane (see [`gather_row`]).
+const ROW: usize = LANES + WIDEST;
 /// Output channels per kernel step.
 const ROWS: usize = 8;
 /// Positions of the transformed tile, α² of F(4x4).
@@ -435,7 +437,8 @@ fn gather_row<S: Simd>(line: &[f32], pw: usize, tx0: usize, count: usize, lane0:
     let w = S::WIDTH;
     // Values x0 - pw .. x0 - pw + 4w + 4 of the row (the last two unused).
     let span = 4 * w + 4;
-    let mut stage = [0.0f32; ROW * 4 + 4];
+    // One vector's span (at most the widest's), zero-filled where it is used.
+    let mut stage = [0.0f32; 4 * WIDEST + 4];
     for n in (0..count).step_by(w) {
         let (lane, x0) = (lane0 + n, 4 * (tx0 + n));
         let src = if x0 >= pw && x0 - pw + span <= line.len() {
@@ -466,7 +469,8 @@ fn gather_row<S: Simd>(line: &[f32], pw: usize, tx0: usize, count: usize, lane0:
 #[inline(always)]
 fn scatter_row<S: Simd>(y: &[[f32; ROW]; 4], tx0: usize, count: usize, lane0: usize, line: &mut [MaybeUninit<f32>]) {
     let w = S::WIDTH;
-    let mut stage = [MaybeUninit::new(0.0f32); ROW * 4];
+    // One vector's values (at most the widest's), written by `interleave4` before they are read.
+    let mut stage = [MaybeUninit::<f32>::uninit(); 4 * WIDEST];
     for n in (0..count).step_by(w) {
         let (lane, x0) = (lane0 + n, 4 * (tx0 + n));
         let phases = [S::load(&y[0][lane..]), S::load(&y[1][lane..]), S::load(&y[2][lane..]), S::load(&y[3][lane..])];
