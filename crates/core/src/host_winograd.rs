@@ -266,9 +266,9 @@ impl Plan {
         // (73.8); the 1/4 grids and the encoders' layers within the noise.
         let threads = rayon::current_num_threads();
         let min_bands = threads.div_ceil(n.max(1));
+        // A count that `band_rows` realises exactly: every band `band_rows` rows, the last fewer.
         let bands = balanced_bands(tiles_h.div_ceil(by_size).max(min_bands), tiles_h, n, threads);
         let band_rows = tiles_h.div_ceil(bands);
-        let bands = tiles_h.div_ceil(band_rows);
         let tiling = Tiling { c, h, w, ph, pw, out_w, m, tiles_w };
         Self { tiling, n, k2: (m + 2) * (m + 2), out_h, tiles_h, bands, band_rows }
     }
@@ -325,10 +325,11 @@ impl Plan {
 
 /// The band count, from `bands` up to `bands + threads` (at most `tiles_h`), whose `n · bands`
 /// jobs the `threads` finish soonest ([`longest_thread`]); the fewest bands among equals, since
-/// every band reads the whole transformed weight. 3 bands of one image on 2 threads left one
-/// thread idle for a third of the convolution (the 1/4 grid of 320x736, 20 tile rows: 1.56 of 2
-/// cores busy in the GRU 1/4, the motion encoder and the flow head); 4 bands of 5 rows share
-/// evenly.
+/// every band reads the whole transformed weight. Returned as the count its rows per band
+/// realise (`tiles_h.div_ceil(rows)`), so `tiles_h.div_ceil(count)` gives those rows back. 3
+/// bands of one image on 2 threads left one thread idle for a third of the convolution (the 1/4
+/// grid of 320x736, 20 tile rows: 1.56 of 2 cores busy in the GRU 1/4, the motion encoder and
+/// the flow head); 4 bands of 5 rows share evenly.
 fn balanced_bands(bands: usize, tiles_h: usize, n: usize, threads: usize) -> usize {
     if tiles_h == 0 {
         return 0;
