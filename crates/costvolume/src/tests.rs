@@ -47,9 +47,9 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(12))]
 
     /// The host on-the-fly kernel and the stock tensor-op one agree within 1e-5 of the
-    /// correlation's scale ([`correlation_scale`]): batches, odd widths and channel counts (the dot product's remainder),
-    /// different left and right widths, fractional positions in and out of the row, and levels
-    /// pooled down to width 1 or 0.
+    /// correlation's scale ([`correlation_scale`]): batches, odd widths and channel counts (the dot
+    /// product's remainder), different left and right widths, fractional positions in and out of
+    /// the row, and levels pooled down to width 1 or 0.
     #[test]
     fn host_and_stock_on_the_fly_agree(w1 in 1usize..40, w2 in 1usize..40, h in 1usize..4, n in 1usize..3, c in 1usize..40, levels in 1usize..7, radius in 0usize..5, seed in 0u64..1000, shift in -50f32..50.0) {
         let (f1, f2) = (features(n, c, h, w1, seed), features(n, c, h, w2, seed + 1));

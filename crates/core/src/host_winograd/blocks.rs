@@ -57,19 +57,18 @@ const ROWS: usize = 8;
 const K2: usize = 36;
 
 /// Most `C·O` (input times output channels) for which the blocked path runs: above it the
-/// transformed weight (`36·C·O` values, read once per block of [`LANES`] tiles) outgrows the
-/// core's caches, and the band path's products over hundreds of tiles per read of the weight
-/// win. Measured on the Xeon in one process alternating both paths, one image, 15 rounds, min
-/// (median) ms, bands -> blocks: 64->64 at 384x448 88.4 (121.7) -> 57.2 (81.8), at 384x1248
-/// 241 (298) -> 173 (204), at 96x112 5.0 (7.6) -> 4.0 (5.9); 96->96 at 192x224 30.8 (44.9) ->
-/// 24.0 (33.8), at 192x624 103 (114) -> 83 (98); 128->128 at 96x112 11.0 (16.9) -> 11.1
-/// (16.9), at 96x312 39.4 (44.2) -> 34.3 (38.7); 128->126 at 96x112 14.4 (18.2) -> 13.7 (16.7);
-/// 384->128 at 96x112 34.5 (39.4) -> 46.5 (52.5). Raised from `128·128` to `128·256` on the
-/// AMD EPYC (Zen 4, AVX-512, 1 MiB L2 per core; session 20), where the blocks won for the
-/// flow head's and the mask head's first layers, 128->256 (min of 25 in three alternating rounds, bands
-/// -> blocks, ms): at 96x112 15.5-16.0 -> 13.6-15.0, at 80x184 20.4-23.4 -> 17.3-18.4, at
-/// 96x312 39.3-44.5 -> 32.5-33.8, at 24x28 2.3-2.5 -> 2.2; at 48x56 mixed (5.2-5.9 -> 5.1-6.0).
-/// Not measured on the Xeon at this shape.
+/// transformed weight (`36·C·O` values, read once per block of [`LANES`] tiles) outgrows the core's
+/// caches, and the band path's products over hundreds of tiles per read of the weight win. Measured
+/// on the Xeon in one process alternating both paths, one image, 15 rounds, min (median) ms, bands
+/// -> blocks: 64->64 at 384x448 88.4 (121.7) -> 57.2 (81.8), at 384x1248 241 (298) -> 173 (204), at
+/// 96x112 5.0 (7.6) -> 4.0 (5.9); 96->96 at 192x224 30.8 (44.9) -> 24.0 (33.8), at 192x624 103
+/// (114) -> 83 (98); 128->128 at 96x112 11.0 (16.9) -> 11.1 (16.9), at 96x312 39.4 (44.2) -> 34.3
+/// (38.7); 128->126 at 96x112 14.4 (18.2) -> 13.7 (16.7); 384->128 at 96x112 34.5 (39.4) -> 46.5
+/// (52.5). Raised from `128·128` to `128·256` on the AMD EPYC (Zen 4, AVX-512, 1 MiB L2 per core;
+/// session 20), where the blocks won for the flow head's and the mask head's first layers, 128->256
+/// (min of 25 in three alternating rounds, bands -> blocks, ms): at 96x112 15.5-16.0 -> 13.6-15.0,
+/// at 80x184 20.4-23.4 -> 17.3-18.4, at 96x312 39.3-44.5 -> 32.5-33.8, at 24x28 2.3-2.5 -> 2.2; at
+/// 48x56 mixed (5.2-5.9 -> 5.1-6.0). Not measured on the Xeon at this shape.
 const MAX_CHANNEL_PRODUCT: usize = 128 * 256;
 
 /// The instruction set for the blocked path to take an F(4x4) convolution of `c` input and
