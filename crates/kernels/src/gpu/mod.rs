@@ -1,0 +1,1 @@
+//! Formulations of burn's operations with fewer kernel launches, for GPU inference.

@@ -1,0 +1,21 @@
+//! The hand-written CPU kernels and GPU formulations of dgstereo, behind one dispatch.
+//!
+//! Design decision: a fast path exists only for a measured hot spot, and a stage should not need
+//! to know it is there. So the stages call a small face of operations on burn tensors
+//! ([`ops`]: convolution with or without an epilogue, norm + ReLU, resize, pooling, lookups,
+//! deformable sampling, the ConvGRU step, convex upsampling); each operation asks the one
+//! dispatch ([`dispatch::path`]) where to run, from the device, its dtype, autodiff and the
+//! process's [`settings`], and runs the hand-written host kernel ([`host`]), the GPU's
+//! launch-saving formulation ([`gpu`]) or burn's own operation, which stays the reference every
+//! other path is tested against on every path ([`test_paths!`]).
+#![deny(missing_docs)]
+
+pub mod dispatch;
+pub mod gpu;
+pub mod host;
+pub mod ops;
+pub mod settings;
+mod test_paths;
+
+pub use dispatch::{Op, Path, path, with_path};
+pub use settings::{GpuRoute, Settings, configure};

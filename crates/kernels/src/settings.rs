@@ -1,0 +1,206 @@
+//! The one settings value that steers the dispatch, read once per process.
+//!
+//! The binaries set it from their flags before the first operation ([`configure`]); otherwise it
+//! is read, once, from the environment variable `DGSTEREO_KERNELS` (the same words as
+//! `dgstereo bench --kernels`), so criterion benchmarks and scripts can choose paths too. Nothing
+//! changes it afterwards: every operation of a process sees the same settings.
+//!
+//! The words, comma-separated:
+//! - `host` (the default): hand-written kernels for CPU inference, GPU formulations on the GPU;
+//! - `stock`: burn's operations everywhere on the CPU (what the kernels gain is measured so);
+//! - `gpu-routes`: the GPU formulations on the CPU too, where no host kernel runs (with `stock`,
+//!   the CPU computes what GPU inference computes);
+//! - `no-winograd`, `no-winograd-blocks`: the host convolution without Winograd's algorithm, or
+//!   without its cache-resident blocks;
+//! - `stock-route=NAME`: one GPU formulation off ([`GpuRoute::name`]; `all` for every one).
+
+use std::str::FromStr;
+use std::sync::OnceLock;
+
+use dgstereo_core::{Error, Result};
+
+/// The environment variable read when no binary configured the settings.
+pub const ENV_VAR: &str = "DGSTEREO_KERNELS";
+
+/// A GPU inference formulation that the settings can turn off (`stock-route=NAME`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum GpuRoute {
+    /// Stride-1 convolutions as one matrix product (`conv`); off: burn's convolution.
+    MatmulConv,
+    /// The column matrix of that product gathered by one `select` (`im2col`); off: the shifted
+    /// windows sliced one by one and concatenated.
+    GatheredColumns,
+    /// Strided convolutions through that product too (`strided`); off: burn's convolution.
+    StridedProducts,
+    /// Convolutions with few outputs as the product first and the shifted sum after
+    /// (`few-outputs`); off: the gathered columns.
+    FewOutputs,
+    /// Bilinear resizes as burn's `interpolate` (`resize`); off: the two interpolation-matrix
+    /// products (the training path).
+    Interpolate,
+    /// The pyramid lookup as two gathers over all levels (`lookup`); off: a gather per level.
+    GatheredLookup,
+    /// Element-wise work after a convolution's product issued on the product's own shape, so
+    /// that burn's fusion runs it in the product's kernel (`epilogue`); off: after the reshape.
+    FusedEpilogue,
+    /// The ConvGRU's inputs gathered into columns once a step for both its products
+    /// (`shared-columns`); off: `[h, x]` and `[r·h, x]` each gathered whole.
+    SharedColumns,
+}
+
+impl GpuRoute {
+    /// Every route.
+    pub const ALL: [GpuRoute; 8] = [
+        Self::MatmulConv,
+        Self::GatheredColumns,
+        Self::StridedProducts,
+        Self::FewOutputs,
+        Self::Interpolate,
+        Self::GatheredLookup,
+        Self::FusedEpilogue,
+        Self::SharedColumns,
+    ];
+
+    /// The name `stock-route=` knows the route by.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::MatmulConv => "conv",
+            Self::GatheredColumns => "im2col",
+            Self::StridedProducts => "strided",
+            Self::FewOutputs => "few-outputs",
+            Self::Interpolate => "resize",
+            Self::GatheredLookup => "lookup",
+            Self::FusedEpilogue => "epilogue",
+            Self::SharedColumns => "shared-columns",
+        }
+    }
+}
+
+/// What the dispatch may choose ([`crate::dispatch::path`]); the default is every fast path on.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Settings {
+    /// The hand-written host kernels run CPU inference (`host`; off: `stock`).
+    pub host_kernels: bool,
+    /// The GPU formulations also run on the CPU where no host kernel does (`gpu-routes`).
+    pub gpu_routes_on_cpu: bool,
+    /// 3x3 stride-1 host convolutions may take Winograd's algorithm (off: `no-winograd`).
+    pub winograd: bool,
+    /// Winograd's F(4x4) may run in cache-resident blocks of tiles (off: `no-winograd-blocks`).
+    pub winograd_blocks: bool,
+    /// GPU formulations switched off (`stock-route=NAME`).
+    pub stock_routes: Vec<GpuRoute>,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self { host_kernels: true, gpu_routes_on_cpu: false, winograd: true, winograd_blocks: true, stock_routes: Vec::new() }
+    }
+}
+
+impl Settings {
+    /// Whether the GPU formulation `route` may run.
+    pub fn route_enabled(&self, route: GpuRoute) -> bool {
+        !self.stock_routes.contains(&route)
+    }
+
+    /// The settings `DGSTEREO_KERNELS` names (the defaults where it is unset or empty); an error
+    /// names the variable and the word it does not know.
+    pub fn from_env() -> Result<Self> {
+        match std::env::var(ENV_VAR) {
+            Ok(text) => text.parse().map_err(|e: Error| Error::Config(format!("{ENV_VAR}: {e}"))),
+            Err(_) => Ok(Self::default()),
+        }
+    }
+}
+
+impl FromStr for Settings {
+    type Err = Error;
+
+    fn from_str(text: &str) -> Result<Self> {
+        let mut settings = Self::default();
+        for word in text.split(',').map(str::trim).filter(|w| !w.is_empty()) {
+            match word.to_ascii_lowercase().as_str() {
+                "host" => settings.host_kernels = true,
+                "stock" => settings.host_kernels = false,
+                "gpu-routes" => {
+                    settings.host_kernels = false;
+                    settings.gpu_routes_on_cpu = true;
+                }
+                "no-winograd" => settings.winograd = false,
+                "no-winograd-blocks" => settings.winograd_blocks = false,
+                other => match other.strip_prefix("stock-route=") {
+                    Some("all") => settings.stock_routes = GpuRoute::ALL.to_vec(),
+                    Some(name) => match GpuRoute::ALL.into_iter().find(|r| r.name() == name) {
+                        Some(route) if !settings.stock_routes.contains(&route) => settings.stock_routes.push(route),
+                        Some(_) => {}
+                        None => {
+                            let names: Vec<_> = GpuRoute::ALL.iter().map(|r| r.name()).collect();
+                            return Err(Error::Config(format!(
+                                "unknown GPU route '{name}' (expected all or one of {})",
+                                names.join(", ")
+                            )));
+                        }
+                    },
+                    None => {
+                        return Err(Error::Config(format!(
+                            "unknown kernel setting '{word}' (expected host, stock, gpu-routes, no-winograd, \
+                             no-winograd-blocks or stock-route=NAME)"
+                        )));
+                    }
+                },
+            }
+        }
+        Ok(settings)
+    }
+}
+
+static SETTINGS: OnceLock<Settings> = OnceLock::new();
+
+/// Fixes the process's settings before the first operation reads them. An error when they were
+/// already read or configured otherwise (configuring the same value again is not).
+pub fn configure(settings: Settings) -> Result<()> {
+    let in_use = SETTINGS.get_or_init(|| settings.clone());
+    if *in_use == settings {
+        Ok(())
+    } else {
+        Err(Error::Config(format!(
+            "kernel settings are already in use ({in_use:?}); they can be configured once, before the first operation"
+        )))
+    }
+}
+
+/// The process's settings: those [`configure`]d, else `DGSTEREO_KERNELS`'s (read once; the
+/// defaults where it is unset or does not parse: a binary that wants the error calls
+/// `configure(Settings::from_env()?)` at start).
+pub fn settings() -> &'static Settings {
+    SETTINGS.get_or_init(|| Settings::from_env().unwrap_or_default())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn words_parse_and_unknown_ones_are_named() {
+        assert_eq!("".parse::<Settings>().unwrap(), Settings::default());
+        let s: Settings = " stock , no-winograd,stock-route=lookup,stock-route=conv".parse().unwrap();
+        assert!(!s.host_kernels && !s.winograd && s.winograd_blocks && !s.gpu_routes_on_cpu);
+        assert!(!s.route_enabled(GpuRoute::GatheredLookup) && !s.route_enabled(GpuRoute::MatmulConv));
+        assert!(s.route_enabled(GpuRoute::Interpolate));
+        let g: Settings = "gpu-routes,stock-route=all".parse().unwrap();
+        assert!(g.gpu_routes_on_cpu && !g.host_kernels);
+        assert!(GpuRoute::ALL.iter().all(|&r| !g.route_enabled(r)));
+        let e = "fast".parse::<Settings>().unwrap_err().to_string();
+        assert!(e.contains("'fast'") && e.contains("gpu-routes"), "{e}");
+        let e = "stock-route=warp".parse::<Settings>().unwrap_err().to_string();
+        assert!(e.contains("'warp'") && e.contains("shared-columns"), "{e}");
+    }
+
+    #[test]
+    fn route_names_are_distinct() {
+        let mut names: Vec<_> = GpuRoute::ALL.iter().map(|r| r.name()).collect();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), GpuRoute::ALL.len());
+    }
+}
