@@ -93,7 +93,13 @@ pub struct Settings {
 
 impl Default for Settings {
     fn default() -> Self {
-        Self { host_kernels: true, gpu_routes_on_cpu: false, winograd: true, winograd_blocks: true, stock_routes: Vec::new() }
+        Self {
+            host_kernels: true,
+            gpu_routes_on_cpu: false,
+            winograd: true,
+            winograd_blocks: true,
+            stock_routes: Vec::new(),
+        }
     }
 }
 

@@ -16,44 +16,16 @@ use burn::tensor::{Device, Int, Tensor, TensorData};
 use dgstereo_core::tensor::to_vec;
 use dgstereo_core::{Error, Result};
 
+use crate::content_hash::ContentHasher;
 use crate::safetensors_io::{FloatArray, read_float_tensors, write_float_tensors};
-use crate::{DepthPrior, Prior, PriorInput, PriorProvider};
+use crate::{DepthPrior, PriorInput, PriorProvider};
 
 /// Version of the key derivation and file layout; bump to invalidate old caches.
 const CACHE_VERSION: &str = "dgstereo-prior-cache v1";
 
-/// A 128-bit FNV-1a hash (two independent 64-bit lanes) of a byte stream.
-#[derive(Debug, Clone)]
-pub struct ContentHasher {
-    lanes: [u64; 2],
-}
-
-impl Default for ContentHasher {
-    fn default() -> Self {
-        Self { lanes: [0xcbf2_9ce4_8422_2325, 0x6c62_272e_07bb_0142] }
-    }
-}
-
-impl ContentHasher {
-    /// Feeds bytes; a length prefix keeps `("ab", "c")` and `("a", "bc")` apart.
-    pub fn update(&mut self, bytes: &[u8]) {
-        const PRIMES: [u64; 2] = [0x0000_0100_0000_01b3, 0x0000_0100_0000_0233];
-        for (lane, prime) in self.lanes.iter_mut().zip(PRIMES) {
-            for b in (bytes.len() as u64).to_le_bytes().iter().chain(bytes) {
-                *lane = (*lane ^ u64::from(*b)).wrapping_mul(prime);
-            }
-        }
-    }
-
-    /// The hash as 32 hex digits.
-    pub fn hex(&self) -> String {
-        format!("{:016x}{:016x}", self.lanes[0], self.lanes[1])
-    }
-}
-
 /// Caches the outputs of a wrapped provider `P` on disk.
 #[derive(Debug, Clone)]
-pub struct CachedPrior<P = Box<Prior>> {
+pub struct CachedPrior<P> {
     inner: P,
     fingerprint: String,
     dir: PathBuf,

@@ -87,7 +87,7 @@ pub enum Prior {
     /// Files.
     File(FilePrior),
     /// A cached provider.
-    Cache(CachedPrior),
+    Cache(CachedPrior<Box<Prior>>),
     /// Simulated from ground truth.
     Simulated(SimulatedPrior),
 }

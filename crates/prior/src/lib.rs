@@ -23,6 +23,7 @@
 
 pub mod cache;
 mod config;
+pub mod content_hash;
 pub mod depth_anything;
 pub mod file;
 pub mod formats;

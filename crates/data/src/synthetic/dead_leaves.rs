@@ -12,7 +12,7 @@
 //! Edges are a smoothstep of the signed distance over `edge_width` pixels, so the pattern is
 //! continuous and point sampling at the pixel centres behaves like a slightly blurred camera.
 
-use super::texture::{hash_cell, mix64};
+use super::hash::{hash_cell, mix64};
 
 /// One scale of a [`DeadLeaves`] texture.
 #[derive(Clone, Debug, PartialEq)]

@@ -11,8 +11,8 @@ use std::f64::consts::PI;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
+use super::config::SyntheticConfig;
 use super::dead_leaves::{DeadLeaves, LeafLevel, MAX_LEAF_LEVELS};
-use super::generate::SyntheticConfig;
 use super::texture::{Grating, Pattern, Shading, SurfaceTexture, Texture, TextureKind};
 
 /// The smooth texture (2-4 gratings and value noise) from the main stream.

@@ -6,6 +6,7 @@
 //! show the same colour at corresponding points of the two views.
 
 use super::dead_leaves::DeadLeaves;
+use super::hash::hash_cell;
 
 /// Which random texture kind a surface got (see [`super::SyntheticConfig::texture_weights`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -181,19 +182,6 @@ impl Texture {
         }
         [c[0].clamp(0.0, 255.0) as f32, c[1].clamp(0.0, 255.0) as f32, c[2].clamp(0.0, 255.0) as f32]
     }
-}
-
-/// A 64-bit hash of the lattice point `(ix, iy)` (splitmix64's finaliser).
-pub(super) fn hash_cell(ix: i64, iy: i64, seed: u64) -> u64 {
-    let z = seed ^ (ix as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (iy as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
-    mix64(z)
-}
-
-/// splitmix64's finaliser: a bijective scramble of `z`.
-pub(super) fn mix64(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 /// A hash of `(ix, iy)` in `[-1, 1)`.

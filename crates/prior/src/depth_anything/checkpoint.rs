@@ -13,7 +13,7 @@ use std::path::Path;
 use burn::store::{ApplyError, ModuleSnapshot, ModuleStore, PytorchStore};
 use dgstereo_core::{Error, Result};
 
-use super::{DepthAnythingV2, DepthAnythingV2Encoder};
+use super::encoder::DepthAnythingV2Encoder;
 
 /// `(checkpoint prefix, module prefix)` pairs for keys whose PyTorch names are not field names.
 pub const KEY_RENAMES: [(&str, &str); 7] = [
@@ -61,12 +61,12 @@ fn regex_escape(s: &str) -> String {
     })
 }
 
-/// Loads every tensor of `weights` into `model`.
+/// Loads every tensor of `weights` into `model`, a network of size `encoder`.
 ///
 /// # Errors
 /// [`Error::Io`] when the file is missing; [`Error::Checkpoint`] naming the first offending key
 /// when a key is missing from the checkpoint, unknown to the model, or of the wrong shape.
-pub fn load_into(model: &mut DepthAnythingV2, weights: &Path) -> Result<()> {
+pub fn load_into<M: ModuleSnapshot>(model: &mut M, encoder: DepthAnythingV2Encoder, weights: &Path) -> Result<()> {
     let mut store = open_store(weights)?;
     let result = model.load_from(&mut store).map_err(|e| checkpoint_error(weights, e.to_string()))?;
     if let Some(error) = result.errors.first() {
@@ -75,7 +75,7 @@ pub fn load_into(model: &mut DepthAnythingV2, weights: &Path) -> Result<()> {
                 "key '{}' has shape {:?}, the {} model expects {:?}",
                 checkpoint_key(path),
                 found.to_vec(),
-                model.encoder(),
+                encoder,
                 expected.to_vec()
             ),
             ApplyError::DTypeMismatch { path, expected, found } => {
@@ -94,7 +94,7 @@ pub fn load_into(model: &mut DepthAnythingV2, weights: &Path) -> Result<()> {
                 "missing key '{}' (and {} more) for the {} model",
                 checkpoint_key(path),
                 result.missing.len() - 1,
-                model.encoder()
+                encoder
             ),
         ));
     }
@@ -105,7 +105,7 @@ pub fn load_into(model: &mut DepthAnythingV2, weights: &Path) -> Result<()> {
                 "unknown key '{}' (and {} more) for the {} model",
                 checkpoint_key(path),
                 result.unused.len() - 1,
-                model.encoder()
+                encoder
             ),
         ));
     }

@@ -36,7 +36,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::cache::ContentHasher;
+use crate::content_hash::ContentHasher;
 use crate::{DepthPrior, PriorInput, PriorProvider};
 use map_ops::{fill_holes_background, gaussian_blur, warp_left_to_right};
 
