@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use dgstereo_core::shared::shared_dir_for_test;
-use dgstereo_prior::depth_anything::checkpoint::checkpoint_keys;
+use dgstereo_prior::depth_anything::checkpoint::{checkpoint_keys, encoder_from_keys, model_keys};
 use dgstereo_prior::{DepthAnythingV2, DepthAnythingV2Encoder, PriorConfig, verify_depth_anything_v2};
 
 const WEIGHTS: &str = "golden/depth_anything_v2_vits_random.pth";
@@ -40,6 +40,18 @@ fn checkpoint_has_the_official_parameter_count_and_loads_completely() {
         DepthAnythingV2::load(DepthAnythingV2Encoder::Vits, &weights, &dgstereo_core::default_device()).unwrap();
     use burn::module::Module;
     assert_eq!(model.num_params(), params);
+}
+
+/// The state dict a built model gives (`model_keys`, which the ViT-B and ViT-L checks use) is
+/// the official checkpoint's, key for key and shape for shape.
+#[test]
+fn a_built_model_has_the_official_state_dict() {
+    let Some((weights, _)) = golden("a_built_model_has_the_official_state_dict") else { return };
+    let mut official = checkpoint_keys(&weights).unwrap();
+    official.sort();
+    let built = model_keys(&DepthAnythingV2::new(DepthAnythingV2Encoder::Vits, &dgstereo_core::default_device()));
+    assert_eq!(built, official);
+    assert_eq!(encoder_from_keys(&official), Ok(DepthAnythingV2Encoder::Vits));
 }
 
 #[test]

@@ -10,7 +10,7 @@
 
 use std::path::Path;
 
-use burn::store::{ApplyError, ModuleSnapshot, ModuleStore, PytorchStore};
+use burn::store::{ApplyError, BurnToPyTorchAdapter, ModuleSnapshot, ModuleStore, PytorchStore};
 use dgstereo_core::{Error, Result};
 
 use super::encoder::DepthAnythingV2Encoder;
@@ -119,27 +119,60 @@ pub fn checkpoint_keys(weights: &Path) -> Result<Vec<(String, Vec<usize>)>> {
     Ok(tensors.iter().map(|(k, t)| (checkpoint_key(k), t.shape.to_vec())).collect())
 }
 
-/// The encoder size of a checkpoint, from the width of `pretrained.cls_token` and the number of
-/// blocks.
+/// The checkpoint keys and shapes of `model`'s parameters, sorted by key: the state dict an
+/// official checkpoint of the same size holds (PyTorch's names and layouts, as burn-store
+/// writes them for PyTorch).
+pub fn model_keys<M: ModuleSnapshot>(model: &M) -> Vec<(String, Vec<usize>)> {
+    let tensors = model.collect(None, Some(Box::new(BurnToPyTorchAdapter)), false);
+    let mut keys: Vec<_> = tensors.iter().map(|t| (checkpoint_key(&t.name), t.shape.to_vec())).collect();
+    keys.sort();
+    keys
+}
+
+/// The encoder size of a checkpoint, from the width of `pretrained.cls_token`, the number of
+/// blocks and the DPT head's widths ([`encoder_from_keys`]).
 pub fn detect_encoder(weights: &Path) -> Result<DepthAnythingV2Encoder> {
-    let keys = checkpoint_keys(weights)?;
-    let cls = keys
-        .iter()
-        .find(|(k, _)| k == "pretrained.cls_token")
-        .ok_or_else(|| checkpoint_error(weights, "missing key 'pretrained.cls_token'"))?;
-    let width = *cls.1.last().unwrap_or(&0);
-    let encoder = DepthAnythingV2Encoder::from_embed_dim(width).ok_or_else(|| {
-        checkpoint_error(weights, format!("key 'pretrained.cls_token' has width {width}, not one of vits/vitb/vitl"))
-    })?;
+    encoder_from_keys(&checkpoint_keys(weights)?).map_err(|m| checkpoint_error(weights, m))
+}
+
+/// The encoder size whose state dict `keys` (checkpoint keys with shapes) is: the token width
+/// (`pretrained.cls_token`) names the size; the block count (`pretrained.blocks.*`), the head's
+/// projections (`depth_head.projects.{i}.weight`: the four `out_channels`) and its fusion width
+/// (`depth_head.scratch.layer1_rn.weight`: `features`) must be that size's. The message names
+/// the first key that disagrees.
+pub fn encoder_from_keys(keys: &[(String, Vec<usize>)]) -> std::result::Result<DepthAnythingV2Encoder, String> {
+    let shape = |key: &str| keys.iter().find(|(k, _)| k == key).map(|(_, s)| s.as_slice());
+    let cls = shape("pretrained.cls_token").ok_or("missing key 'pretrained.cls_token'")?;
+    let width = *cls.last().unwrap_or(&0);
+    let encoder = DepthAnythingV2Encoder::from_embed_dim(width)
+        .ok_or_else(|| format!("key 'pretrained.cls_token' has width {width}, not one of vits/vitb/vitl"))?;
     let blocks =
         keys.iter().filter(|(k, _)| k.starts_with("pretrained.blocks.") && k.ends_with(".norm1.weight")).count();
     if blocks != encoder.vit().depth {
-        return Err(checkpoint_error(
-            weights,
-            format!("{blocks} blocks 'pretrained.blocks.*', the {encoder} encoder has {}", encoder.vit().depth),
+        return Err(format!(
+            "{blocks} blocks 'pretrained.blocks.*', the {encoder} encoder has {}",
+            encoder.vit().depth
         ));
     }
-    Ok(encoder)
+    for (i, channels) in encoder.out_channels().into_iter().enumerate() {
+        let key = format!("depth_head.projects.{i}.weight");
+        match shape(&key) {
+            Some(s) if s.first() == Some(&channels) => {}
+            Some(s) => {
+                return Err(format!("key '{key}' has shape {s:?}, the {encoder} encoder projects to {channels}"));
+            }
+            None => return Err(format!("missing key '{key}'")),
+        }
+    }
+    let key = "depth_head.scratch.layer1_rn.weight";
+    match shape(key) {
+        Some(s) if s.first() == Some(&encoder.features()) => Ok(encoder),
+        Some(s) => Err(format!(
+            "key '{key}' has shape {s:?}, the {encoder} encoder's head has {} features",
+            encoder.features()
+        )),
+        None => Err(format!("missing key '{key}'")),
+    }
 }
 
 #[cfg(test)]
