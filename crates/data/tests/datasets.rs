@@ -7,8 +7,8 @@ use std::path::Path;
 use std::sync::Arc;
 
 use dgstereo_data::datasets::{
-    KittiVersion, SceneFlowPass, SceneFlowSubset, drivingstereo, eth3d, folder_pairs, kitti, middlebury2014,
-    read_middlebury_calib, sceneflow,
+    DrivingStereoWeather, KittiVersion, SceneFlowPass, SceneFlowSubset, drivingstereo, eth3d, folder_pairs, kitti,
+    middlebury2014, read_middlebury_calib, sceneflow,
 };
 use dgstereo_data::{
     Dataset, DisparityMap, Mask, PrefetchLoader, RgbImage, SyntheticConfig, SyntheticDataset, ValidRule, save_mask,
@@ -145,10 +145,10 @@ fn drivingstereo_weathers() {
     let all = drivingstereo(&root, &[]).unwrap();
     assert_eq!(all.len(), 4);
     assert_eq!(all.files[0].group.as_deref(), Some("sunny"));
-    let rainy = drivingstereo(&root, &["rainy"]).unwrap();
+    let rainy = drivingstereo(&root, &[DrivingStereoWeather::Rainy]).unwrap();
     assert_eq!(rainy.len(), 2);
     assert_eq!(rainy.get(0).unwrap().disparity.unwrap().get(3, 2), 30.5);
-    assert!(drivingstereo(&root, &["foggy"]).unwrap_err().to_string().contains("foggy"));
+    assert!(drivingstereo(&root, &[DrivingStereoWeather::Foggy]).unwrap_err().to_string().contains("foggy"));
 }
 
 #[test]

@@ -1,5 +1,5 @@
-//! Folder layouts of Middlebury 2014, ETH3D two-view, KITTI 2012/2015, DrivingStereo and plain
-//! folders of pairs, plus Middlebury's `calib.txt`.
+//! Folder layouts of Middlebury 2014, ETH3D two-view, KITTI 2012/2015 and plain folders of pairs,
+//! plus Middlebury's `calib.txt`.
 
 use std::path::{Path, PathBuf};
 
@@ -190,44 +190,6 @@ pub fn kitti(root: &Path, version: KittiVersion) -> Result<FileDataset> {
             nonoccluded: some_file(root.join(noc).join(&n)),
         })
         .collect();
-    Ok(FileDataset { files, rule: ValidRule::Positive })
-}
-
-/// The four DrivingStereo weather subsets.
-pub const DRIVINGSTEREO_WEATHERS: [&str; 4] = ["sunny", "cloudy", "foggy", "rainy"];
-
-/// DrivingStereo weather subsets: `root/<weather>/left-image-full-size/*.jpg|png`,
-/// `right-image-full-size/`, `disparity-map-full-size/*.png` (16-bit /256, 0 = unknown); the
-/// `half-size` folders are used when the full-size ones are missing. `weathers` selects subsets
-/// (empty = all four present); each sample's group is its weather. Valid ground truth: `> 0`.
-pub fn drivingstereo(root: &Path, weathers: &[&str]) -> Result<FileDataset> {
-    let chosen: Vec<&str> = if weathers.is_empty() { DRIVINGSTEREO_WEATHERS.to_vec() } else { weathers.to_vec() };
-    let mut files = Vec::new();
-    for w in chosen {
-        let wdir = root.join(w);
-        if !wdir.is_dir() {
-            if weathers.is_empty() {
-                continue;
-            }
-            return Err(Error::format(&wdir, "DrivingStereo weather folder not found"));
-        }
-        let size = if wdir.join("left-image-full-size").is_dir() { "full-size" } else { "half-size" };
-        let left_dir = wdir.join(format!("left-image-{size}"));
-        let mut lefts = Vec::new();
-        walk(&left_dir, &mut lefts)?;
-        for left in lefts {
-            let name = file_name(&left);
-            let stem = left.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-            files.push(SampleFiles {
-                name: format!("{w}/{stem}"),
-                group: Some(w.to_string()),
-                right: wdir.join(format!("right-image-{size}")).join(&name),
-                disparity: some_file(wdir.join(format!("disparity-map-{size}")).join(format!("{stem}.png"))),
-                left,
-                nonoccluded: None,
-            });
-        }
-    }
     Ok(FileDataset { files, rule: ValidRule::Positive })
 }
 

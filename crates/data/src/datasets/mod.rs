@@ -1,17 +1,25 @@
 //! Datasets: layouts list the files of each sample ([`SampleFiles`]); a [`FileDataset`] reads
 //! them on demand into [`Sample`]s, applying the dataset's validity rule.
 //!
-//! Layout functions ([`middlebury2014`], [`eth3d`], [`sceneflow`], [`drivingstereo`],
-//! [`kitti`], [`folder_pairs`]) only walk folders, so listing is cheap and reading can happen on
-//! worker threads ([`crate::loader`]). [`SyntheticDataset`] renders samples instead of reading.
+//! Layout functions ([`middlebury2014`], [`middeval3`], [`eth3d`], [`sceneflow`],
+//! [`flyingthings_test`], [`drivingstereo`], [`kitti`], [`folder_pairs`]) only walk folders, so
+//! listing is cheap and reading can happen on worker threads ([`crate::loader`]).
+//! [`SyntheticDataset`] renders samples instead of reading.
 
+mod drivingstereo;
+mod flyingthings_subset;
 mod layouts;
+mod middeval3;
+mod numpy_permutation;
 mod sceneflow;
 
-pub use layouts::{
-    DRIVINGSTEREO_WEATHERS, KittiVersion, MiddleburyCalib, drivingstereo, eth3d, folder_pairs, kitti, middlebury2014,
-    read_middlebury_calib,
+pub use drivingstereo::{DrivingStereoWeather, drivingstereo};
+pub use flyingthings_subset::{
+    FlyingThingsTestSubset, RAFT_STEREO_SUBSET_SEED, RAFT_STEREO_SUBSET_SIZE, flyingthings_test,
 };
+pub use layouts::{KittiVersion, MiddleburyCalib, eth3d, folder_pairs, kitti, middlebury2014, read_middlebury_calib};
+pub use middeval3::{MiddleburySplit, middeval3, middeval3_splits_in};
+pub use numpy_permutation::numpy_permutation;
 pub use sceneflow::{SceneFlowPass, SceneFlowSubset, sceneflow};
 
 use std::path::PathBuf;

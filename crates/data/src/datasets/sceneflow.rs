@@ -35,6 +35,16 @@ pub enum SceneFlowPass {
     Final,
 }
 
+impl SceneFlowPass {
+    /// The pass's folder: `frames_cleanpass` or `frames_finalpass`.
+    pub fn folder(self) -> &'static str {
+        match self {
+            SceneFlowPass::Clean => "frames_cleanpass",
+            SceneFlowPass::Final => "frames_finalpass",
+        }
+    }
+}
+
 pub(super) fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
     let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| Error::io(dir, e))?
@@ -56,10 +66,7 @@ pub(super) fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
 /// Samples without a right image are skipped; a missing disparity file is listed as is (reading
 /// it then fails naming the file). Valid ground truth: `|d| < 512`, as RAFT's dense sets.
 pub fn sceneflow(root: &Path, subset: SceneFlowSubset, pass: SceneFlowPass) -> Result<FileDataset> {
-    let frames = root.join(match pass {
-        SceneFlowPass::Clean => "frames_cleanpass",
-        SceneFlowPass::Final => "frames_finalpass",
-    });
+    let frames = root.join(pass.folder());
     let start = match subset {
         SceneFlowSubset::FlyingThingsTrain => frames.join("TRAIN"),
         SceneFlowSubset::FlyingThingsTest => frames.join("TEST"),
