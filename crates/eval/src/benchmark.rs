@@ -11,7 +11,9 @@ use std::str::FromStr;
 use dgstereo_core::{Error, Result};
 use dgstereo_data::FileDataset;
 use dgstereo_data::datasets::{
-    KittiVersion, SceneFlowPass, SceneFlowSubset, drivingstereo, eth3d, folder_pairs, kitti, middlebury2014, sceneflow,
+    DrivingStereoWeather, FlyingThingsTestSubset, KittiVersion, MiddleburySplit, SceneFlowPass, SceneFlowSubset,
+    drivingstereo, eth3d, flyingthings_test, folder_pairs, kitti, middeval3, middeval3_splits_in, middlebury2014,
+    sceneflow,
 };
 use serde::{Deserialize, Serialize};
 
@@ -21,7 +23,8 @@ use crate::Protocol;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum DatasetKind {
-    /// Middlebury 2014 / MiddEval3: scene folders with im0.png, im1.png, disp0GT.pfm.
+    /// Middlebury: with a split (Q, H, F), the MiddEval3 folder; without one, a folder of scene
+    /// folders with im0.png, im1.png, disp0GT.pfm (a MiddEval3 split folder, Middlebury 2014).
     Middlebury,
     /// ETH3D two-view (two_view_training + two_view_training_gt).
     Eth3d,
@@ -29,9 +32,9 @@ pub enum DatasetKind {
     Kitti2012,
     /// KITTI 2015 training folder (image_2, image_3, disp_occ_0).
     Kitti2015,
-    /// SceneFlow FlyingThings3D finalpass TEST.
+    /// SceneFlow FlyingThings3D finalpass TEST (all pairs, or RAFT-Stereo's 400 with a subset).
     Sceneflow,
-    /// DrivingStereo weather subsets (sunny, cloudy, foggy, rainy).
+    /// DrivingStereo weather subsets (sunny, cloudy, foggy, rainy; all present, or one).
     Drivingstereo,
     /// A folder of pairs (`*left*`/`*right*` or im0/im1) with `*disp*` or disp0GT ground truth,
     /// e.g. the bundled Cones pair in assets/cones.
@@ -63,7 +66,8 @@ impl DatasetKind {
         }
     }
 
-    /// Lists the samples of the data set in `root`.
+    /// Lists the samples of the data set in `root`, without a split, weather or subset (see
+    /// [`BenchmarkConfig::load`] for those).
     pub fn load(self, root: &Path) -> Result<FileDataset> {
         match self {
             Self::Middlebury => middlebury2014(root),
@@ -128,6 +132,18 @@ pub struct BenchmarkConfig {
     /// smaller disparity range, such as the CPU smoke runs. Not the benchmark's protocol.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_size: Option<usize>,
+    /// Middlebury only: the MiddEval3 split (`"Q"`, `"H"`, `"F"`); `root` is then the MiddEval3
+    /// folder (see [`middeval3`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub split: Option<MiddleburySplit>,
+    /// DrivingStereo only: the one weather to score (`"sunny"`, `"cloudy"`, `"foggy"`,
+    /// `"rainy"`); without it every weather folder present, each a group of the table.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weather: Option<DrivingStereoWeather>,
+    /// SceneFlow only: which FlyingThings3D TEST pairs (`"all"`, the default, or
+    /// `"raft-stereo-400"`, RAFT-Stereo's validation subset).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub subset: Option<FlyingThingsTestSubset>,
 }
 
 fn default_iters() -> usize {
@@ -151,6 +167,70 @@ impl BenchmarkConfig {
         m
     }
 
+    /// A benchmark of `dataset` in `root` with the default settings (32 iterations, every
+    /// sample, no split, weather or subset).
+    pub fn new(dataset: DatasetKind, root: impl Into<PathBuf>) -> Self {
+        Self {
+            name: None,
+            dataset,
+            root: root.into(),
+            iters: default_iters(),
+            limit: None,
+            max_size: None,
+            split: None,
+            weather: None,
+            subset: None,
+        }
+    }
+
+    /// The options set for another data set than the one they belong to, as `(key, message)`:
+    /// `split` belongs to middlebury, `weather` to drivingstereo, `subset` to sceneflow.
+    pub fn option_problems(&self) -> Vec<(&'static str, String)> {
+        let set = [
+            ("split", self.split.is_some(), DatasetKind::Middlebury),
+            ("weather", self.weather.is_some(), DatasetKind::Drivingstereo),
+            ("subset", self.subset.is_some(), DatasetKind::Sceneflow),
+        ];
+        set.into_iter()
+            .filter(|(_, given, owner)| *given && *owner != self.dataset)
+            .map(|(key, _, owner)| (key, format!("only a {owner} benchmark has a {key}; this one is {}", self.dataset)))
+            .collect()
+    }
+
+    /// Lists the benchmark's samples: the data set in `root` with the split, weather or subset.
+    ///
+    /// # Errors
+    /// An option that belongs to another data set (naming the key), a MiddEval3 folder given
+    /// without a split, and the layout reader's errors (naming the folder).
+    pub fn load(&self) -> Result<FileDataset> {
+        if let Some((key, message)) = self.option_problems().into_iter().next() {
+            return Err(Error::Config(format!("benchmark '{}': {key}: {message}", self.label())));
+        }
+        match self.dataset {
+            DatasetKind::Middlebury => match self.split {
+                Some(split) => middeval3(&self.root, split),
+                None => {
+                    let splits = middeval3_splits_in(&self.root);
+                    if !splits.is_empty() {
+                        let names: Vec<&str> = splits.iter().map(|s| s.name()).collect();
+                        return Err(Error::Config(format!(
+                            "benchmark '{}': root {} is a MiddEval3 folder: set split to one of {}",
+                            self.label(),
+                            self.root.display(),
+                            names.join(", ")
+                        )));
+                    }
+                    middlebury2014(&self.root)
+                }
+            },
+            DatasetKind::Drivingstereo => drivingstereo(&self.root, self.weather.as_slice()),
+            DatasetKind::Sceneflow => {
+                flyingthings_test(&self.root, SceneFlowPass::Final, self.subset.unwrap_or_default())
+            }
+            other => other.load(&self.root),
+        }
+    }
+
     /// Lists the samples to score (the first `limit`), with a clear error when the folder is
     /// missing or holds no sample with ground truth.
     pub fn dataset(&self) -> Result<(FileDataset, Vec<usize>)> {
@@ -161,7 +241,7 @@ impl BenchmarkConfig {
                 self.root.display()
             )));
         }
-        let dataset = self.dataset.load(&self.root)?;
+        let dataset = self.load()?;
         if !dataset.files.iter().any(|f| f.disparity.is_some()) {
             return Err(Error::Config(format!(
                 "benchmark '{}': no sample in {} has ground truth disparity",
@@ -200,14 +280,7 @@ mod tests {
 
     #[test]
     fn table_metrics_follow_the_protocol() {
-        let b = |d| BenchmarkConfig {
-            name: None,
-            dataset: d,
-            root: PathBuf::new(),
-            iters: 32,
-            limit: None,
-            max_size: None,
-        };
+        let b = |d| BenchmarkConfig::new(d, PathBuf::new());
         assert_eq!(b(DatasetKind::Middlebury).table_metrics(), vec!["epe", "bad-2"]);
         assert_eq!(b(DatasetKind::Kitti2015).table_metrics()[0], "epe");
         assert_eq!(b(DatasetKind::Folder).table_metrics(), vec!["epe", "bad-2", "bad-3"]);

@@ -122,11 +122,15 @@ fn leading_key(message: &str) -> String {
         .to_string()
 }
 
-/// Benchmark labels name table columns: each once; at least one iteration.
+/// Benchmark labels name table columns: each once; at least one iteration; a split, weather or
+/// subset only on the data set it belongs to.
 fn check_benchmarks(benchmarks: &[BenchmarkConfig], add: &mut impl FnMut(&str, String)) {
     for (i, b) in benchmarks.iter().enumerate() {
         if b.iters == 0 {
             add(&format!("benchmarks[{i}].iters"), "must be at least 1".into());
+        }
+        for (key, message) in b.option_problems() {
+            add(&format!("benchmarks[{i}].{key}"), message);
         }
         if benchmarks[..i].iter().any(|o| o.label() == b.label()) {
             add(&format!("benchmarks[{i}].name"), format!("'{}' is used twice: give each benchmark a name", b.label()));

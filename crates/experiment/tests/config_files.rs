@@ -374,3 +374,28 @@ fn checkpoint_paths_need_not_exist_to_validate() {
     let device = dgstereo_core::default_device();
     assert!(config.prior.init(&device).is_err());
 }
+
+#[test]
+fn benchmark_options_belong_to_their_data_set() {
+    let files = Files::new(&[
+        (
+            "wrong.toml",
+            "name = \"wrong\"\n[[benchmarks]]\nname = \"k\"\ndataset = \"kitti2015\"\nroot = \"x\"\nweather = \"sunny\"\n",
+        ),
+        (
+            "right.toml",
+            "name = \"right\"\n[[benchmarks]]\ndataset = \"middlebury\"\nroot = \"MiddEval3\"\nsplit = \"H\"\n",
+        ),
+        (
+            "typo.toml",
+            "name = \"typo\"\n[[benchmarks]]\ndataset = \"drivingstereo\"\nroot = \"x\"\nweather = \"snowy\"\n",
+        ),
+    ]);
+    let message = files.error("wrong.toml");
+    names(&message, "wrong.toml", "benchmarks[0].weather");
+    assert!(message.contains("drivingstereo"), "{message}");
+    assert_eq!(files.one("right.toml").benchmarks[0].split.map(|s| s.name()), Some("H"));
+    let message = files.error("typo.toml");
+    names(&message, "typo.toml", "benchmarks");
+    assert!(message.contains("snowy") && message.contains("rainy"), "{message}");
+}
