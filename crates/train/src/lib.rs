@@ -13,7 +13,9 @@
 //! and the step reproduces an uninterrupted run exactly. [`run::train`] is the loop: logging
 //! (JSONL, progress bar), validation, plots and atomic checkpoints that keep the last N.
 //! `train.ema_decay` adds a moving average of the weights ([`ema`]) that validation, checkpoints'
-//! model weights and the final model use.
+//! model weights and the final model use. [`ablation`] scores finished runs into the ablation
+//! table, and [`paper_report`] lays them out in the paper's tables beside its published figures
+//! ([`paper_tables`]).
 #![deny(missing_docs)]
 
 pub mod ablation;
@@ -22,6 +24,8 @@ pub mod checkpoint;
 pub mod clip;
 mod config;
 pub mod ema;
+pub mod paper_report;
+pub mod paper_tables;
 pub mod params;
 pub mod plot;
 pub mod run;

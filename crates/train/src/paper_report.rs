@@ -1,0 +1,194 @@
+//! Our runs in the paper's ablation tables, optionally beside the published figures.
+//!
+//! [`PaperComparison::new`] fills one of [`PAPER_TABLES`] from run results: a row takes the
+//! scores of the run named by [`PaperRow::run`], a column the metric of the benchmark named by
+//! [`PaperColumn::benchmark`] (the `[[benchmarks]]` names of `experiments/paper.toml`); anything
+//! missing stays unknown (NaN, shown as `–`). Design decision: matching by name keeps the tables
+//! a pure function of what `dgstereo ablate` scored, so the same runs always give the same
+//! tables, and a partial ablation (some rows trained, some benchmarks present) still fills what it
+//! can. With the published figures, each row is three lines: ours, the paper's, and ours minus the
+//! paper's (every metric is an error, so a positive difference is worse than published).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use dgstereo_core::Result;
+use dgstereo_eval::Metrics;
+
+use crate::checkpoint::write_atomic;
+use crate::paper_tables::{PAPER_SOURCE, PAPER_TABLES, PaperTable};
+
+/// A run's results: its name and, per benchmark name, the benchmark's aggregate metrics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunScores {
+    /// The run's name (an experiment file's `name`, with a sweep suffix).
+    pub run: String,
+    /// `(benchmark name, metrics)` for each benchmark the run was scored on.
+    pub scores: Vec<(String, Metrics)>,
+}
+
+/// One of the paper's tables filled with our values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PaperComparison {
+    /// The published table (layout and figures).
+    pub table: &'static PaperTable,
+    /// Our value per row and column of the table (NaN where unknown).
+    pub ours: Vec<Vec<f64>>,
+    /// Per row, whether its run is among the results.
+    pub found: Vec<bool>,
+}
+
+impl PaperComparison {
+    /// Fills `table` from `runs` (see the module doc).
+    pub fn new(table: &'static PaperTable, runs: &[RunScores]) -> Self {
+        let mut ours = Vec::with_capacity(table.rows.len());
+        let mut found = Vec::with_capacity(table.rows.len());
+        for row in table.rows {
+            let run = runs.iter().find(|r| r.run == row.run);
+            found.push(run.is_some());
+            ours.push(
+                table
+                    .columns
+                    .iter()
+                    .map(|c| {
+                        run.and_then(|r| r.scores.iter().find(|(b, _)| b == c.benchmark))
+                            .and_then(|(_, m)| m.get(c.metric))
+                            .unwrap_or(f64::NAN)
+                    })
+                    .collect(),
+            );
+        }
+        Self { table, ours, found }
+    }
+
+    /// Whether any row's run is among the results.
+    pub fn has_runs(&self) -> bool {
+        self.found.iter().any(|f| *f)
+    }
+
+    /// The column headings as the paper writes them: the benchmark before its first metric
+    /// (`Midd-H EPE`, `D2`, `DS-Sunny EPE`, `D3`, ...).
+    pub fn headings(&self) -> Vec<String> {
+        let columns = self.table.columns;
+        columns
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                if i == 0 || columns[i - 1].benchmark != c.benchmark {
+                    format!("{} {}", c.heading, c.metric_heading)
+                } else {
+                    c.metric_heading.to_string()
+                }
+            })
+            .collect()
+    }
+
+    /// The lines of row `r`: `(source, values)` for ours and, `with_paper`, the paper's and the
+    /// difference.
+    fn lines(&self, r: usize, with_paper: bool) -> Vec<(&'static str, Vec<f64>)> {
+        let mut lines = vec![("ours", self.ours[r].clone())];
+        if with_paper {
+            let paper = self.table.rows[r].values;
+            lines.push(("paper", paper.to_vec()));
+            lines.push(("difference", self.ours[r].iter().zip(paper).map(|(o, p)| o - p).collect()));
+        }
+        lines
+    }
+
+    /// The table as Markdown, values to the paper's two decimals (see the module doc).
+    pub fn to_markdown(&self, with_paper: bool) -> String {
+        let t = self.table;
+        let mut s = format!("### Table {}: {}\n\n| row | run |", t.number, t.title);
+        if with_paper {
+            s += " |";
+        }
+        for h in self.headings() {
+            let _ = write!(s, " {h} |");
+        }
+        s += if with_paper { "\n|---|---|---|" } else { "\n|---|---|" };
+        s += &"---:|".repeat(t.columns.len());
+        s.push('\n');
+        for (r, row) in t.rows.iter().enumerate() {
+            let run = if self.found[r] { format!("`{}`", row.run) } else { format!("`{}` (not run)", row.run) };
+            for (k, (source, values)) in self.lines(r, with_paper).into_iter().enumerate() {
+                s += &if k == 0 { format!("| {} | {run} |", row.label) } else { "| | |".to_string() };
+                if with_paper {
+                    let _ = write!(s, " {source} |");
+                }
+                for v in values {
+                    let text = match (v.is_finite(), source) {
+                        (false, _) => "–".to_string(),
+                        (true, "difference") => format!("{v:+.2}"),
+                        (true, _) => format!("{v:.2}"),
+                    };
+                    let _ = write!(s, " {text} |");
+                }
+                s.push('\n');
+            }
+        }
+        if with_paper {
+            let _ = write!(s, "\nPublished figures: {PAPER_SOURCE}.\n");
+        }
+        s
+    }
+
+    /// The table as CSV: `row,run,source,<benchmark heading> <metric heading>,...`, one line per
+    /// row (`source` = `ours`) and, `with_paper`, `paper` and `difference` lines; unknown values
+    /// are empty cells.
+    pub fn to_csv(&self, with_paper: bool) -> String {
+        let t = self.table;
+        let mut s = String::from("row,run,source");
+        for c in t.columns {
+            let _ = write!(s, ",{} {}", c.heading, c.metric_heading);
+        }
+        s.push('\n');
+        for (r, row) in t.rows.iter().enumerate() {
+            for (source, values) in self.lines(r, with_paper) {
+                let _ = write!(s, "{},{},{source}", csv_cell(row.label), csv_cell(row.run));
+                for v in values {
+                    s += &match (v.is_finite(), source) {
+                        (false, _) => ",".to_string(),
+                        (true, "difference") => format!(",{v:.6}"),
+                        (true, _) => format!(",{v}"),
+                    };
+                }
+                s.push('\n');
+            }
+        }
+        s
+    }
+}
+
+fn csv_cell(text: &str) -> String {
+    if text.contains([',', '"', '\n']) { format!("\"{}\"", text.replace('"', "\"\"")) } else { text.to_string() }
+}
+
+/// The paper's four ablation tables filled from `runs`, in the paper's order.
+pub fn compare_with_paper(runs: &[RunScores]) -> Vec<PaperComparison> {
+    PAPER_TABLES.iter().map(|t| PaperComparison::new(t, runs)).collect()
+}
+
+/// All tables as one Markdown document, with a line on how ours were matched.
+pub fn paper_tables_markdown(tables: &[PaperComparison], with_paper: bool) -> String {
+    let mut s = String::from(
+        "# The paper's ablation tables\n\nOurs: each row is the run it names, each column a \
+         `[[benchmarks]]` entry of that name scored under its protocol (EPE in px; D1/D2/D3 the % \
+         of pixels with an error over 1/2/3 px); `–` where the run or the benchmark is missing.\n",
+    );
+    for t in tables {
+        s.push('\n');
+        s += &t.to_markdown(with_paper);
+    }
+    s
+}
+
+/// Writes `paper-tables.md` (every table) and `paper-table<N>.csv` (one per table) into `dir`,
+/// atomically.
+pub fn write_paper_tables(tables: &[PaperComparison], dir: &Path, with_paper: bool) -> Result<()> {
+    write_atomic(&dir.join("paper-tables.md"), paper_tables_markdown(tables, with_paper).as_bytes())?;
+    for t in tables {
+        let path = dir.join(format!("paper-table{}.csv", t.table.number));
+        write_atomic(&path, t.to_csv(with_paper).as_bytes())?;
+    }
+    Ok(())
+}
