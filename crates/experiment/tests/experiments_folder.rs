@@ -172,3 +172,58 @@ fn smoke_files_build_and_run() {
     // The smoke models are a fraction of RAFT-Stereo's size.
     assert!(counts.iter().all(|(_, n)| *n < 11_116_176), "{counts:?}");
 }
+
+#[test]
+fn the_paper_trains_with_batch_4_and_scores_its_seven_columns() {
+    use dgstereo_eval::DatasetKind;
+    use dgstereo_train::paper_tables::GENERALISATION_COLUMNS;
+    let paper = one("paper.toml");
+    assert_eq!(paper.train.batch_size, 4, "the paper: \"we set batch size to 4\"");
+    let benchmarks: Vec<(&str, DatasetKind, Option<&str>, Option<&str>)> = paper
+        .benchmarks
+        .iter()
+        .map(|b| (b.label(), b.dataset, b.split.map(|s| s.name()), b.weather.map(|w| w.name())))
+        .collect();
+    use DatasetKind::{Drivingstereo, Eth3d, Kitti2015, Middlebury};
+    assert_eq!(
+        benchmarks,
+        [
+            ("middlebury-h", Middlebury, Some("H"), None),
+            ("drivingstereo-sunny", Drivingstereo, None, Some("sunny")),
+            ("drivingstereo-cloudy", Drivingstereo, None, Some("cloudy")),
+            ("drivingstereo-foggy", Drivingstereo, None, Some("foggy")),
+            ("drivingstereo-rainy", Drivingstereo, None, Some("rainy")),
+            ("kitti2015", Kitti2015, None, None),
+            ("eth3d", Eth3d, None, None),
+        ]
+    );
+    // The paper's tables read these benchmarks, in this order, with the metrics they show.
+    let columns: Vec<(&str, &str)> = GENERALISATION_COLUMNS.iter().map(|c| (c.benchmark, c.metric)).collect();
+    let shown: Vec<(&str, &str)> =
+        paper.benchmarks.iter().flat_map(|b| b.table_metrics().into_iter().map(move |m| (b.label(), m))).collect();
+    let shown_in_paper: Vec<(&str, &str)> = shown.into_iter().filter(|(_, m)| *m != "d1-all").collect();
+    assert_eq!(shown_in_paper, columns);
+    assert!(paper.benchmarks.iter().all(|b| b.iters == 32));
+    // Every row inherits the benchmarks.
+    for file in ["baseline.toml", "+dgia.toml", "depth-guided-gru.toml"] {
+        assert_eq!(one(file).benchmarks, paper.benchmarks, "{file}");
+    }
+}
+
+#[test]
+fn every_row_of_the_papers_tables_is_a_run_of_the_folder() {
+    let mut files = Vec::new();
+    toml_files(&experiments_dir(), &mut files);
+    let runs: Vec<String> = files.iter().flat_map(|f| load(f).unwrap()).map(|r| r.name).collect();
+    for table in &dgstereo_train::paper_tables::PAPER_TABLES {
+        for row in table.rows {
+            assert!(
+                runs.iter().any(|r| r == row.run),
+                "Table {} row {}: no run '{}'",
+                table.number,
+                row.label,
+                row.run
+            );
+        }
+    }
+}
