@@ -154,11 +154,19 @@ fn ablate_scores_benchmarks_and_reuses_finished_runs() {
     let modified = |p: &Path| std::fs::metadata(p).unwrap().modified().unwrap();
     let model = out.join("tiny/model.safetensors");
     let before = modified(&model);
-    let o = dgstereo(&args);
+    // The paper's tables are written too; the run matches none of their rows.
+    let tables = std::fs::read_to_string(out.join("paper-tables.md")).unwrap();
+    assert!(tables.contains("### Table 5: EALS's threshold tau") && !tables.contains("1.81"), "{tables}");
+    let o = dgstereo(&[&args[..], &["--paper"]].concat());
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("reusing it"), "{}", text(&o));
     assert_eq!(modified(&model), before, "a finished run is not trained again");
     assert_eq!(std::fs::read_to_string(out.join("ablation.csv")).unwrap(), csv, "same scores on reuse");
+    // --paper sets the published figures beside ours: Table 2's baseline row reads 1.81.
+    let tables = std::fs::read_to_string(out.join("paper-tables.md")).unwrap();
+    assert!(tables.contains("| | | paper | 1.81 | 8.34 |"), "{tables}");
+    let table2 = std::fs::read_to_string(out.join("paper-table2.csv")).unwrap();
+    assert!(table2.contains("Baseline,baseline,paper,1.81,8.34,"), "{table2}");
 }
 
 #[test]

@@ -6,6 +6,9 @@
 //! scored on its held-out synthetic validation set (`[data.validation]`, column `synthetic`) and
 //! on each of its `[[benchmarks]]` (a real data set under its protocol: EPE and the protocol's
 //! headline rate); the table's columns are the union over the runs, NaN where a run lacks one.
+//! The same scores fill the paper's four ablation tables (`paper-tables.md`,
+//! `paper-table{2,3,4,5}.csv`): rows are matched to runs and columns to benchmarks by name, and
+//! `--paper` sets the published figures and our distance from them beside ours.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -14,6 +17,7 @@ use anyhow::Context;
 use clap::Args;
 use dgstereo_core::DeviceChoice;
 use dgstereo_train::ablation::{AblationTable, FinishedRun, TABLE_METRICS, evaluate_benchmark, evaluate_finished_run};
+use dgstereo_train::paper_report::{RunScores, compare_with_paper, write_paper_tables};
 use dgstereo_train::run::{checkpoint_dir, is_finished};
 
 use super::train::{folder_name, parts_of, train_one};
@@ -36,6 +40,10 @@ pub struct AblateArgs {
     /// No progress bars.
     #[arg(long)]
     pub quiet: bool,
+    /// Show the paper's published figures beside ours in its tables: ours, the paper's, and ours
+    /// minus the paper's.
+    #[arg(long)]
+    pub paper: bool,
 }
 
 pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
@@ -53,6 +61,7 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
         }
     }
     let mut table = AblationTable::new(columns);
+    let mut scored: Vec<RunScores> = Vec::new();
     for run in runs {
         let name = run.name.clone();
         let out = a.out.join(folder_name(&name));
@@ -89,8 +98,14 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
         }
         table.push(&name, &scores);
         table.write(&a.out)?;
+        scored.push(RunScores { run: name, scores });
+        write_paper_tables(&compare_with_paper(&scored), &a.out, a.paper)?;
     }
     println!("\n{}", table.to_markdown());
+    for paper_table in compare_with_paper(&scored).iter().filter(|t| t.has_runs()) {
+        println!("{}", paper_table.to_markdown(a.paper));
+    }
     println!("tables written to {}/ablation.{{md,csv,json}}", a.out.display());
+    println!("the paper's tables written to {}/paper-tables.md and paper-table{{2,3,4,5}}.csv", a.out.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -5,7 +5,9 @@
 //! ones where a mask exists) into a table printed as text and written as `eval.csv` and
 //! `eval.json` in `--out`. The protocol follows the data set (KITTI: bad-3 pooled; Middlebury:
 //! bad-2 per image; ETH3D: bad-1 per image; SceneFlow: FlyingThings3D finalpass TEST, bad-1
-//! pooled; DrivingStereo: EPE and bad-3 per weather; folder: generic). `--max-size` makes the
+//! pooled; DrivingStereo: EPE and bad-3 per weather; folder: generic). `--split`, `--weather`
+//! and `--subset` choose MiddEval3's resolution, one DrivingStereo weather and RAFT-Stereo's 400
+//! FlyingThings3D pairs, as an experiment's `[[benchmarks]]` keys of the same names do. `--max-size` makes the
 //! numbers differ from the benchmark's (it is for quick looks and tests) and is reported in the
 //! output, as is the upscaling of small pairs that `--min-size` (default `auto`) applies to
 //! 1/8-resolution models: the predictions are scored at the data set's size either way.
@@ -18,22 +20,32 @@ use std::time::Instant;
 use anyhow::bail;
 use clap::Args;
 use dgstereo_data::Dataset;
-use dgstereo_eval::{DatasetKind, evaluate_dataset};
+use dgstereo_data::datasets::{DrivingStereoWeather, FlyingThingsTestSubset, MiddleburySplit, middeval3_splits_in};
+use dgstereo_eval::{BenchmarkConfig, DatasetKind, evaluate_dataset};
 
 use crate::engine::{Engine, ModelArgs, error_line};
 
 /// Options of `dgstereo eval`.
 #[derive(Args)]
 pub struct EvalArgs {
-    /// Data set layout: middlebury (MiddEval3 / 2014 scene folders), eth3d (two-view training),
-    /// kitti2012, kitti2015 (training folders), sceneflow (FlyingThings3D finalpass TEST),
-    /// drivingstereo (weather subsets), folder (pairs with `*disp*` or disp0GT ground truth, e.g.
-    /// assets/cones).
+    /// Data set layout: middlebury (the MiddEval3 folder with --split, or a folder of scene
+    /// folders), eth3d (two-view training), kitti2012, kitti2015 (training folders), sceneflow
+    /// (FlyingThings3D finalpass TEST), drivingstereo (weather subsets), folder (pairs with
+    /// `*disp*` or disp0GT ground truth, e.g. assets/cones).
     #[arg(long)]
     dataset: DatasetKind,
     /// Root folder of the data set.
     #[arg(long)]
     root: PathBuf,
+    /// Middlebury: the MiddEval3 split Q, H or F (--root is then the MiddEval3 folder).
+    #[arg(long)]
+    split: Option<MiddleburySplit>,
+    /// DrivingStereo: score one weather (sunny, cloudy, foggy, rainy) instead of all present.
+    #[arg(long)]
+    weather: Option<DrivingStereoWeather>,
+    /// SceneFlow: all TEST pairs, or raft-stereo-400 (RAFT-Stereo's validation subset).
+    #[arg(long)]
+    subset: Option<FlyingThingsTestSubset>,
     /// Output folder for eval.csv and eval.json.
     #[arg(long, default_value = "out/eval")]
     out: PathBuf,
@@ -53,7 +65,19 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
     if !a.root.is_dir() {
         bail!("{}: --root must be the data set's folder", a.root.display());
     }
-    let dataset = a.dataset.load(&a.root)?;
+    let benchmark = BenchmarkConfig {
+        split: a.split,
+        weather: a.weather,
+        subset: a.subset,
+        ..BenchmarkConfig::new(a.dataset, &a.root)
+    };
+    if let Some((key, message)) = benchmark.option_problems().into_iter().next() {
+        bail!("--{key}: {message}");
+    }
+    if a.dataset == DatasetKind::Middlebury && a.split.is_none() && !middeval3_splits_in(&a.root).is_empty() {
+        bail!("{}: a MiddEval3 folder: choose its split with --split Q, H or F", a.root.display());
+    }
+    let dataset = benchmark.load()?;
     if dataset.files.is_empty() {
         bail!("{}: no {} samples found in this folder", a.root.display(), a.dataset);
     }
