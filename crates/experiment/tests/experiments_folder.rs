@@ -204,6 +204,11 @@ fn the_paper_trains_with_batch_4_and_scores_its_seven_columns() {
     let shown_in_paper: Vec<(&str, &str)> = shown.into_iter().filter(|(_, m)| *m != "d1-all").collect();
     assert_eq!(shown_in_paper, columns);
     assert!(paper.benchmarks.iter().all(|b| b.iters == 32));
+    // The resolved file (what a run folder keeps) loads back with its splits and weathers.
+    let dir = tempfile::tempdir().unwrap();
+    let resolved = dir.path().join("paper.toml");
+    std::fs::write(&resolved, paper.to_toml()).unwrap();
+    assert_eq!(load(&resolved).unwrap()[0].config, paper);
     // Every row inherits the benchmarks.
     for file in ["baseline.toml", "+dgia.toml", "depth-guided-gru.toml"] {
         assert_eq!(one(file).benchmarks, paper.benchmarks, "{file}");
