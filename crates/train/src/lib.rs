@@ -32,4 +32,4 @@ pub mod validate;
 pub use config::{DataSource, TrainingConfig, TrainingDataConfig, ValidationConfig};
 pub use run::{RunOptions, RunSummary, train};
 pub use schedule::OneCycleLr;
-pub use trainer::{StepReport, TrainParts, Trainer};
+pub use trainer::{StepInternals, StepReport, TrainParts, Trainer};
