@@ -13,7 +13,8 @@
 //! and the step reproduces an uninterrupted run exactly. [`run::train`] is the loop: logging
 //! (JSONL, progress bar), validation, plots and atomic checkpoints that keep the last N.
 //! `train.ema_decay` adds a moving average of the weights ([`ema`]) that validation, checkpoints'
-//! model weights and the final model use.
+//! model weights and the final model use. [`verify_step`] checks two steps against the official
+//! training loop.
 #![deny(missing_docs)]
 
 pub mod ablation;
@@ -28,6 +29,7 @@ pub mod run;
 pub mod schedule;
 pub mod trainer;
 pub mod validate;
+pub mod verify_step;
 
 pub use config::{DataSource, TrainingConfig, TrainingDataConfig, ValidationConfig};
 pub use run::{RunOptions, RunSummary, train};
