@@ -19,6 +19,7 @@ bench:
 # Conformance with the official RAFT-Stereo code on the reference activations.
 verify:
     cargo run --release -p dgstereo -- verify raft-stereo --weights ../shared/golden/raft_stereo_random.pth --reference ../shared/golden/raft_stereo_random.activations.safetensors
+    cargo run --release -p dgstereo -- verify train-step --weights ../shared/golden/raft_stereo_random.pth --reference ../shared/golden/raft_stereo_random.train_step.safetensors
 
 # Resolve, validate and smoke-test every experiment file.
 check-experiments:

@@ -28,6 +28,18 @@ const RENAMES: &[(&str, &str)] = &[
     (r"update_block\.mask\.2\.", "update_block.mask.conv2."),
 ];
 
+/// Our module path of an official state-dict key (with or without the `module.` prefix): the
+/// renames the loader applies, and `downsample.1`, the same BatchNorm as the block's `norm3` in
+/// the reference, as `norm3`.
+pub fn module_path_of_official_key(key: &str) -> String {
+    let mut path = key.to_string();
+    let renames = burn::store::KeyRemapper::from_patterns(RENAMES.to_vec()).expect("the renames are valid patterns");
+    for (pattern, replacement) in renames.patterns.iter() {
+        path = pattern.replace_all(&path, replacement.as_str()).into_owned();
+    }
+    path.replace("downsample.1.", "norm3.")
+}
+
 /// Whether an unused checkpoint key is one the reference stores redundantly.
 fn ignorable(key: &str) -> bool {
     key.ends_with("num_batches_tracked") || key.contains("downsample.1.")

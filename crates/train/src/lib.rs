@@ -15,7 +15,7 @@
 //! `train.ema_decay` adds a moving average of the weights ([`ema`]) that validation, checkpoints'
 //! model weights and the final model use. [`ablation`] scores finished runs into the ablation
 //! table, and [`paper_report`] lays them out in the paper's tables beside its published figures
-//! ([`paper_tables`]).
+//! ([`paper_tables`]). [`verify_step`] checks two steps against the official training loop.
 #![deny(missing_docs)]
 
 pub mod ablation;
@@ -32,8 +32,9 @@ pub mod run;
 pub mod schedule;
 pub mod trainer;
 pub mod validate;
+pub mod verify_step;
 
 pub use config::{DataSource, TrainingConfig, TrainingDataConfig, ValidationConfig};
 pub use run::{RunOptions, RunSummary, train};
 pub use schedule::OneCycleLr;
-pub use trainer::{StepReport, TrainParts, Trainer};
+pub use trainer::{StepInternals, StepReport, TrainParts, Trainer};

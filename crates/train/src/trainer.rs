@@ -71,6 +71,17 @@ pub struct StepReport {
     pub grad_norm: f64,
 }
 
+/// What a step computed before clipping and the update, lent to the observer of
+/// [`Trainer::step_on`].
+pub struct StepInternals<'a> {
+    /// The network the step started from (autodiff device).
+    pub model: &'a RaftStereo,
+    /// Positive disparity after every iteration, `[N, 1, H, W]` each.
+    pub predictions: &'a [Tensor<4>],
+    /// The gradients, before clipping.
+    pub grads: &'a GradientsParams,
+}
+
 /// A run in progress: the network on the autodiff device, the optimiser and the step counter.
 pub struct Trainer {
     /// The run's parts.
@@ -95,12 +106,22 @@ pub struct Trainer {
 
 /// The AdamW of a recipe (decoupled weight decay, PyTorch's update).
 pub fn adamw(train: &TrainingConfig) -> ModuleOptimizer {
+    adamw_config(train).init()
+}
+
+/// The settings of the recipe's AdamW, for callers that build the optimiser themselves.
+///
+/// burn-optim's AdamW computes PyTorch's update: `p <- p * (1 - lr * weight_decay)`, then
+/// `p <- p - lr * m_hat / (sqrt(v_hat) + eps)` with both moments bias-corrected
+/// (`m_hat = m / (1 - beta1^t)`, `v_hat = v / (1 - beta2^t)`). It forms the corrections in
+/// float32, 1.3e-5 relative from PyTorch's float64 ones at `t = 1`, far below what a training
+/// step can show.
+pub fn adamw_config(train: &TrainingConfig) -> AdamWConfig {
     AdamWConfig::new()
         .with_beta_1(train.betas[0] as f32)
         .with_beta_2(train.betas[1] as f32)
         .with_epsilon(train.eps as f32)
         .with_weight_decay(train.weight_decay as f32)
-        .init()
 }
 
 /// A freshly initialised network of `config` on `device`, the backend's generator first seeded
@@ -221,14 +242,27 @@ impl Trainer {
         Ok(Self { parts, model, optimizer, schedule, step, ema, device: device.clone(), autodiff, data, prior })
     }
 
-    /// Takes one step. On NaN or inf in the loss or the gradients, fails naming the step and
-    /// what was not finite, and leaves the weights and optimiser state untouched.
+    /// Takes one step on the run's batch of the current step ([`crate::batch`]). On NaN or inf
+    /// in the loss or the gradients, fails naming the step and what was not finite, and leaves
+    /// the weights and optimiser state untouched.
     pub fn step(&mut self) -> Result<StepReport> {
+        let pairs = self.data.batch(self.step, self.parts.train.batch_size)?;
+        let batch = to_tensors(&pairs, &self.autodiff)?;
+        self.step_on(&batch, None)
+    }
+
+    /// Takes one step on `batch` (on the autodiff device): prior, forward over all training
+    /// iterations, loss, backward, clipping, AdamW at the schedule's rate of the current step.
+    /// `observe`, when given, sees the predictions and the gradients before clipping
+    /// ([`StepInternals`]); conformance checks read them there. Fails as [`Trainer::step`].
+    pub fn step_on(
+        &mut self,
+        batch: &TensorBatch,
+        observe: Option<&mut dyn FnMut(StepInternals<'_>)>,
+    ) -> Result<StepReport> {
         let step = self.step;
         let t = &self.parts.train;
-        let pairs = self.data.batch(step, t.batch_size)?;
-        let batch = to_tensors(&pairs, &self.autodiff)?;
-        let prior = batch_prior(&self.prior, self.parts.model.needs_prior(), &batch)?;
+        let prior = batch_prior(&self.prior, self.parts.model.needs_prior(), batch)?;
         let predictions = forward_disparities(
             &self.model,
             &self.parts.model,
@@ -250,6 +284,9 @@ impl Trainer {
         let last = predictions.last().expect("at least one iteration").clone().detach();
         let sums = batch_metrics(last, batch.target.disparity_bilinear.clone(), batch.target.valid.clone())?;
         let grads = GradientsParams::from_grads(loss.backward(), &self.model);
+        if let Some(observe) = observe {
+            observe(StepInternals { model: &self.model, predictions: &predictions, grads: &grads });
+        }
         let (grads, clip) = clip_global_norm(&self.model, grads, t.clip);
         if let Some(param) = clip.non_finite {
             return Err(Error::Other(format!(

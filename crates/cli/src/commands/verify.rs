@@ -1,15 +1,19 @@
 //! `dgstereo verify`: conformance with the official PyTorch code.
 //!
 //! Each subcommand loads a checkpoint in the official layout, runs it on the input stored in a
-//! reference activations file, prints one line per reference tensor with its largest absolute
-//! error, and exits with status 1 when any tensor is outside the tolerance.
+//! reference file, prints one line per compared value with its error, and exits with status 1
+//! when any is outside the tolerance. `raft-stereo` and `depth-anything-v2` check inference
+//! against reference activations; `train-step` checks two training steps against the official
+//! training loop.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Args, Subcommand};
 use dgstereo_model::verify::verify_raft_stereo;
 use dgstereo_prior::verify_depth_anything_v2;
+use dgstereo_train::TrainParts;
+use dgstereo_train::verify_step::verify_train_step;
 
 /// Which model to verify.
 #[derive(Subcommand)]
@@ -20,6 +24,29 @@ pub enum VerifyCommand {
     /// against a reference activations file. Ends with `depth max abs error: X`; fails above
     /// 1e-3 of each tensor's range.
     DepthAnythingV2(VerifyArgs),
+    /// Training: two steps of our trainer (the recipe's loss, clipping, AdamW and one-cycle
+    /// schedule, frozen batch norm) from a `.pth` checkpoint on the batch of a
+    /// `*.train_step.safetensors` reference, with its iterations, step count and learning rate.
+    /// Prints the recipe against the reference's, then every iteration's prediction, both
+    /// losses, gradient norms and learning rates, each gradient and each parameter's update;
+    /// ends with `train step: loss rel err A, grad rel L2 err B (worst: NAME), update agreement
+    /// C %: PASSED` (or `FAILED`).
+    TrainStep(TrainStepArgs),
+}
+
+/// Files of a training-step verification.
+#[derive(Args)]
+pub struct TrainStepArgs {
+    /// The checkpoint (official `.pth` layout).
+    #[arg(long)]
+    weights: PathBuf,
+    /// The reference steps (safetensors).
+    #[arg(long)]
+    reference: PathBuf,
+    /// The experiment whose recipe is verified (its first run); default: every section's
+    /// default, the reference's recipe.
+    #[arg(long)]
+    experiment: Option<PathBuf>,
 }
 
 /// Files of a verification.
@@ -46,6 +73,36 @@ pub fn run(cmd: VerifyCommand) -> anyhow::Result<ExitCode> {
             println!("{report}");
             report.passed
         }
+        VerifyCommand::TrainStep(a) => {
+            let recipe = recipe(a.experiment.as_deref())?;
+            let report = verify_train_step(&a.weights, &a.reference, &recipe, None, &device)?;
+            println!("{report}");
+            report.passed()
+        }
     };
     Ok(if passed { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}
+
+/// The trainer's parts of `experiment`'s first run, or of an experiment that sets nothing.
+fn recipe(experiment: Option<&Path>) -> anyhow::Result<TrainParts> {
+    let config = match experiment {
+        Some(file) => {
+            dgstereo_experiment::load(file)?
+                .into_iter()
+                .next()
+                .ok_or_else(|| anyhow::anyhow!("{}: the file defines no run", file.display()))?
+                .config
+        }
+        None => dgstereo_experiment::ExperimentConfig {
+            name: "defaults".into(),
+            description: None,
+            model: Default::default(),
+            prior: Default::default(),
+            loss: Default::default(),
+            train: Default::default(),
+            data: Default::default(),
+            benchmarks: Vec::new(),
+        },
+    };
+    Ok(super::train::parts_of(config, None))
 }
