@@ -1,14 +1,15 @@
 //! The checks of a training-step verification, their tolerances and the report.
 //!
 //! The tolerances are the golden README's (set from the reference's float noise between one and
-//! two threads), except two that the trainer's own float noise exceeds. The gradients of the
-//! feature encoder's first convolutions (`fnet.conv1`, `fnet.layer1.0.conv1`: full resolution,
-//! followed by instance norms) are ill-conditioned: moving every weight by one unit in the last
-//! place moves them by up to 1.7e-3 relative L2, and the share of their update elements within
-//! 1 % of `lr1 + lr2` of the unperturbed run's ranges from 94 to 97 %, where the README asks for
-//! 1e-3 and 95 %. A reordering of float sums, which any implementation other than PyTorch's is,
-//! acts like such a perturbation. So a gradient passes within [`GRADIENT_TOLERANCE`] = 3e-3 and
-//! [`UPDATE_SHARE`] is 90 %; a broken component misses both by far (see docs/training.md).
+//! two threads), except for the two parameters whose gradients the trainer's own float noise
+//! moves further. The gradients of the feature encoder's first convolutions (`fnet.conv1`,
+//! `fnet.layer1.0.conv1`: full resolution, followed by instance norms) are ill-conditioned:
+//! moving every weight by one unit in the last place moves them by up to 1.7e-3 relative L2, and
+//! the share of their update elements within 1 % of `lr1 + lr2` of the unperturbed run's ranges
+//! from 94 to 97 %, where the README asks for 1e-3 and 95 %. A reordering of float sums, which
+//! any implementation other than PyTorch's is, acts like such a perturbation. So those two
+//! ([`ILL_CONDITIONED`]) pass within 3e-3 and 90 %; every other parameter is held to the
+//! README's limits, and a broken component misses them by far (see docs/training.md).
 
 use std::fmt;
 
@@ -20,17 +21,34 @@ pub const LOSS_TOLERANCE: [f64; 2] = [1e-5, 1e-4];
 pub const GRAD_NORM_TOLERANCE: f64 = 1e-4;
 /// Learning rates, relative (both sides compute them in float64).
 pub const LR_TOLERANCE: f64 = 1e-9;
-/// Each gradient: L2 error relative to its own L2 norm (the README's 1e-3 is below the float
-/// noise of the feature encoder's first convolutions).
-pub const GRADIENT_TOLERANCE: f64 = 3e-3;
+/// Each gradient: L2 error relative to its own L2 norm (the README's).
+pub const GRADIENT_TOLERANCE: f64 = 1e-3;
 /// Gradients whose norm is at most this fraction of the global norm are noise (a zero gradient
 /// in exact arithmetic): their L2 error is compared with this fraction of the global norm.
 pub const SMALL_GRADIENT: f64 = 1e-6;
 /// An element's update agrees when within this fraction of `lr1 + lr2` of the reference's.
 pub const UPDATE_CLOSE: f64 = 0.01;
-/// The share of every tensor's elements whose updates must agree (the README's 95 % is within
-/// the float noise of the feature encoder's first convolutions).
-pub const UPDATE_SHARE: f64 = 0.90;
+/// The share of every tensor's elements whose updates must agree (the README's).
+pub const UPDATE_SHARE: f64 = 0.95;
+/// Parameters (reference names, by prefix) whose gradients are within the trainer's own float
+/// noise of the README's limits (see the module documentation), and so are held to
+/// [`ILL_CONDITIONED_GRADIENT_TOLERANCE`] and [`ILL_CONDITIONED_UPDATE_SHARE`].
+pub const ILL_CONDITIONED: [&str; 2] = ["fnet.conv1.", "fnet.layer1.0.conv1."];
+/// [`GRADIENT_TOLERANCE`] of the [`ILL_CONDITIONED`] parameters.
+pub const ILL_CONDITIONED_GRADIENT_TOLERANCE: f64 = 3e-3;
+/// [`UPDATE_SHARE`] of the [`ILL_CONDITIONED`] parameters.
+pub const ILL_CONDITIONED_UPDATE_SHARE: f64 = 0.90;
+
+/// The gradient tolerance and update share of the parameter `key` names (a parameter name, or a
+/// reference key such as `step1.grad.<name>`, with or without `module.`).
+fn tolerances(key: &str) -> (f64, f64) {
+    let named = |prefix: &str| key.starts_with(prefix) || key.contains(&format!(".{prefix}"));
+    if ILL_CONDITIONED.iter().any(|p| named(p)) {
+        (ILL_CONDITIONED_GRADIENT_TOLERANCE, ILL_CONDITIONED_UPDATE_SHARE)
+    } else {
+        (GRADIENT_TOLERANCE, UPDATE_SHARE)
+    }
+}
 /// No element's update may differ by more than this fraction of `lr1 + lr2`.
 pub const UPDATE_BOUND: f64 = 0.5;
 
@@ -143,7 +161,8 @@ fn l2(values: impl Iterator<Item = f64>) -> f64 {
     values.map(|v| v * v).sum::<f64>().sqrt()
 }
 
-/// Compares a gradient: within [`GRADIENT_TOLERANCE`] relative L2 where its norm exceeds
+/// Compares a gradient: within [`GRADIENT_TOLERANCE`] (or the [`ILL_CONDITIONED`] one) relative
+/// L2 where its norm exceeds
 /// [`SMALL_GRADIENT`] of `global_norm`, else its L2 error under that fraction of `global_norm`.
 /// Returns the relative error for the former.
 pub fn gradient_check(
@@ -159,8 +178,9 @@ pub fn gradient_check(
     let small = global_norm * SMALL_GRADIENT;
     if norm > small {
         let e = error / norm;
-        let text = format!("{shape:<18} norm {norm:.3e} rel L2 err {e:.3e} (tol {GRADIENT_TOLERANCE:.0e})");
-        let passed = e <= GRADIENT_TOLERANCE;
+        let tolerance = tolerances(key).0;
+        let text = format!("{shape:<18} norm {norm:.3e} rel L2 err {e:.3e} (tol {tolerance:.0e})");
+        let passed = e <= tolerance;
         (CheckLine { kind: CheckKind::Gradient, key: key.into(), text, passed }, Some(e))
     } else {
         let e = error / global_norm.max(f64::MIN_POSITIVE);
@@ -172,7 +192,7 @@ pub fn gradient_check(
 }
 
 /// Compares a parameter's update over the two steps (`p2 - p0`, both sides from the same `p0`):
-/// at least [`UPDATE_SHARE`] of the elements within [`UPDATE_CLOSE`] of `lr_sum = lr1 + lr2`,
+/// at least [`UPDATE_SHARE`] (or the [`ILL_CONDITIONED`] one) of the elements within [`UPDATE_CLOSE`] of `lr_sum = lr1 + lr2`,
 /// none beyond [`UPDATE_BOUND`] of it. Returns the line and the agreeing share in percent.
 pub fn update_check(
     key: &str,
@@ -190,11 +210,12 @@ pub fn update_check(
     let close = differences.iter().filter(|&&d| d <= UPDATE_CLOSE).count();
     let share = 100.0 * close as f64 / differences.len().max(1) as f64;
     let worst = differences.iter().copied().fold(0.0, f64::max);
-    let passed = share >= 100.0 * UPDATE_SHARE && worst <= UPDATE_BOUND && !differences.is_empty();
+    let required = tolerances(key).1;
+    let passed = share >= 100.0 * required && worst <= UPDATE_BOUND && !differences.is_empty();
     let text = format!(
         "{:<18} update agreement {share:6.2} % (>= {:.0} %), worst {worst:.3e} (lr1 + lr2) (tol {UPDATE_BOUND})",
         format!("{shape:?}"),
-        100.0 * UPDATE_SHARE
+        100.0 * required
     );
     (CheckLine { kind: CheckKind::Update, key: key.into(), text, passed }, share)
 }
@@ -221,14 +242,19 @@ mod tests {
         assert!(!line.passed, "an error of 1e-5 of the global norm must fail: {line:?}");
     }
 
+    /// 1e-3 for every parameter but the ill-conditioned ones, which get 3e-3.
     #[test]
     fn a_gradient_off_by_more_than_the_tolerance_fails() {
         let reference = [1.0f32, -2.0, 3.0];
-        let ours: Vec<f32> = reference.iter().map(|v| v * 1.002).collect();
-        let (line, rel) = gradient_check("g", &[3], &ours, &reference, 10.0);
-        assert!(line.passed && (rel.unwrap() - 2e-3).abs() < 1e-6, "{line:?}");
-        let ours: Vec<f32> = reference.iter().map(|v| v * 1.004).collect();
-        assert!(!gradient_check("g", &[3], &ours, &reference, 10.0).0.passed);
+        let within = |k: f32| -> Vec<f32> { reference.iter().map(|v| v * k).collect() };
+        let (line, rel) = gradient_check("g", &[3], &within(1.0008), &reference, 10.0);
+        assert!(line.passed && (rel.unwrap() - 8e-4).abs() < 1e-6, "{line:?}");
+        assert!(!gradient_check("g", &[3], &within(1.002), &reference, 10.0).0.passed);
+        assert!(gradient_check("fnet.conv1.weight", &[3], &within(1.002), &reference, 10.0).0.passed);
+        assert!(gradient_check("step1.grad.fnet.layer1.0.conv1.bias", &[3], &within(1.002), &reference, 10.0).0.passed);
+        assert!(gradient_check("module.fnet.conv1.weight", &[3], &within(1.002), &reference, 10.0).0.passed);
+        assert!(!gradient_check("fnet.conv1.weight", &[3], &within(1.004), &reference, 10.0).0.passed);
+        assert!(!gradient_check("fnet.conv2.weight", &[3], &within(1.002), &reference, 10.0).0.passed);
     }
 
     #[test]
@@ -237,17 +263,23 @@ mod tests {
         let p0 = vec![0.5f32; 100];
         let reference: Vec<f32> = p0.iter().map(|p| p - 1e-4).collect();
         let mut ours = reference.clone();
-        // 9 % of the elements off by 0.3 (lr1 + lr2): share 91 %, within the bound.
-        for v in ours.iter_mut().take(9) {
+        // 4 % of the elements off by 0.3 (lr1 + lr2): share 96 %, within the bound.
+        for v in ours.iter_mut().take(4) {
             *v += 3e-5;
         }
         let (line, share) = update_check("p", &[100], &p0, &ours, &reference, lr_sum);
-        assert!(line.passed && (share - 91.0).abs() < 1e-9, "{line:?}");
-        // Two more: 89 %.
+        assert!(line.passed && (share - 96.0).abs() < 1e-9, "{line:?}");
+        // Five more: 91 %, too few for most parameters, enough for the ill-conditioned ones.
         let mut fewer = ours.clone();
+        for v in fewer.iter_mut().skip(4).take(5) {
+            *v += 3e-5;
+        }
+        assert!(!update_check("p", &[100], &p0, &fewer, &reference, lr_sum).0.passed);
+        assert!(update_check("fnet.conv1.weight", &[100], &p0, &fewer, &reference, lr_sum).0.passed);
+        // Two more: 89 %, too few for every parameter.
         fewer[9] += 3e-5;
         fewer[10] += 3e-5;
-        assert!(!update_check("p", &[100], &p0, &fewer, &reference, lr_sum).0.passed);
+        assert!(!update_check("fnet.conv1.weight", &[100], &p0, &fewer, &reference, lr_sum).0.passed);
         // One element beyond half of lr1 + lr2.
         ours[50] += 6e-5;
         assert!(!update_check("p", &[100], &p0, &ours, &reference, lr_sum).0.passed);
