@@ -19,10 +19,10 @@ use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Distribution, Int, Tensor};
 use criterion::{BenchmarkId, Criterion, criterion_group};
 use dgstereo_core::default_device;
-use dgstereo_core::host_conv::KeptWeights;
 use dgstereo_costvolume::{
     CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, LookupKernel, OnTheFlyCorrelation,
 };
+use dgstereo_kernels::KeptWeights;
 use dgstereo_model::encoder::{ContextExtractor, FeatureExtractor};
 use dgstereo_model::fusion::{FusionConfig, ImageFusion};
 use dgstereo_model::updater::{GateContext, Updater, convex_upsample};
@@ -100,13 +100,13 @@ fn correlation(c: &mut Criterion) {
 /// GRU-1/4 candidate (384 -> 128 channels at the 1/4 grid, of 320x736 and of a 384x448 pair)
 /// and a feature-encoder layer1 convolution (64 -> 64; the default model runs layer1 at full
 /// resolution, here it runs at half of 320x736 to keep the bench short). `3x3 Host` is the
-/// dispatching kernel (Winograd F(4x4, 3x3) at these sizes unless `DGSTEREO_NO_WINOGRAD=1`; the
+/// dispatching kernel (Winograd F(4x4, 3x3) at these sizes unless `DGSTEREO_KERNELS=no-winograd`; the
 /// 64-channel layer in cache-resident blocks where the processor has AVX-512, in bands with
-/// `DGSTEREO_WINOGRAD_BLOCKS=0`), `3x3 Host im2col` its im2col path alone.
+/// `DGSTEREO_KERNELS=no-winograd-blocks`), `3x3 Host im2col` its im2col path alone.
 fn convolution(c: &mut Criterion) {
     use burn::tensor::module::conv2d;
     use burn::tensor::ops::ConvOptions;
-    use dgstereo_core::host_conv::{conv2d_host, conv2d_host_im2col};
+    use dgstereo_kernels::host::conv::{conv2d_host, conv2d_host_im2col};
     let mut group = c.benchmark_group("convolution");
     group.sample_size(10);
     let [h, w] = SIZES[0].0;
@@ -231,7 +231,7 @@ criterion_group!(benches, encoders, convolution, correlation, update, forward, t
 /// `criterion_main!` with the allocator setting the `dgstereo` binary makes, so the stages are
 /// timed as the binary runs them.
 fn main() {
-    dgstereo_core::allocator::retain_freed_memory();
+    dgstereo_kernels::allocator::retain_freed_memory();
     benches();
     Criterion::default().configure_from_args().final_summary();
 }

@@ -43,7 +43,7 @@ step() {
     local left=$((DEADLINE - SECONDS))
     if [ "$left" -lt 20 ]; then echo "- skipped (${SECONDS} s gone): $*" | tee -a "$OUT/log.txt"; return; fi
     [ "$limit" -gt "$left" ] && limit=$left
-    echo "+ [${SECONDS} s, limit ${limit} s] ${DGSTEREO_GPU_STOCK:+DGSTEREO_GPU_STOCK=$DGSTEREO_GPU_STOCK }$*" | tee -a "$OUT/log.txt"
+    echo "+ [${SECONDS} s, limit ${limit} s] ${DGSTEREO_KERNELS:+DGSTEREO_KERNELS=$DGSTEREO_KERNELS }$*" | tee -a "$OUT/log.txt"
     timeout "$limit" "$@" 2>&1 | tee -a "$OUT/log.txt"
     # Keep the tuning after every step: a later step may be cut off by the command's limit.
     cp target/environment/default.db "$OUT/autotune-default.db" 2>/dev/null || true
@@ -60,11 +60,10 @@ cones_scored() {
 }
 step 280 /tmp/dgstereo "${kitti[@]}" --precision f16 --stages
 cones_scored f16
-# What each GPU inference route gains (`dgstereo_core::gpu_routes`; DGSTEREO_GPU_STOCK turns the
-# named ones off): one process each, all routes on between them. Session 17 timed im2col, resize
-# and lookup; strided, few-outputs, epilogue and shared-columns came after its last lease.
+# What each GPU inference route gains (`dgstereo_kernels::gpu`; DGSTEREO_KERNELS=stock-route=NAME turns the
+# named ones off): one process each, all routes on between them.
 for routes in epilogue "" shared-columns "" strided few-outputs "" epilogue,shared-columns,strided,few-outputs; do
-    DGSTEREO_GPU_STOCK=$routes step 60 /tmp/dgstereo "${kitti[@]}" --precision f16
+    DGSTEREO_KERNELS=$(echo "$routes" | sed -E 's/([^,]+)/stock-route=\1/g') step 60 /tmp/dgstereo "${kitti[@]}" --precision f16
 done
 # The paper's stereo model (DGIA fusion + Gradient-GRU; its prior's time is not included).
 step 60 /tmp/dgstereo "${kitti[@]}" --precision f16 --config scripts/paper-model.toml

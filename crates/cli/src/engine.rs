@@ -393,7 +393,7 @@ impl Engine {
         };
         // The last pass's freed buffers go back to the system where this pass's size differs;
         // a pass of the same size (the next frame, the mirrored pass) reuses them.
-        dgstereo_core::allocator::release_before_pass([l.height, l.width]);
+        dgstereo_kernels::allocator::release_before_pass([l.height, l.width]);
         let corr = self.choose_corr(l.width, l.height);
         let (lt, rt) = (image_tensor(&l, &self.device), image_tensor(&r, &self.device));
         let prior_start = Instant::now();

@@ -55,7 +55,15 @@ enum Command {
 fn main() -> ExitCode {
     sigpipe::restore_default_sigpipe();
     let cli = Cli::parse();
-    dgstereo_core::allocator::retain_freed_memory();
+    dgstereo_kernels::allocator::retain_freed_memory();
+    // `bench --kernels` configures the kernels itself; every other command takes
+    // `DGSTEREO_KERNELS`, and a word it does not know is an error before any work.
+    if !matches!(cli.command, Command::Bench(_))
+        && let Err(e) = dgstereo_kernels::Settings::from_env().and_then(dgstereo_kernels::configure)
+    {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     let result = match cli.command {
         Command::Demo(a) => commands::demo::run(a),
         Command::Infer(a) => commands::infer::run(a),

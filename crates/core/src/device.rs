@@ -11,7 +11,7 @@
 //! half precision without touching the model code. burn keeps a loaded weight in the dtype of
 //! its file, so weights read from an f32 checkpoint must be cast afterwards
 //! ([`cast_float_params`]); the hand-written host kernels are f32 code and stand aside on any
-//! other precision ([`host_kernels_apply`]).
+//! other precision (the kernels crate's dispatch reads [`float_dtype`]).
 
 use burn::module::{Module, ModuleMapper, Param};
 use burn::tensor::{Device, FloatDType, Tensor};
@@ -196,25 +196,6 @@ pub fn default_device() -> Device {
     Device::flex()
 }
 
-static HOST_KERNELS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
-
-/// Turns the hand-written host kernels on or off for the whole process (on by default); off,
-/// burn's operations run everywhere, which is how `dgstereo bench --kernels stock` measures what
-/// the kernels gain.
-pub fn set_host_kernels(enabled: bool) {
-    HOST_KERNELS.store(enabled, std::sync::atomic::Ordering::Relaxed);
-}
-
-/// Whether the hand-written host kernels apply on `device`: the plain CPU backend (Flex) without
-/// autodiff in f32 (the kernels' only precision), i.e. inference on the CPU, unless
-/// [`set_host_kernels`] turned them off. Everywhere else burn's operations run.
-pub fn host_kernels_apply(device: &Device) -> bool {
-    HOST_KERNELS.load(std::sync::atomic::Ordering::Relaxed)
-        && *device == Device::flex()
-        && !device.is_autodiff()
-        && float_dtype(device) == FloatDType::F32
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -232,14 +213,13 @@ mod tests {
     }
 
     /// The default precision needs no configuration, so asking for it on the (already used)
-    /// f32 CPU device is not an error, and the host kernels apply there.
+    /// f32 CPU device is not an error.
     #[test]
-    fn f32_is_the_cpu_default_and_keeps_the_host_kernels() {
+    fn f32_is_the_cpu_default() {
         let device = DeviceChoice::Cpu.device().unwrap();
         let _ = Tensor::<1>::zeros([1], &device);
         let again = DeviceChoice::Cpu.device_with_precision(Precision::F32).unwrap();
         assert_eq!(float_dtype(&again), FloatDType::F32);
-        assert!(host_kernels_apply(&again));
     }
 
     /// Every weight and bias of a module takes the asked dtype, values rounded to it.

@@ -2,25 +2,16 @@
 //!
 //! Every stage crate (prior, fusion, encoder, cost volume, updater, loss) depends on this crate
 //! and on nothing else of the workspace, so the stages stay swappable and independent. What lives
-//! here is what more than one stage needs: the device choice, the error type, the input padder
-//! that makes any image size a multiple of 32, fixed bilinear resampling expressed as matrix
-//! products (they differentiate on every backend, unlike the GPU backends' resize), a few tensor
-//! helpers, the locator of the shared reference data, the stage clock of the profiler and the allocator
-//! setting the binaries make at start.
+//! here is what more than one stage needs: the device and precision choice, the error type, the
+//! input padder that makes any image size a multiple of 32, a few tensor helpers, the locator of
+//! the shared reference data and the stage clock of the profiler. The kernels live in
+//! `dgstereo-kernels`, which depends on this crate.
 #![deny(missing_docs)]
 
-pub mod allocator;
 pub mod device;
 pub mod error;
-pub mod gpu_routes;
-pub mod host_conv;
-mod host_few_outputs;
-pub mod host_norm;
-mod host_winograd;
 pub mod layers;
-pub mod matmul_conv;
 pub mod padding;
-pub mod resample;
 pub mod shared;
 pub mod tensor;
 pub mod timing;

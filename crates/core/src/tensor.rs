@@ -71,7 +71,7 @@ pub fn zeros_parallel(len: usize) -> Vec<f32> {
 ///
 /// In tests and debug builds the buffer starts as NaN, so a value the pass failed to write shows
 /// in the output (as stale memory from a buffer of the same size, freed a moment ago, might not).
-pub(crate) fn unwritten(len: usize) -> Box<[MaybeUninit<f32>]> {
+pub fn unwritten(len: usize) -> Box<[MaybeUninit<f32>]> {
     let mut buffer = Box::new_uninit_slice(len);
     if cfg!(any(test, debug_assertions)) {
         buffer.iter_mut().for_each(|v| {
@@ -86,7 +86,7 @@ pub(crate) fn unwritten(len: usize) -> Box<[MaybeUninit<f32>]> {
 /// # Safety
 /// Every element of `buffer` must have been written (`MaybeUninit::write` or a copy into it).
 #[allow(unsafe_code)]
-pub(crate) unsafe fn written(buffer: Box<[MaybeUninit<f32>]>) -> Vec<f32> {
+pub unsafe fn written(buffer: Box<[MaybeUninit<f32>]>) -> Vec<f32> {
     // SAFETY: the caller guarantees that every element is initialised.
     unsafe { buffer.assume_init() }.into_vec()
 }
@@ -118,7 +118,7 @@ pub fn planes_from<I: Iterator<Item = f32>>(
 /// Resizing a thread's buffer down for a small convolution and up again for the next large one
 /// wrote zeros over the regrown part every time (1-1.5 % of a CPU forward pass); the callers
 /// write every element they read, so what the buffer held before never matters.
-pub(crate) fn reuse_buffer(buffer: &mut Vec<f32>, len: usize) -> &mut [f32] {
+pub fn reuse_buffer(buffer: &mut Vec<f32>, len: usize) -> &mut [f32] {
     if buffer.len() < len {
         buffer.resize(len, 0.0);
     }

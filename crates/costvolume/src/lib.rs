@@ -37,7 +37,11 @@ pub enum LookupKernel {
 impl LookupKernel {
     /// The fast kernel where it applies: the CPU backend without autodiff; else the stock one.
     pub fn for_device(device: &Device) -> Self {
-        if dgstereo_core::device::host_kernels_apply(device) { Self::Host } else { Self::Stock }
+        if dgstereo_kernels::path(device, dgstereo_kernels::Op::Lookup) == dgstereo_kernels::Path::Host {
+            Self::Host
+        } else {
+            Self::Stock
+        }
     }
 }
 

@@ -1,7 +1,7 @@
 //! The materialised all-pairs pyramid ("reg").
 
 use burn::tensor::{Device, Tensor, TensorData};
-use dgstereo_core::gpu_routes::GpuRoute;
+use dgstereo_kernels::{Op, Path, path};
 
 use crate::host_lookup::{self, HostLevel};
 use crate::lookup::{GatheredLevels, interpolate_taps, taps};
@@ -57,7 +57,7 @@ impl CorrelationPyramid {
                     let last = pyramid.last().expect("level 0").clone();
                     pyramid.push(pool_pairs(last));
                 }
-                if GpuRoute::GatheredLookup.applies(&device) {
+                if path(&device, Op::Lookup) == Path::Gpu {
                     let gathered = Box::new(GatheredLevels::new(&pyramid[..levels], radius));
                     Storage::Gathered(pyramid, gathered)
                 } else {

@@ -3,8 +3,8 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::host_conv::conv2d_forward;
 use dgstereo_core::layers::{ConvInit, conv2d};
+use dgstereo_kernels::conv2d_forward;
 
 use crate::FeatureExtractor;
 use crate::norm::{Norm, NormKind};

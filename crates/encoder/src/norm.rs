@@ -5,10 +5,8 @@ use burn::nn::Identity;
 use burn::nn::conv::Conv2d;
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::device::host_kernels_apply;
-use dgstereo_core::host_conv::{conv_options, conv2d_forward, conv2d_host_rectified};
-use dgstereo_core::host_norm::{PlaneNorm, normalize_planes};
 use dgstereo_core::tensor::{instance_norm, to_vec};
+use dgstereo_kernels::{PlaneNorm, conv2d_affine_or, conv2d_forward, normalize_planes_or};
 use serde::{Deserialize, Serialize};
 
 const EPS: f64 = 1e-5;
@@ -64,55 +62,47 @@ impl Norm {
         }
     }
 
-    /// `conv`, then this norm, then a ReLU when `relu_after`. For CPU inference
-    /// ([`host_kernels_apply`]) a frozen batch norm is folded into the convolution (its scale
-    /// into the weight, its shift into the bias), so the host convolution writes the normalised
-    /// (and rectified) output at once instead of a second pass over it; otherwise, and for the
-    /// other norms, the convolution and [`forward_relu`](Self::forward_relu).
+    /// `conv`, then this norm, then a ReLU when `relu_after`. For CPU inference a frozen batch
+    /// norm is folded into the convolution ([`conv2d_affine_or`]), so the host convolution writes
+    /// the normalised (and rectified) output at once; otherwise, and for the other norms, the
+    /// convolution and [`forward_relu`](Self::forward_relu).
     ///
     /// # Shapes
     /// - `x`: `[N, C_in, H, W]`; output `[N, C_out, H_out, W_out]`
     pub fn conv_forward_relu(&self, conv: &Conv2d, x: Tensor<4>, relu_after: bool) -> Tensor<4> {
-        if let (Self::Batch(bn), Some(options)) = (self, conv_options(conv))
-            && host_kernels_apply(&x.device())
-        {
-            let (scale, shift) = bn.scale_shift();
-            let o = scale.dims()[0];
-            let weight = conv.weight.val() * scale.clone().reshape([o, 1, 1, 1]);
-            let bias = match &conv.bias {
-                Some(b) => b.val() * scale + shift,
-                None => shift,
-            };
-            return conv2d_host_rectified(x, weight, Some(bias), &options, relu_after);
+        let stock = |x| self.forward_relu(conv2d_forward(conv, x), relu_after);
+        match self {
+            Self::Batch(bn) => conv2d_affine_or(conv, x, || bn.scale_shift(), relu_after, stock),
+            _ => stock(x),
         }
-        self.forward_relu(conv2d_forward(conv, x), relu_after)
     }
 
-    /// [`forward`](Self::forward), then a ReLU when `relu_after`. For CPU inference
-    /// ([`host_kernels_apply`]) the batch, instance and no norm run as one parallel host pass
-    /// with the ReLU ([`normalize_planes`]); elsewhere, and for the group norm, the tensor
-    /// operations.
+    /// [`forward`](Self::forward), then a ReLU when `relu_after`. For CPU inference the batch,
+    /// instance and no norm run as one parallel host pass with the ReLU
+    /// ([`normalize_planes_or`]); elsewhere, and for the group norm, the tensor operations.
     ///
     /// # Shapes
     /// - `x`: `[N, C, H, W]`; output: the same
     pub fn forward_relu(&self, x: Tensor<4>, relu_after: bool) -> Tensor<4> {
-        if host_kernels_apply(&x.device()) {
-            match self {
-                Self::Batch(n) => {
+        let stock = |x| {
+            let y = self.forward(x);
+            if relu_after { relu(y) } else { y }
+        };
+        match self {
+            Self::Batch(n) => {
+                let affine = || {
                     let (scale, shift) = n.scale_shift();
-                    let (scale, shift) = (to_vec(scale), to_vec(shift));
-                    return normalize_planes(x, PlaneNorm::Affine { scale: &scale, shift: &shift }, relu_after);
-                }
-                Self::Instance(n) => {
-                    return normalize_planes(x, PlaneNorm::Instance { epsilon: n.epsilon }, relu_after);
-                }
-                Self::None(_) if !relu_after => return x,
-                Self::None(_) => return normalize_planes(x, PlaneNorm::Identity, true),
-                Self::Group(_) => {}
+                    PlaneNorm::Affine { scale: to_vec(scale), shift: to_vec(shift) }
+                };
+                normalize_planes_or(x, affine, relu_after, stock)
             }
+            Self::Instance(n) => {
+                normalize_planes_or(x, || PlaneNorm::Instance { epsilon: n.epsilon }, relu_after, stock)
+            }
+            Self::None(_) if !relu_after => x,
+            Self::None(_) => normalize_planes_or(x, || PlaneNorm::Identity, true, stock),
+            Self::Group(_) => stock(x),
         }
-        let y = self.forward(x);
-        if relu_after { relu(y) } else { y }
     }
 }
 

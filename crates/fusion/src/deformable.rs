@@ -5,8 +5,8 @@ use burn::module::Module;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig, DeformConv2d, DeformConv2dConfig};
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::device::host_kernels_apply;
-use dgstereo_core::host_conv::conv2d_forward;
+use dgstereo_kernels::conv2d_forward;
+use dgstereo_kernels::{Op, Path, path};
 
 use crate::ImageFusion;
 use crate::host_deform::deform_conv2d_host;
@@ -75,9 +75,10 @@ impl DeformableFusion {
         let (image_features, depth_features) = self.projection.forward(image, depth);
         let offset = self.offsets(depth_features.clone());
         let features = Tensor::cat(vec![image_features, depth_features], 1);
-        let host = host_kernels_apply(&features.device())
-            .then(|| deform_conv2d_host(&self.mixer, features.clone(), offset.clone()))
-            .flatten();
+        let host = match path(&features.device(), Op::Deform) {
+            Path::Host => deform_conv2d_host(&self.mixer, features.clone(), offset.clone()),
+            Path::Gpu | Path::Stock => None,
+        };
         host.unwrap_or_else(|| self.mixer.forward(features, offset, None))
     }
 }

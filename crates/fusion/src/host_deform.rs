@@ -10,7 +10,7 @@
 //! sampling position, its four corners and their weights are found once and the sample of all
 //! channels is one vector, which goes straight into per-output-channel partial sums; rows of output
 //! pixels run in parallel. Used where the host kernels apply (CPU inference,
-//! [`dgstereo_core::device::host_kernels_apply`]) and the convolution has one weight group, one
+//! the dispatch's host path) and the convolution has one weight group, one
 //! offset group and no modulation mask (DGIA's); burn's operation stays the reference and the path
 //! everywhere else, and the tests check both agree.
 

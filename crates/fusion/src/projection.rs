@@ -3,7 +3,7 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::host_conv::conv2d_forward;
+use dgstereo_kernels::conv2d_forward;
 
 use crate::depth::normalize_depth;
 use crate::init::{RGB, identity_padded_projection};

@@ -10,12 +10,23 @@
 //! other path is tested against on every path ([`test_paths!`]).
 #![deny(missing_docs)]
 
+pub mod allocator;
 pub mod dispatch;
+pub mod geometry;
 pub mod gpu;
 pub mod host;
 pub mod ops;
+pub mod product;
 pub mod settings;
 mod test_paths;
 
 pub use dispatch::{Op, Path, path, with_path};
+pub use host::winograd::KeptWeights;
+pub use ops::conv::{
+    conv_options, conv2d_affine_or, conv2d_forward, conv2d_forward_then, conv2d_op, conv2d_op_then,
+    conv2d_relu_forward, flat_pixels,
+};
+pub use ops::gru::conv_gru_step_or;
+pub use ops::norm::{PlaneNorm, add_relu, normalize_planes_or};
+pub use ops::resample::{average_pool_half, resize_bilinear};
 pub use settings::{GpuRoute, Settings, configure};

@@ -74,6 +74,11 @@ impl GpuRoute {
             Self::SharedColumns => "shared-columns",
         }
     }
+
+    /// Whether the process's settings leave the route on.
+    pub fn enabled(self) -> bool {
+        settings().route_enabled(self)
+    }
 }
 
 /// What the dispatch may choose ([`crate::dispatch::path`]); the default is every fast path on.

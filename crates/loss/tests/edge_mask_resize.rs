@@ -3,8 +3,8 @@
 //! exactly where bilinear interpolation mixes the two surfaces.
 
 use dgstereo_core::default_device;
-use dgstereo_core::resample::resize_bilinear;
 use dgstereo_core::tensor::{from_vec, to_vec};
+use dgstereo_kernels::resize_bilinear;
 use dgstereo_loss::edge_mask;
 use proptest::prelude::*;
 

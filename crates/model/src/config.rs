@@ -1,13 +1,10 @@
 //! Configuration of the stereo network.
 
-use burn::tensor::Device;
 use dgstereo_costvolume::CorrelationConfig;
 use dgstereo_encoder::NormKind;
 use dgstereo_fusion::FusionConfig;
 use dgstereo_updater::{GuidanceKind, UpdaterConfig};
 use serde::{Deserialize, Serialize};
-
-use crate::RaftStereo;
 
 /// Encoder options of RAFT-Stereo.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -109,11 +106,5 @@ impl ModelConfig {
     /// when the coarsest GRU level (`2^(n_downsample + 3)`) needs it.
     pub fn pad_divisor(&self) -> usize {
         32usize.max(1 << (self.updater.n_downsample + 3))
-    }
-
-    /// Builds the network with fresh weights.
-    pub fn init(&self, device: &Device) -> dgstereo_core::Result<RaftStereo> {
-        self.validate()?;
-        Ok(RaftStereo::new(self, device))
     }
 }

@@ -74,7 +74,7 @@ impl StereoModel {
         }
         if self.config.needs_prior() && prior.is_none() {
             return Err(Error::Config(
-                "this model uses a depth prior (fusion or guidance) but none was given: set [prior] in the experiment or pass --prior".into(),
+                "this model uses a depth prior (fusion or guidance) but none was given: configure a prior source (an experiment's [prior]) or give a prior per view".into(),
             ));
         }
         let disparities =

@@ -8,7 +8,6 @@ use burn::tensor::activation::{relu, tanh};
 use burn::tensor::{DType, Device, FloatDType, Tensor, TensorData};
 use dgstereo_core::DepthPrior;
 use dgstereo_core::device::float_dtype;
-use dgstereo_core::host_conv::{KeptWeights, conv2d_forward};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::tensor::cast_float;
 use dgstereo_core::timing::{StageClock, timed};
@@ -17,6 +16,7 @@ use dgstereo_encoder::{
     ContextEncoder, ContextExtractor, FeatureEncoder, FeatureExtractor, NormKind, SharedFeatureHead,
 };
 use dgstereo_fusion::{Fusion, FusionTarget, ImageFusion};
+use dgstereo_kernels::{KeptWeights, conv2d_forward};
 use dgstereo_updater::{GateContext, GuidanceKind, MultiLevelUpdateBlock, Updater, convex_upsample};
 
 use crate::config::ModelConfig;
@@ -83,6 +83,14 @@ pub struct FlowOutput {
     pub flow_up: Vec<Tensor<4>>,
     /// x flow at the update grid after the last iteration.
     pub flow_lowres: Tensor<4>,
+}
+
+impl ModelConfig {
+    /// Builds the network with fresh weights, after [`ModelConfig::validate`].
+    pub fn init(&self, device: &Device) -> dgstereo_core::Result<RaftStereo> {
+        self.validate()?;
+        Ok(RaftStereo::new(self, device))
+    }
 }
 
 impl RaftStereo {

@@ -1,19 +1,18 @@
 //! GPU inference's composition, computed on the CPU: the forward pass with the GPU routes
-//! (`dgstereo_core::gpu_routes`: the gathered im2col and its strided and few-output forms,
-//! burn's `interpolate`, the gathered lookup) equals the pass with burn's stock operations.
+//! (`dgstereo_kernels::gpu`: the gathered im2col and its strided and few-output forms,
+//! burn's `interpolate`, the gathered lookup) equals the pass with burn's stock operations, and
+//! so does the pass with the host kernels.
 //!
-//! Each route is tested against its stock operation in its own crate; this checks that they
-//! compose into the same network, end to end, where a GPU is not at hand (CI). The switches are
-//! process-wide, so this binary holds one test that runs the stock pass first and the routed pass
-//! after.
+//! Each route is tested against its stock operation in the kernels crate; this checks that they
+//! compose into the same network, end to end, where a GPU is not at hand (CI). Each pass runs
+//! with its path pinned on the calling thread (`dgstereo_kernels::with_path`).
 
 use std::path::Path;
 
 use burn::tensor::{Device, Distribution, Tensor};
 use dgstereo_core::DepthPrior;
-use dgstereo_core::device::set_host_kernels;
-use dgstereo_core::gpu_routes::{gpu_inference, set_routes_on_cpu};
 use dgstereo_core::tensor::{from_vec, max_abs_diff};
+use dgstereo_kernels::{Op, Path as KernelPath, path, with_path};
 use dgstereo_model::{ModelConfig, StereoModel, checkpoint};
 
 /// A textured pair whose right view is the left shifted by 5 pixels.
@@ -56,15 +55,15 @@ fn the_gpu_routes_compute_the_stock_network() {
     let run = |(_, model, [l, r], prior): &(&str, StereoModel, [Tensor<4>; 2], Option<DepthPrior>)| {
         model.predict(l.clone(), r.clone(), prior.as_ref(), 4, false, None).unwrap().last()
     };
-    set_host_kernels(false);
-    assert!(!gpu_inference(&device), "the routes are off on the CPU by default");
-    let stock: Vec<Tensor<4>> = models.iter().map(run).collect();
-    set_routes_on_cpu(true);
-    assert!(gpu_inference(&device) && !gpu_inference(&device.clone().autodiff()));
-    for (m, stock) in models.iter().zip(stock) {
-        let routed = run(m);
-        let scale = stock.clone().abs().max().into_scalar::<f32>().max(1.0);
-        let diff = max_abs_diff(routed, stock) / scale;
-        assert!(diff < 1e-4, "{}: the routed pass differs by {diff} of the disparity's scale", m.0);
+    assert_eq!(path(&device, Op::Conv), KernelPath::Host, "the routes are off on the CPU by default");
+    let stock: Vec<Tensor<4>> = with_path(KernelPath::Stock, || models.iter().map(run).collect());
+    for pinned in [KernelPath::Gpu, KernelPath::Host] {
+        with_path(pinned, || assert_eq!(path(&device, Op::Conv), pinned));
+        for (m, stock) in models.iter().zip(&stock) {
+            let routed = with_path(pinned, || run(m));
+            let scale = stock.clone().abs().max().into_scalar::<f32>().max(1.0);
+            let diff = max_abs_diff(routed, stock.clone()) / scale;
+            assert!(diff < 1e-4, "{} on {pinned:?}: the pass differs by {diff} of the disparity's scale", m.0);
+        }
     }
 }

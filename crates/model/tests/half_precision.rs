@@ -168,7 +168,10 @@ fn half_precision_child() {
     // The device's precision is fixed now: asking for another is a clear error.
     let e = DeviceChoice::Cpu.device_with_precision(Precision::F32).unwrap_err().to_string();
     assert!(e.contains("already set to") && e.contains("f32"), "{e}");
-    assert!(!dgstereo_core::device::host_kernels_apply(&device), "the f32 host kernels must stand aside");
+    assert!(
+        dgstereo_kernels::path(&device, dgstereo_kernels::Op::Conv) != dgstereo_kernels::Path::Host,
+        "the f32 host kernels must stand aside"
+    );
     check_mixed_precision_dtypes(&device, DType::from(precision.float_dtype()));
     let disparity = predict(&device);
     // The weights (checked in `predict`) and the update loop (`check_mixed_precision_dtypes`) are

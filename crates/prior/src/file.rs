@@ -9,8 +9,8 @@
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{Device, Tensor, TensorData};
-use dgstereo_core::resample::resize_bilinear;
 use dgstereo_core::{Error, Result};
+use dgstereo_kernels::resize_bilinear;
 
 use crate::formats::{DepthMap, EXTENSIONS, read_depth_map};
 use crate::{DepthPrior, PriorInput, PriorProvider};

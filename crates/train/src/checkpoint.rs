@@ -219,14 +219,14 @@ pub fn load_checkpoint(parts: TrainParts, path: &Path, device: &burn::tensor::De
     let mut trainer = Trainer::with_model(parts, model, device, optimizer, step)?;
     match (trainer.parts.train.ema_decay, saved_with_ema) {
         (Some(decay), true) => trainer.ema = Some(Ema::new(decay, read_model(&trainer.parts, bytes, path, device)?)),
-        (Some(_), false) => eprintln!(
+        (Some(_), false) => trainer.notices.push(format!(
             "{}: saved without train.ema_decay; the moving average of the weights starts at its weights (step {step})",
             path.display()
-        ),
-        (None, true) => eprintln!(
+        )),
+        (None, true) => trainer.notices.push(format!(
             "{}: saved with train.ema_decay, which is no longer set; continuing from its raw trained weights without a moving average",
             path.display()
-        ),
+        )),
         (None, false) => {}
     }
     Ok(trainer)

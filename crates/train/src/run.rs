@@ -37,6 +37,9 @@ pub struct RunOptions {
     pub stop_after: Option<usize>,
     /// Show a progress bar on the terminal.
     pub progress: bool,
+    /// Shown what the user should know before the run goes on (a resumed run's changed config,
+    /// weights that kept their initialisation): the binary prints them; the library never does.
+    pub notice: fn(&str),
 }
 
 /// What a run returns.
@@ -115,26 +118,29 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
     let existing = list_checkpoints(&ckpt_dir)?;
     let mut trainer = if options.resume {
         let (_, path) = existing.last().ok_or_else(|| {
-            Error::Config(format!("--resume: {} holds no checkpoint to resume from", ckpt_dir.display()))
+            Error::Config(format!("resume: {} holds no checkpoint to resume from", ckpt_dir.display()))
         })?;
         let stored = crate::checkpoint::read_metadata(path)?.remove("config").unwrap_or_default();
         if stored != parts.resolved_toml {
-            eprintln!(
+            (options.notice)(&format!(
                 "warning: {} was saved with another resolved config; resuming with the current one",
                 path.display()
-            );
+            ));
         }
         load_checkpoint(parts, path, device)?
     } else {
         if let Some((_, p)) = existing.last() {
             return Err(Error::Config(format!(
-                "{} already holds checkpoints ({}): pass --resume to continue, or choose another --out",
+                "{} already holds checkpoints ({}): resume the run to continue, or choose another output folder",
                 ckpt_dir.display(),
                 p.display()
             )));
         }
         Trainer::new(parts, device)?
     };
+    for notice in trainer.notices.drain(..) {
+        (options.notice)(&notice);
+    }
     let config_path = out.join("config.toml");
     crate::checkpoint::write_atomic(&config_path, trainer.parts.resolved_toml.as_bytes())?;
     let log_path = out.join("log.jsonl");

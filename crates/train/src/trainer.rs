@@ -100,6 +100,10 @@ pub struct Trainer {
     pub device: Device,
     /// The autodiff device.
     pub autodiff: Device,
+    /// What the user should know about how the trainer was set up (weights that kept their
+    /// initialisation, a moving average that restarts): the caller shows them, a library never
+    /// prints.
+    pub notices: Vec<String>,
     data: TrainingData,
     prior: Prior,
 }
@@ -202,24 +206,27 @@ impl Trainer {
     pub fn new(parts: TrainParts, device: &Device) -> Result<Self> {
         parts.validate()?;
         let model = init_model(&parts.model, device, Some(parts.train.seed))?;
+        let mut notices = Vec::new();
         let model = match &parts.train.init {
             Some(path) => {
                 let (model, missing) = dgstereo_model::checkpoint::load_weights(model, path, parts.train.init_strict)
                     .map_err(|e| Error::Config(format!("train.init: {e}")))?;
                 if !missing.is_empty() {
-                    eprintln!(
+                    notices.push(format!(
                         "train.init: {} parameter(s) not in {} keep their initialisation (e.g. {})",
                         missing.len(),
                         path.display(),
                         missing.iter().take(3).cloned().collect::<Vec<_>>().join(", ")
-                    );
+                    ));
                 }
                 model
             }
             None => model,
         };
         let optimizer = adamw(&parts.train);
-        Self::with_model(parts, model, device, optimizer, 0)
+        let mut trainer = Self::with_model(parts, model, device, optimizer, 0)?;
+        trainer.notices = notices;
+        Ok(trainer)
     }
 
     /// A run from given weights (plain device), optimiser and step counter; with
@@ -239,7 +246,19 @@ impl Trainer {
         let data = TrainingData::new(&parts.data, &parts.train)?;
         let prior = parts.prior.init(device)?;
         let ema = parts.train.ema_decay.map(|decay| Ema::new(decay, model.valid()));
-        Ok(Self { parts, model, optimizer, schedule, step, ema, device: device.clone(), autodiff, data, prior })
+        Ok(Self {
+            parts,
+            model,
+            optimizer,
+            schedule,
+            step,
+            ema,
+            device: device.clone(),
+            autodiff,
+            notices: Vec::new(),
+            data,
+            prior,
+        })
     }
 
     /// Takes one step on the run's batch of the current step ([`crate::batch`]). On NaN or inf

@@ -3,10 +3,10 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::host_conv::{conv2d_forward, conv2d_forward_then, conv2d_relu_forward};
 use dgstereo_core::layers::{ConvInit, conv2d};
-use dgstereo_core::resample::{average_pool_half, resize_bilinear};
 use dgstereo_core::timing::{StageClock, timed};
+use dgstereo_kernels::{average_pool_half, resize_bilinear};
+use dgstereo_kernels::{conv2d_forward, conv2d_forward_then, conv2d_relu_forward};
 
 use crate::gru::{ConvGru, GateContext};
 use crate::motion::MotionEncoder;

@@ -13,10 +13,9 @@ use burn::tensor::{
     Device, Tensor,
     activation::{sigmoid, tanh},
 };
-use dgstereo_core::device::host_kernels_apply;
-use dgstereo_core::host_conv::{conv_options, conv2d_forward_then, conv2d_op_then, flat_pixels};
 use dgstereo_core::layers::{ConvInit, conv2d};
-use dgstereo_core::matmul_conv::{SharedColumns, shared_columns_apply};
+use dgstereo_kernels::gpu::matmul_conv::{SharedColumns, shared_columns_apply};
+use dgstereo_kernels::{conv_gru_step_or, conv_options, conv2d_forward_then, conv2d_op_then, flat_pixels};
 
 /// A ConvGRU whose gates also receive precomputed context terms.
 ///
@@ -69,14 +68,16 @@ impl ConvGru {
         Self { convz: c(0), convr: c(1), convq: c(2) }
     }
 
-    /// One step.
+    /// One step: the kernels' fused host step for CPU inference, [`Self::tensor_step`]
+    /// elsewhere.
     pub fn forward(&self, h: Tensor<4>, ctx: &GateContext, inputs: Vec<Tensor<4>>) -> Tensor<4> {
+        let convs = [&self.convz, &self.convr, &self.convq];
+        conv_gru_step_or(convs, h, [&ctx.zr, &ctx.q], &inputs, |h| self.tensor_step(h, ctx, &inputs))
+    }
+
+    /// One step of burn's tensor operations (the reference, and the training path).
+    fn tensor_step(&self, h: Tensor<4>, ctx: &GateContext, inputs: &[Tensor<4>]) -> Tensor<4> {
         let hidden = h.dims()[1];
-        if host_kernels_apply(&h.device())
-            && let Some(next) = super::gru_host::step(self, h.clone(), ctx, &inputs)
-        {
-            return next;
-        }
         // `[h, x]` and `[r·h, x]` each as one concatenation of all parts (no `x` of its own: one
         // copy fewer a step).
         let with_inputs =
@@ -85,7 +86,7 @@ impl ConvGru {
         // `[N, C, H·W]` with their operands flattened before it (GPU inference runs them in the
         // product's kernel: `conv2d_op_then`). On the GPU the inputs' columns are gathered once
         // for both convolutions (`SharedColumns`).
-        let shared = self.shared_columns(&inputs);
+        let shared = self.shared_columns(inputs);
         let zr_context = flat_pixels(ctx.zr.clone());
         let gates = |zr: Tensor<3>| sigmoid(zr + zr_context);
         let zr = match &shared {
@@ -195,7 +196,8 @@ mod tests {
         let ad = device.clone().autodiff();
         let gru = ConvGru::new(hidden, inputs[0] + inputs[1], &device);
         let gru_ad = gru.clone().fork(&ad);
-        assert!(host_kernels_apply(&device) && !host_kernels_apply(&ad), "one path each");
+        use dgstereo_kernels::{Op, Path, path};
+        assert!(path(&device, Op::GruStep) == Path::Host && path(&ad, Op::GruStep) == Path::Stock, "one path each");
         let rand = |c: usize| Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
         let (hidden_state, x1, x2, zqr) = (rand(hidden), rand(inputs[0]), rand(inputs[1]), rand(3 * hidden));
         let on_ad = |t: &Tensor<4>| Tensor::<4>::from_data(t.to_data(), &ad);

@@ -3,8 +3,8 @@
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::{ConvOptions, PadMode};
 use burn::tensor::{Tensor, TensorData};
-use dgstereo_core::resample::resize_bilinear;
 use dgstereo_core::tensor::instance_norm;
+use dgstereo_kernels::resize_bilinear;
 use serde::{Deserialize, Serialize};
 
 const EPS: f64 = 1e-6;

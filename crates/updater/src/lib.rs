@@ -5,13 +5,12 @@
 //! disparity update and the convex-upsampling weights. [`MultiLevelUpdateBlock`] is RAFT-Stereo's
 //! three-level ConvGRU; its motion encoder gains a guidance branch when [`GuidanceKind`] is not
 //! `none`, so the guidance reaches the GRU input but never the disparity head directly. Bilinear
-//! resizes between levels are matrix products (see `dgstereo_core::resample`), which train on
+//! resizes between levels are matrix products (see `dgstereo_kernels::ops::resample`), which train on
 //! every backend.
 #![deny(missing_docs)]
 
 pub mod block;
 pub mod gru;
-mod gru_host;
 pub mod guidance;
 pub mod motion;
 pub mod upsample;

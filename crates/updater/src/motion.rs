@@ -4,8 +4,8 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::host_conv::conv2d_relu_forward;
 use dgstereo_core::layers::{ConvInit, conv2d};
+use dgstereo_kernels::conv2d_relu_forward;
 
 /// Correlation branch (1x1, 3x3), flow branch (7x7, 3x3) and an optional guidance branch
 /// (7x7, 3x3) joined by a 3x3 merge convolution; the 2-channel flow is appended to the output.

@@ -1,7 +1,7 @@
 //! Convex upsampling of the disparity field.
 //!
 //! Design decision: burn's operations are the reference and run everywhere (training, the GPU);
-//! CPU inference ([`host_kernels_apply`]) takes a host pass instead, one parallel sweep that
+//! CPU inference (the dispatch's host path) takes a host pass instead, one parallel sweep that
 //! computes each coarse pixel's softmax weights once and writes its `factor x factor` block of
 //! every channel. The stock composition (softmax over a reshaped mask, `unfold`, a broadcast
 //! product, a sum and a permute) ran mostly on one core: 35-90 ms of a 384x448 pass on the
@@ -11,8 +11,8 @@ use burn::tensor::activation::softmax;
 use burn::tensor::module::unfold4d;
 use burn::tensor::ops::UnfoldOptions;
 use burn::tensor::{Tensor, TensorData};
-use dgstereo_core::device::host_kernels_apply;
 use dgstereo_core::tensor::{host_values, zeros_parallel};
+use dgstereo_kernels::{Op, Path, path};
 use rayon::prelude::*;
 
 /// Upsamples `[N, D, H, W]` by `factor` as a convex combination of each coarse pixel's 3x3
@@ -23,7 +23,7 @@ use rayon::prelude::*;
 /// # Shapes
 /// - `flow`: `[N, D, H, W]`, `mask`: `[N, 9·factor², H, W]`; output `[N, D, factor·H, factor·W]`
 pub fn convex_upsample(flow: Tensor<4>, mask: Tensor<4>, factor: usize) -> Tensor<4> {
-    if host_kernels_apply(&flow.device()) && host_kernels_apply(&mask.device()) {
+    if path(&flow.device(), Op::Upsample) == Path::Host && path(&mask.device(), Op::Upsample) == Path::Host {
         return convex_upsample_host(flow, mask, factor);
     }
     convex_upsample_stock(flow, mask, factor)

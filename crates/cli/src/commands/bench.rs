@@ -20,10 +20,11 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use burn::tensor::{Distribution, Tensor};
 use clap::Args;
-use dgstereo_core::device::{Precision, host_kernels_apply};
+use dgstereo_core::device::Precision;
 use dgstereo_core::timing::process_cpu_seconds;
 use dgstereo_core::{DepthPrior, DeviceChoice, InputPadder};
 use dgstereo_costvolume::CorrelationImplementation;
+use dgstereo_kernels::{Op, Path, Settings, path};
 use dgstereo_model::flops::StageMacs;
 use dgstereo_model::profile::profile_forward;
 use dgstereo_model::{ModelConfig, StereoModel};
@@ -59,11 +60,12 @@ pub struct BenchArgs {
     /// The machine's peak GFLOP/s, for the share-of-peak column (2 cores here: ~200).
     #[arg(long, default_value_t = 200.0)]
     pub peak_gflops: f64,
-    /// CPU kernels: `host` (the hand-written convolution and lookup kernels, the default),
-    /// `stock` (burn's operations only, the reference), to measure what the kernels gain, or
-    /// `gpu-routes` (burn's operations arranged as GPU inference arranges them, to check the GPU's
-    /// composition on a CPU).
-    #[arg(long, default_value = "host", value_parser = ["host", "stock", "gpu-routes"])]
+    /// Kernel settings, comma-separated (the words of `DGSTEREO_KERNELS`): `host` (the
+    /// hand-written CPU kernels, the default), `stock` (burn's operations only, the reference), to
+    /// measure what the kernels gain, `gpu-routes` (burn's operations arranged as GPU inference
+    /// arranges them, to check the GPU's composition on a CPU), `no-winograd`,
+    /// `no-winograd-blocks`, `stock-route=NAME|all` (one GPU formulation off).
+    #[arg(long, default_value = "host")]
     pub kernels: String,
     /// Float precision of the whole forward pass: `f32`, `f16` or `bf16` (the host kernels are
     /// f32-only, so a half precision on the CPU runs burn's operations).
@@ -151,8 +153,8 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         other => bail!("--corr '{other}': expected reg or alt"),
     };
     let precision = a.precision.parse::<Precision>()?;
-    dgstereo_core::device::set_host_kernels(a.kernels == "host");
-    dgstereo_core::gpu_routes::set_routes_on_cpu(a.kernels == "gpu-routes");
+    let settings: Settings = a.kernels.parse().with_context(|| format!("--kernels '{}'", a.kernels))?;
+    dgstereo_kernels::configure(settings)?;
     // The precision is set before the device's first tensor: burn fixes it there.
     let device = a.device.parse::<DeviceChoice>()?.device_with_precision(precision)?;
     let config = match &a.config {
@@ -192,11 +194,12 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let padded = padder.padded();
     let macs = StageMacs::new(&config, padded).forward(a.iters, 1);
     // What runs: the host kernels only on f32 CPU inference, whatever `--kernels` asked.
-    let kernels = match (host_kernels_apply(&device), dgstereo_core::gpu_routes::gpu_inference(&device)) {
-        (true, _) => "host",
-        (false, true) => "gpu-routes",
-        (false, false) if a.kernels == "host" => "stock (host kernels inactive)",
-        (false, false) => "stock",
+    let kernels = match path(&device, Op::Conv) {
+        Path::Host => "host",
+        Path::Gpu if device == burn::tensor::Device::flex() => "gpu-routes",
+        Path::Gpu => "gpu-formulation",
+        Path::Stock if a.kernels.contains("host") => "stock (host kernels inactive)",
+        Path::Stock => "stock",
     };
 
     let mut non_finite = 0;
@@ -204,7 +207,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         let cpu = process_cpu_seconds();
         // As `infer` does before each pair (outside the timed span): every run has one size, so
         // the passes reuse each other's freed buffers.
-        dgstereo_core::allocator::release_before_pass([h, w]);
+        dgstereo_kernels::allocator::release_before_pass([h, w]);
         let start = Instant::now();
         let computed = match &provider {
             Some(p) => {

@@ -66,7 +66,8 @@ pub fn train_one(
     device: &burn::tensor::Device,
 ) -> anyhow::Result<dgstereo_train::RunSummary> {
     let name = parts.name.clone();
-    let options = RunOptions { out: out.to_path_buf(), resume, stop_after: None, progress };
+    let options =
+        RunOptions { out: out.to_path_buf(), resume, stop_after: None, progress, notice: |n| eprintln!("{n}") };
     let summary = dgstereo_train::train(parts, device, &options).with_context(|| format!("run '{name}'"))?;
     if let Some(r) = summary.last {
         println!(

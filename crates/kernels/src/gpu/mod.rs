@@ -1,1 +1,3 @@
 //! Formulations of burn's operations with fewer kernel launches, for GPU inference.
+
+pub mod matmul_conv;

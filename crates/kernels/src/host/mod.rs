@@ -1,1 +1,7 @@
 //! Hand-written CPU kernels for inference on the Flex backend in f32, on host buffers.
+
+pub mod conv;
+pub mod few_outputs;
+pub mod gru;
+pub mod norm;
+pub mod winograd;

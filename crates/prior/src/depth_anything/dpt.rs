@@ -16,8 +16,8 @@ use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::host_conv::{conv2d_forward, conv2d_relu_forward};
-use dgstereo_core::resample::resize_bilinear;
+use dgstereo_kernels::resize_bilinear;
+use dgstereo_kernels::{conv2d_forward, conv2d_relu_forward};
 
 use super::dinov2::{IntermediateLayer, PATCH_SIZE};
 

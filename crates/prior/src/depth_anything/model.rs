@@ -5,7 +5,7 @@ use std::path::Path;
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::Result;
-use dgstereo_core::resample::resize_bilinear;
+use dgstereo_kernels::resize_bilinear;
 
 use super::dinov2::{DinoVisionTransformer, IntermediateLayer, PATCH_SIZE};
 use super::dpt::DptHead;

@@ -97,7 +97,7 @@ mod x86 {
 
     /// Sixteen lanes of AVX-512; only for functions compiled with `avx512f` and `fma`.
     #[derive(Clone, Copy)]
-    pub(in super::super) struct Avx512(__m512);
+    pub(crate) struct Avx512(__m512);
 
     // SAFETY (every method): the type is used only inside functions with `avx512f` enabled
     // (`blocks::band_avx512`, called where the processor has it), and the loads and stores

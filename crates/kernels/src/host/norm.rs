@@ -7,19 +7,17 @@
 //! full-resolution layers (2 images x 64 channels x 192 x 224 at 384x448) that is most of the
 //! time outside the convolutions. Here each `(image, channel)` plane is one rayon task: its
 //! statistics in `f64`, then normalisation, affine and ReLU in the same pass. Only for plain CPU
-//! tensors without autodiff ([`crate::device::host_kernels_apply`]); the tensor operations stay
-//! the reference and the path for training and the GPU, and the tests check both agree.
+//! tensors without autodiff (the dispatch's host path, [`crate::ops::norm`]); the tensor operations
+//! stay the reference and the path for training and the GPU, and the tests check both agree.
 
-use burn::tensor::activation::relu;
 use burn::tensor::{Tensor, TensorData};
 use rayon::prelude::*;
 
-use crate::device::host_kernels_apply;
-use crate::tensor::to_vec;
+use dgstereo_core::tensor::to_vec;
 
 /// What [`normalize_planes`] does to each plane before the optional ReLU.
-#[derive(Debug, Clone, Copy)]
-pub enum PlaneNorm<'a> {
+#[derive(Debug, Clone)]
+pub enum PlaneNorm {
     /// Instance norm: subtract the plane's mean, divide by `sqrt(var + epsilon)` (biased
     /// variance), no affine.
     Instance {
@@ -29,9 +27,9 @@ pub enum PlaneNorm<'a> {
     /// `x * scale[c] + shift[c]` (a frozen batch norm folded to one affine per channel).
     Affine {
         /// Per-channel factor.
-        scale: &'a [f32],
+        scale: Vec<f32>,
         /// Per-channel offset.
-        shift: &'a [f32],
+        shift: Vec<f32>,
     },
     /// Nothing (only the ReLU, if asked).
     Identity,
@@ -44,7 +42,7 @@ pub enum PlaneNorm<'a> {
 ///
 /// # Panics
 /// When an affine norm's `scale` or `shift` does not have `C` entries.
-pub fn normalize_planes(x: Tensor<4>, norm: PlaneNorm<'_>, relu: bool) -> Tensor<4> {
+pub fn normalize_planes(x: Tensor<4>, norm: &PlaneNorm, relu: bool) -> Tensor<4> {
     let device = x.device();
     let dims = x.dims();
     let [_, c, h, w] = dims;
@@ -60,7 +58,7 @@ pub fn normalize_planes(x: Tensor<4>, norm: PlaneNorm<'_>, relu: bool) -> Tensor
     let mut values = to_vec(x);
     values.par_chunks_mut(plane.max(1)).enumerate().for_each(|(i, p)| {
         let (a, b) = match norm {
-            PlaneNorm::Instance { epsilon } => {
+            &PlaneNorm::Instance { epsilon } => {
                 let mean = lane_sum(p, |v| v) / plane as f64;
                 let var = lane_sum(p, |v| (v - mean) * (v - mean)) / plane as f64;
                 let inv = 1.0 / (var + epsilon).sqrt();
@@ -98,8 +96,7 @@ fn lane_sum(values: &[f32], f: impl Fn(f64) -> f64) -> f64 {
     lanes.iter().sum::<f64>() + tail.iter().map(|&v| f(v as f64)).sum::<f64>()
 }
 
-/// `max(0, a + b)`: for CPU inference ([`host_kernels_apply`]) in one parallel host pass,
-/// elsewhere with burn's operations.
+/// `max(0, a + b)` in one parallel host pass.
 ///
 /// # Shapes
 /// - `a`, `b`: `[N, C, H, W]`, equal; output: the same
@@ -108,9 +105,6 @@ fn lane_sum(values: &[f32], f: impl Fn(f64) -> f64) -> f64 {
 /// When the shapes differ.
 pub fn add_relu(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
     let device = a.device();
-    if !host_kernels_apply(&device) {
-        return relu(a + b);
-    }
     let dims = a.dims();
     assert_eq!(dims, b.dims(), "add_relu: shapes differ");
     let mut values = to_vec(a);
@@ -128,7 +122,7 @@ mod tests {
     use burn::tensor::{Device, Distribution};
 
     use super::*;
-    use crate::tensor::{instance_norm, max_abs_diff};
+    use dgstereo_core::tensor::{instance_norm, max_abs_diff};
 
     fn random(dims: [usize; 4]) -> Tensor<4> {
         Tensor::random(dims, Distribution::Normal(0.5, 2.0), &Device::flex())
@@ -140,7 +134,7 @@ mod tests {
         for relu_after in [false, true] {
             let stock = instance_norm(x.clone(), 1e-5);
             let stock = if relu_after { relu(stock) } else { stock };
-            let host = normalize_planes(x.clone(), PlaneNorm::Instance { epsilon: 1e-5 }, relu_after);
+            let host = normalize_planes(x.clone(), &PlaneNorm::Instance { epsilon: 1e-5 }, relu_after);
             assert!(max_abs_diff(stock, host) < 1e-5);
         }
         let scale = [0.5, -1.0, 2.0, 0.0, 1.5];
@@ -148,26 +142,26 @@ mod tests {
         let s = Tensor::<1>::from_floats(scale, &Device::flex()).reshape([1, 5, 1, 1]);
         let t = Tensor::<1>::from_floats(shift, &Device::flex()).reshape([1, 5, 1, 1]);
         let stock = relu(x.clone() * s + t);
-        let host = normalize_planes(x.clone(), PlaneNorm::Affine { scale: &scale, shift: &shift }, true);
+        let host =
+            normalize_planes(x.clone(), &PlaneNorm::Affine { scale: scale.to_vec(), shift: shift.to_vec() }, true);
         assert!(max_abs_diff(stock, host) < 1e-6);
-        assert!(max_abs_diff(relu(x.clone()), normalize_planes(x, PlaneNorm::Identity, true)) == 0.0);
+        assert!(max_abs_diff(relu(x.clone()), normalize_planes(x, &PlaneNorm::Identity, true)) == 0.0);
     }
 
     #[test]
     fn add_relu_agrees_with_the_tensor_operations() {
         let (a, b) = (random([1, 3, 70, 300]), random([1, 3, 70, 300]));
         let expected = relu(a.clone() + b.clone());
-        assert!(max_abs_diff(expected.clone(), add_relu(a.clone(), b.clone())) == 0.0);
-        // With autodiff, burn's operations.
-        let ad = Device::flex().autodiff();
-        let [a, b] = [a, b].map(|t| Tensor::<4>::from_data(t.into_data(), &ad));
-        let stock = Tensor::<4>::from_data(add_relu(a, b).into_data(), &Device::flex());
-        assert!(max_abs_diff(expected, stock) == 0.0);
+        assert!(max_abs_diff(expected, add_relu(a, b)) == 0.0);
     }
 
     #[test]
     #[should_panic(expected = "affine norm of 2 / 2 entries for 5 channels")]
     fn an_affine_norm_of_the_wrong_width_is_refused() {
-        normalize_planes(random([1, 5, 2, 2]), PlaneNorm::Affine { scale: &[1.0, 1.0], shift: &[0.0, 0.0] }, false);
+        normalize_planes(
+            random([1, 5, 2, 2]),
+            &PlaneNorm::Affine { scale: vec![1.0, 1.0], shift: vec![0.0, 0.0] },
+            false,
+        );
     }
 }

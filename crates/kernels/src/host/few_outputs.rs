@@ -13,7 +13,8 @@
 
 use rayon::prelude::*;
 
-use crate::host_conv::{Epilogue, band_jobs, matmul_strided};
+use crate::geometry::{Epilogue, band_jobs};
+use crate::product::matmul_strided;
 
 /// Most output channels for which this path runs (with a 3x3 kernel the product has 9·O rows).
 pub(crate) const MAX_OUTPUTS: usize = 4;
@@ -114,7 +115,7 @@ mod tests {
     use burn::tensor::{Device, Distribution, Tensor};
 
     use super::*;
-    use crate::tensor::to_vec;
+    use dgstereo_core::tensor::to_vec;
 
     /// Against burn's convolution (the reference), with and without bias and ReLU.
     fn case(

@@ -19,7 +19,7 @@
 
 use std::sync::{Arc, Mutex};
 
-use super::{Variant, transform_weights};
+use super::transforms::{Variant, transform_weights};
 
 /// Bytes of transformed and raw weights the process-wide cache keeps: the update loop of the
 /// default RAFT-Stereo needs ~65 MB (the GRU pairs at 1/4 and 1/8 with F(4x4) 20 MB each and
@@ -159,7 +159,7 @@ impl Drop for KeptWeights {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{F2, F4};
+    use super::super::transforms::{F2, F4};
     use super::*;
 
     fn weight(o: usize, c: usize, seed: u32) -> Vec<f32> {

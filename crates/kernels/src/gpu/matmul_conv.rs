@@ -5,7 +5,7 @@
 //! with 256 to 384 input channels) the implicit-GEMM kernels ask for 90 KB of workgroup memory
 //! where Vulkan allows 48 KB, so burn falls back to its direct kernel: about 2 TFLOP/s on an H200
 //! in f16 and f32 alike, 47 % of a KITTI pass in the GRU at 1/4 resolution (burn's tuning database
-//! from the session 12 lease). burn's matrix product does run on the tensor cores at those sizes
+//! from a tuning run). burn's matrix product does run on the tensor cores at those sizes
 //! (its tuning picked `matmul_simple_cyclic_cmma_multi_rows`). So on devices other than the CPU a
 //! convolution is built from burn's operations as an explicit im2col, the input's `kh·kw` shifted
 //! windows stacked along the channels (`[N, C·kh·kw, H_out·W_out]`), and one product with the
@@ -26,39 +26,49 @@
 //! The gathered columns take a stride as well, so the encoders' strided convolutions, which burn
 //! ran with its direct kernel (31 ms of a 0.2-s KITTI pass on an H200), take the product too.
 //!
-//! `DGSTEREO_GPU_STOCK=conv` turns the route off, `im2col` the gathered columns and `strided` the
-//! strided convolutions' share ([`crate::gpu_routes`]), so a GPU run can measure what each gains.
+//! `stock-route=conv` turns the route off, `im2col` the gathered columns and `strided` the
+//! strided convolutions' share ([`crate::settings::GpuRoute`]), so a GPU run can measure what each gains.
 
+mod columns;
 mod few_outputs;
 mod shared_columns;
 
 pub use shared_columns::SharedColumns;
 
-use std::sync::{Mutex, PoisonError};
-
 use burn::tensor::ops::{ConvOptions, PadMode};
-use burn::tensor::{Device, Int, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 
-use crate::gpu_routes::GpuRoute;
-use crate::host_conv::conv_output_size;
+#[cfg(test)]
+use columns::window_indices;
+use columns::{EpilogueBias, WindowShape, epilogue_bias, finish, gathered_columns};
+
+use crate::dispatch::{Op, Path, path};
+use crate::geometry::conv_output_size;
+use crate::settings::GpuRoute;
 
 /// Whether a convolution with `options` and a `kh x kw` kernel on `device` takes
 /// [`conv2d_by_matmul`]: GPU inference ([`GpuRoute::MatmulConv`]), groups 1, and either stride 1
 /// with a kernel larger than 1x1, or, with the gathered columns, any stride
 /// ([`GpuRoute::StridedProducts`]: burn's strided convolutions ran its direct kernel, 31 ms of a
-/// 0.2-s KITTI pass on an H200 in session 17's profile), or an unpadded 1x1 at stride 1 when the
+/// 0.2-s KITTI pass on an H200), or an unpadded 1x1 at stride 1 when the
 /// element-wise work after it joins the product's kernel ([`GpuRoute::FusedEpilogue`]; burn runs
 /// those as a product already, with the bias in a kernel of its own).
 pub fn matmul_conv_applies(device: &Device, options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
+    path(device, Op::Conv) == Path::Gpu && suits_product(options, kernel)
+}
+
+/// The shape rule of [`matmul_conv_applies`] under the settings' routes, for a caller that has
+/// asked the dispatch already.
+pub fn suits_product(options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
     let strided = GpuRoute::GatheredColumns.enabled() && GpuRoute::StridedProducts.enabled();
-    GpuRoute::MatmulConv.applies(device) && suits(options, kernel, strided, GpuRoute::FusedEpilogue.enabled())
+    suits(options, kernel, strided, GpuRoute::FusedEpilogue.enabled())
 }
 
 /// Whether convolutions with `options` and a `kh x kw` kernel on `device` share an input part's
 /// columns ([`SharedColumns`]): where they take [`conv2d_by_matmul`] with gathered columns and
-/// `DGSTEREO_GPU_STOCK` leaves `shared-columns` on.
+/// the dispatch gives the GRU step the GPU formulation (route `shared-columns`).
 pub fn shared_columns_apply(device: &Device, options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
-    GpuRoute::SharedColumns.enabled()
+    path(device, Op::GruStep) == Path::Gpu
         && GpuRoute::GatheredColumns.enabled()
         && matmul_conv_applies(device, options, kernel)
 }
@@ -120,7 +130,7 @@ pub fn conv2d_by_matmul(
 /// picks): it takes element-wise operations of the product's shape and stops at the first
 /// operation of another shape (the bias reshaped after the product was one, which left
 /// every bias add and activation of the update loop in kernels of their own). With
-/// `DGSTEREO_GPU_STOCK=epilogue` the old order returns, for comparison.
+/// ``stock-route=epilogue`` the old order returns, for comparison.
 ///
 /// # Shapes
 /// - as [`conv2d_by_matmul`]; `then` maps `[N, O, H_out·W_out]` to the same shape
@@ -197,134 +207,13 @@ fn conv2d_by_matmul_with(
     finish(weight.matmul(columns), bias, then, out_size)
 }
 
-/// The column matrix of `x` for the windows of `shape`: one `select` of the kept indices
-/// ([`window_indices`]) from `x` with a zero column appended.
-///
-/// # Shapes
-/// - `x`: `[N, C, H, W]`; output `[N, C·kh·kw, H_out·W_out]`, rows `(c, ky, kx)`
-fn gathered_columns(x: Tensor<4>, shape: WindowShape) -> Tensor<3> {
-    let [n, c, h, w] = x.dims();
-    let taps = shape.kernel[0] * shape.kernel[1];
-    let indices = window_indices(shape, 1, &x.device());
-    let pixels = indices.dims()[0] / taps;
-    let zero = Tensor::zeros([n, c, 1], &x.device());
-    let flat = Tensor::cat(vec![x.reshape([n, c, h * w]), zero], 2);
-    flat.select(2, indices).reshape([n, c * taps, pixels])
-}
-
-/// The bias as [`finish`] adds it: as `[1, O, 1]`, reshaped before the product, or as it is.
-enum EpilogueBias {
-    Flat(Tensor<3>),
-    Vector(Tensor<1>),
-}
-
-/// `bias` prepared for [`finish`] before the product is issued: reshaped there where `fused`
-/// (a convolution with an epilogue and the route on), else as it is. A convolution without an
-/// epilogue (the encoders', each followed by a norm) keeps session 17's composition, the one its
-/// H200 timings measured.
-fn epilogue_bias(bias: Option<Tensor<1>>, o: usize, fused: bool) -> Option<EpilogueBias> {
-    bias.map(|b| if fused { EpilogueBias::Flat(b.reshape([1, o, 1])) } else { EpilogueBias::Vector(b) })
-}
-
-/// The product `out` (`[N, O, P]`) plus the bias, then `then`, as `[N, O, H_out, W_out]`. With the
-/// bias reshaped before the product (`EpilogueBias::Flat`) burn's fusion takes both into the
-/// product's epilogue; reshaped here, after the product (`Vector`, the composition before
-/// [`GpuRoute::FusedEpilogue`]), the reshape ends the product's fusion block.
-fn finish(
-    out: Tensor<3>,
-    bias: Option<EpilogueBias>,
-    then: impl FnOnce(Tensor<3>) -> Tensor<3>,
-    [out_h, out_w]: [usize; 2],
-) -> Tensor<4> {
-    let [n, o, _] = out.dims();
-    let out = match bias {
-        None => out,
-        Some(EpilogueBias::Flat(b)) => out + b,
-        Some(EpilogueBias::Vector(b)) => out + b.reshape([1, o, 1]),
-    };
-    then(out).reshape([n, o, out_h, out_w])
-}
-
-/// What the gathered column indices depend on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct WindowShape {
-    input: [usize; 2],
-    kernel: [usize; 2],
-    stride: [usize; 2],
-    padding: [(usize, usize); 2],
-    dilation: [usize; 2],
-}
-
-impl WindowShape {
-    /// The windows of a `kh x kw` kernel over an `[h, w]` input with `options`.
-    fn new(input: [usize; 2], kernel: [usize; 2], options: &ConvOptions<2>) -> Self {
-        let (stride, padding, dilation) = (options.stride, options.padding, options.dilation);
-        Self { input, kernel, stride, padding, dilation }
-    }
-
-    /// For each row `(ky, kx)` of a channel and each output pixel, the input pixel it reads
-    /// (`y·W + x`), or `H·W` (the appended zero) where the window lies in the padding.
-    ///
-    /// # Shapes
-    /// - `kh·kw·H_out·W_out` indices, tap-major
-    fn indices(&self) -> Vec<i32> {
-        let ([h, w], [kh, kw]) = (self.input, self.kernel);
-        let [(top, _), (left, _)] = self.padding;
-        let ([dh, dw], [sh, sw]) = (self.dilation, self.stride);
-        let options = ConvOptions::new_with_padding(self.stride, self.padding, self.dilation, 1);
-        let [out_h, out_w] = conv_output_size("window indices", self.input, self.kernel, &options);
-        let zero = i32::try_from(h * w).expect("an input plane of fewer than 2^31 pixels");
-        let mut indices = Vec::with_capacity(kh * kw * out_h * out_w);
-        for ky in 0..kh {
-            for kx in 0..kw {
-                for oy in 0..out_h {
-                    let y = (oy * sh + dh * ky).checked_sub(top).filter(|&y| y < h);
-                    for ox in 0..out_w {
-                        let x = (ox * sw + dw * kx).checked_sub(left).filter(|&x| x < w);
-                        indices.push(match (y, x) {
-                            (Some(y), Some(x)) => (y * w + x) as i32,
-                            _ => zero,
-                        });
-                    }
-                }
-            }
-        }
-        indices
-    }
-}
-
-/// The most index tensors kept: a pass uses a few shapes per resolution, and a folder of images
-/// of many sizes must not grow the cache without bound.
-const KEPT_INDEX_TENSORS: usize = 32;
-
-/// The indices of [`WindowShape::indices`], `repeat` times over, as a tensor on `device`, built
-/// once per shape, repeat and device and kept (up to [`KEPT_INDEX_TENSORS`], the oldest dropped
-/// first).
-fn window_indices(shape: WindowShape, repeat: usize, device: &Device) -> Tensor<1, Int> {
-    type Kept = Vec<((WindowShape, usize), Device, Tensor<1, Int>)>;
-    static KEPT: Mutex<Kept> = Mutex::new(Vec::new());
-    let mut kept = KEPT.lock().unwrap_or_else(PoisonError::into_inner);
-    let key = (shape, repeat);
-    if let Some((_, _, t)) = kept.iter().find(|(k, d, _)| *k == key && d == device) {
-        return t.clone();
-    }
-    let values = shape.indices().repeat(repeat);
-    let len = values.len();
-    let tensor = Tensor::<1, Int>::from_data(TensorData::new(values, [len]), device);
-    if kept.len() == KEPT_INDEX_TENSORS {
-        kept.remove(0);
-    }
-    kept.push((key, device.clone(), tensor.clone()));
-    tensor
-}
-
 #[cfg(test)]
 mod tests {
     use burn::tensor::module::conv2d;
     use burn::tensor::{Device, Distribution};
 
     use super::*;
-    use crate::tensor::max_abs_diff;
+    use dgstereo_core::tensor::max_abs_diff;
 
     fn options(padding: [(usize, usize); 2], dilation: usize) -> ConvOptions<2> {
         ConvOptions::new_with_padding([1, 1], padding, [dilation, dilation], 1)

@@ -11,8 +11,12 @@
 //! at the memory of the pending share (`O x α² x tiles`, 35 MB for the GRU at 1/4 resolution of
 //! a KITTI frame).
 
-use super::*;
-use crate::host_conv::matmul_strided_with;
+use dgstereo_core::tensor::reuse_buffer;
+
+use super::transforms::*;
+use super::weight_cache::transformed_weights;
+use crate::geometry::Epilogue;
+use crate::product::{matmul_strided, matmul_strided_with};
 
 /// The second convolution's products over the shared channels, band by band, waiting for the
 /// rest of its input.
@@ -123,73 +127,4 @@ thread_local! {
     /// step runs one pair per level per iteration; clearing fresh buffers each time cost a
     /// memory pass over them).
     static SUMS: std::cell::RefCell<Vec<Vec<f32>>> = const { std::cell::RefCell::new(Vec::new()) };
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Both convolutions of a split pair against [`winograd_conv`] of the whole inputs, for both
-    /// variants and a batch of two.
-    #[test]
-    fn a_split_pair_equals_the_two_whole_convolutions() {
-        let random = |len: usize, seed: u32| -> Vec<f32> {
-            (0..len).map(|i| (((i as u32).wrapping_mul(2_654_435_761) ^ seed) % 2001) as f32 / 1000.0 - 1.0).collect()
-        };
-        let (n, own1, own2, shared, o1, o2, h, w) = (2, 5, 4, 6, 7, 3, 13, 18);
-        let c1 = own1 + shared;
-        let c2 = own2 + shared;
-        let x1 = random(n * c1 * h * w, 1);
-        let own2_values = random(n * own2 * h * w, 2);
-        let (wt1, wt2) = (random(o1 * c1 * 9, 3), random(o2 * c2 * 9, 4));
-        let (b1, b2) = (random(o1, 5), random(o2, 6));
-        // The second convolution's whole input: its own channels, then the first's shared ones.
-        let plane = h * w;
-        let mut x2 = Vec::with_capacity(n * c2 * plane);
-        for b in 0..n {
-            x2.extend_from_slice(&own2_values[b * own2 * plane..][..own2 * plane]);
-            x2.extend_from_slice(&x1[(b * c1 + own1) * plane..][..shared * plane]);
-        }
-        let padding = [(1, 1), (1, 1)];
-        for variant in [&F2, &F4] {
-            let (got1, pending) = first(
-                variant,
-                &x1,
-                [n, c1, h, w],
-                [&wt1, &wt2],
-                [o1, o2],
-                c2,
-                shared,
-                Some(&b1),
-                padding,
-                Epilogue::Relu,
-            );
-            let got2 = second(pending, &own2_values, [n, own2, h, w], Some(&b2), Epilogue::Linear);
-            let conv1 = Conv3x3 {
-                x: &x1,
-                x_dims: [n, c1, h, w],
-                wt: &wt1,
-                o: o1,
-                bias: Some(&b1),
-                padding,
-                epilogue: Epilogue::Relu,
-            };
-            let want1 = winograd_conv(variant, &conv1);
-            let conv2 = Conv3x3 {
-                x: &x2,
-                x_dims: [n, c2, h, w],
-                wt: &wt2,
-                o: o2,
-                bias: Some(&b2),
-                padding,
-                epilogue: Epilogue::Linear,
-            };
-            let want2 = winograd_conv(variant, &conv2);
-            for ((got, want), which) in [(got1, want1), (got2, want2)].into_iter().zip(["first", "second"]) {
-                assert_eq!(got.1, want.1, "F({}) {which}", variant.m);
-                let worst = got.0.iter().zip(&want.0).map(|(g, w)| (g - w).abs()).fold(0.0, f32::max);
-                assert!(worst < 1e-4, "F({}) {which}: {worst}", variant.m);
-            }
-        }
-    }
 }

@@ -29,13 +29,20 @@
 // Elsewhere than on x86-64 only the tests run the blocks (with the portable vectors).
 #![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 
-use std::sync::OnceLock;
+use std::mem::MaybeUninit;
+use std::ops::Range;
+
+use dgstereo_core::tensor::reuse_buffer;
+use rayon::prelude::*;
 
 use super::simd::{self, Simd};
-use super::*;
+use super::transforms::*;
+use super::weight_cache::transformed_weights;
+use crate::geometry::Epilogue;
+use crate::settings::settings;
 
 /// Tiles per block: the vectors of the transforms and the kernel's columns. 48 (three
-/// AVX-512 vectors a kernel step) rather than 32 since session 20, on the AMD EPYC (Zen 4):
+/// AVX-512 vectors a kernel step) rather than 32, on the AMD EPYC (Zen 4):
 /// min of 25, three rounds alternating, 32 -> 48, ms: 64->64 at 384x448 41.2-43.5 -> 39.0-40.4,
 /// 96->96 at 192x224 14.4-16.3 -> 13.4-13.6, 128->128 at 96x112 6.0-7.1 -> 6.0, 128->256 at
 /// 96x112 11.3-12.8 -> 10.9-11.4, at 96x312 29.7-31.0 -> 30.7-32.1 (the one shape it loses), 64->64
@@ -73,16 +80,14 @@ const MAX_CHANNEL_PRODUCT: usize = 128 * 256;
 
 /// The instruction set for the blocked path to take an F(4x4) convolution of `c` input and
 /// `o` output channels: AVX-512 where the processor has it and `C·O` is at most
-/// [`MAX_CHANNEL_PRODUCT`]; `None` (the band path) otherwise, or where
-/// `DGSTEREO_WINOGRAD_BLOCKS=0` (read once) turns the path off.
+/// [`MAX_CHANNEL_PRODUCT`]; `None` (the band path) otherwise, or where the settings say
+/// `no-winograd-blocks`.
 pub(crate) fn instruction_set(c: usize, o: usize) -> Option<Isa> {
-    static OFF: OnceLock<bool> = OnceLock::new();
-    let off = *OFF.get_or_init(|| std::env::var("DGSTEREO_WINOGRAD_BLOCKS").is_ok_and(|v| v == "0"));
-    Isa::detect().filter(|_| !off && c * o <= MAX_CHANNEL_PRODUCT)
+    Isa::detect().filter(|_| settings().winograd_blocks && c * o <= MAX_CHANNEL_PRODUCT)
 }
 
 /// `conv` by F(4x4, 3x3) in cache-resident blocks of tiles, compiled for `isa` (from
-/// [`instruction_set`]); the same contract as [`winograd_conv`].
+/// [`instruction_set`]); the same contract as `winograd_conv`.
 pub(crate) fn blocked_conv(isa: Isa, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
     let &Conv3x3 { x, x_dims, wt, o, bias, padding, epilogue } = conv;
     let c = conv.channels();

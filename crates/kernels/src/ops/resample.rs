@@ -5,10 +5,10 @@
 //! maps, so `y = A_h · x · A_wᵀ` with fixed matrices `A_h` (`H_out x H_in`) and `A_w`. Written this
 //! way the resize is two matrix products, whose gradients every burn backend has (the GPU backends
 //! lack bilinear-resize backward), and it is exact to PyTorch's formula. For CPU inference
-//! ([`host_kernels_apply`]) the same interpolation runs as a host pass with the two taps of each
+//! (the dispatch's host path) the same interpolation runs as a host pass with the two taps of each
 //! output row and column, in parallel over channel planes: the products spend most of their work
 //! on the matrices' zeros (the GRUs' resizes between levels were 4 % of a CPU forward pass). GPU
-//! inference ([`GpuRoute::Interpolate`]) takes burn's `interpolate`, one kernel where the products
+//! inference (route `resize`) takes burn's `interpolate`, one kernel where the products
 //! take two and upload their matrices on every call; training keeps the products everywhere.
 
 use burn::tensor::module::{avg_pool2d, interpolate};
@@ -16,9 +16,9 @@ use burn::tensor::ops::{AvgPoolOptions, InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 
-use crate::device::host_kernels_apply;
-use crate::gpu_routes::GpuRoute;
-use crate::tensor::{host_values, zeros_parallel};
+use dgstereo_core::tensor::{host_values, zeros_parallel};
+
+use crate::dispatch::{Op, Path, path};
 
 /// The two taps of each output sample of 1-D linear interpolation: `(x0, x1, w)`, the output
 /// being `(1 - w)·in[x0] + w·in[x1]` (`x1 == x0` at the last sample).
@@ -68,13 +68,11 @@ pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> T
     if [h, w] == size {
         return x;
     }
-    if host_kernels_apply(&x.device()) {
-        return resize_bilinear_host(x, size, align_corners);
+    match path(&x.device(), Op::Resize) {
+        Path::Host => resize_bilinear_host(x, size, align_corners),
+        Path::Gpu => resize_bilinear_by_interpolate(x, size, align_corners),
+        Path::Stock => resize_bilinear_by_matrices(x, size, align_corners),
     }
-    if GpuRoute::Interpolate.applies(&x.device()) {
-        return resize_bilinear_by_interpolate(x, size, align_corners);
-    }
-    resize_bilinear_by_matrices(x, size, align_corners)
 }
 
 /// [`resize_bilinear`] by burn's `interpolate` (forward only on the GPU backends).
@@ -146,7 +144,7 @@ fn resize_bilinear_host(x: Tensor<4>, [ho, wo]: [usize; 2], align_corners: bool)
 
 /// `F.avg_pool2d(x, 3, stride=2, padding=1)`: the mean of each 3x3 window at stride 2, the zero
 /// padding counted in the mean (PyTorch's default `count_include_pad`), so every output is its
-/// window's sum over 9. For CPU inference ([`host_kernels_apply`]) a host pass per channel plane
+/// window's sum over 9. For CPU inference (the dispatch's host path) a host pass per channel plane
 /// (the three rows summed, then the three columns); elsewhere burn's `avg_pool2d`. burn Flex's
 /// pooling took 9.2 ms for the GRUs' 1/4 state at 384x448 (128 x 96 x 112), ~4 % of an update
 /// iteration on the Xeon; the host pass 1.2 ms.
@@ -154,7 +152,7 @@ fn resize_bilinear_host(x: Tensor<4>, [ho, wo]: [usize; 2], align_corners: bool)
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output `[N, C, (H - 1) / 2 + 1, (W - 1) / 2 + 1]`
 pub fn average_pool_half(x: Tensor<4>) -> Tensor<4> {
-    if !host_kernels_apply(&x.device()) {
+    if path(&x.device(), Op::Pool) != Path::Host {
         let options = AvgPoolOptions::new([3, 3]).with_stride([2, 2]).with_padding([1, 1]);
         return avg_pool2d(x, options);
     }
@@ -196,7 +194,7 @@ mod tests {
 
     #[test]
     fn matches_stock_bilinear_resize() {
-        let device = crate::default_device();
+        let device = Device::flex();
         let x = Tensor::<4>::random([2, 3, 7, 9], burn::tensor::Distribution::Default, &device);
         for size in [[14, 18], [4, 5], [7, 9], [13, 3]] {
             for align in [true, false] {
@@ -205,7 +203,7 @@ mod tests {
                     ("entry", resize_bilinear(x.clone(), size, align)),
                     ("matrices", resize_bilinear_by_matrices(x.clone(), size, align)),
                 ] {
-                    let diff = crate::tensor::max_abs_diff(a, b.clone());
+                    let diff = dgstereo_core::tensor::max_abs_diff(a, b.clone());
                     assert!(diff < 1e-5, "{path}, size {size:?} align {align}: {diff}");
                 }
             }
@@ -223,14 +221,14 @@ mod tests {
                 let host = resize_bilinear_host(x.clone(), size, align);
                 let reference = resize_bilinear_by_matrices(x.clone(), size, align);
                 assert_eq!(host.dims(), reference.dims());
-                let diff = crate::tensor::max_abs_diff(host, reference);
+                let diff = dgstereo_core::tensor::max_abs_diff(host, reference);
                 assert!(diff < 1e-6, "size {size:?} align {align}: {diff}");
             }
         }
         // The public entry takes the host pass on the plain CPU device.
         let via_entry = resize_bilinear(x.clone(), [11, 13], true);
         let host = resize_bilinear_host(x, [11, 13], true);
-        assert_eq!(crate::tensor::max_abs_diff(via_entry, host), 0.0);
+        assert_eq!(dgstereo_core::tensor::max_abs_diff(via_entry, host), 0.0);
     }
 
     /// The host pooling against burn's `avg_pool2d` (the reference) on even and odd sizes, one row
@@ -244,7 +242,7 @@ mod tests {
             let reference = avg_pool2d(x.clone(), options.clone());
             let host = average_pool_half(x);
             assert_eq!(host.dims(), reference.dims(), "{h}x{w}");
-            let diff = crate::tensor::max_abs_diff(host, reference);
+            let diff = dgstereo_core::tensor::max_abs_diff(host, reference);
             assert!(diff < 1e-6, "{h}x{w}: {diff}");
         }
     }

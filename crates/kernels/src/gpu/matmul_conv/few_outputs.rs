@@ -11,8 +11,8 @@
 use burn::tensor::Tensor;
 use burn::tensor::ops::ConvOptions;
 
-use super::{EpilogueBias, WindowShape, finish, window_indices};
-use crate::host_conv::conv_output_size;
+use super::columns::{EpilogueBias, WindowShape, finish, window_indices};
+use crate::geometry::conv_output_size;
 
 /// The most output channels that take the product first.
 const MAX_OUTPUTS: usize = 4;
@@ -62,7 +62,7 @@ mod tests {
     use burn::tensor::{Device, Distribution};
 
     use super::*;
-    use crate::tensor::max_abs_diff;
+    use dgstereo_core::tensor::max_abs_diff;
 
     /// Against burn's convolution: one to four outputs, a batch of two, padded, unpadded,
     /// asymmetric, dilated and non-square kernels, a single row.
@@ -86,21 +86,11 @@ mod tests {
             assert!(suits(&options, o, c));
             let reference = conv2d(x.clone(), wt.clone(), Some(b.clone()), options.clone());
             let scale = reference.clone().abs().max().into_scalar::<f32>();
-            // Directly, and through the route's entry, which picks it for these shapes.
-            for got in [
-                conv2d_product_first(
-                    x.clone(),
-                    wt.clone(),
-                    super::super::epilogue_bias(Some(b.clone()), o, true),
-                    &options,
-                    |t| t,
-                ),
-                super::super::conv2d_by_matmul(x, wt, Some(b), &options),
-            ] {
-                assert_eq!(got.dims(), reference.dims());
-                let err = max_abs_diff(got, reference.clone()) / scale;
-                assert!(err < 1e-5, "n {n} c {c} o {o} {h}x{w} {kh}x{kw}: {err}");
-            }
+            let bias = super::super::columns::epilogue_bias(Some(b), o, true);
+            let got = conv2d_product_first(x, wt, bias, &options, |t| t);
+            assert_eq!(got.dims(), reference.dims());
+            let err = max_abs_diff(got, reference) / scale;
+            assert!(err < 1e-5, "n {n} c {c} o {o} {h}x{w} {kh}x{kw}: {err}");
         }
     }
 

@@ -10,15 +10,16 @@
 //! convolutions take the Winograd path (the GRUs' sizes), the candidate's `x` channels are not
 //! transformed a second time: the gates' convolution keeps the candidate's products over them
 //! (`conv2d_host_shared_first`) and pass one writes `r·h` alone. Used only where the
-//! host kernels apply (CPU inference, [`dgstereo_core::device::host_kernels_apply`]); the
-//! tensor-op step in [`super::gru`] stays the reference and the tests check both agree.
+//! host kernels apply (CPU inference, the dispatch's host path, [`crate::ops::gru`]); the updater's
+//! tensor-op step stays the reference and its tests check both agree.
 
+use burn::nn::conv::Conv2d;
 use burn::tensor::{Tensor, TensorData};
-use dgstereo_core::host_conv::{conv_options, conv2d_host_shared_first, conv2d_host_shared_second, conv2d_host_slices};
 use dgstereo_core::tensor::{host_values, planes_from, zeros_parallel};
 use rayon::prelude::*;
 
-use super::gru::{ConvGru, GateContext};
+use super::conv::{conv2d_host_shared_first, conv2d_host_shared_second, conv2d_host_slices};
+use crate::ops::conv::conv_options;
 
 /// `tanh` as a rational function (odd degree-13 numerator, even degree-6 denominator, the
 /// minimax fit Eigen uses for `float`), clamped where `tanh` is ±1 in `f32`. Branch-free, so the
@@ -44,15 +45,23 @@ fn sigmoid(v: f32) -> f32 {
 }
 
 /// One step `h' = (1 - z)·h + z·tanh(convq([r·h, x]) + cq)` on the host, `x` being the
-/// concatenation of `inputs` (never built: their planes go straight into `[h, x]`).
+/// concatenation of `inputs` (never built: their planes go straight into `[h, x]`), with
+/// `z = σ(convz([h, x]) + cz)`, `r = σ(convr([h, x]) + cr)`; `zr_ctx` is `[cz, cr]` stacked
+/// along channels, `q_ctx` is `cq`.
 ///
 /// # Shapes
-/// - `h`, the context terms: `[N, C, H, W]`; `inputs[i]`: `[N, C_i, H, W]`; output `[N, C, H, W]`
+/// - `h`, `q_ctx`: `[N, C, H, W]`; `zr_ctx`: `[N, 2·C, H, W]`; `inputs[i]`: `[N, C_i, H, W]`;
+///   output `[N, C, H, W]`
 ///
 /// `None` (nothing computed) when a convolution has options the host kernel does not take.
-pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, inputs: &[Tensor<4>]) -> Option<Tensor<4>> {
-    let (zr_options, q_options) = (conv_options(&gru.convz)?, conv_options(&gru.convq)?);
-    if conv_options(&gru.convr)? != zr_options {
+pub fn step(
+    [convz, convr, convq]: [&Conv2d; 3],
+    h: Tensor<4>,
+    [zr_ctx, q_ctx]: [&Tensor<4>; 2],
+    inputs: &[Tensor<4>],
+) -> Option<Tensor<4>> {
+    let (zr_options, q_options) = (conv_options(convz)?, conv_options(convq)?);
+    if conv_options(convr)? != zr_options {
         return None;
     }
     let device = h.device();
@@ -82,12 +91,16 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, inputs: &[Ten
         dst.copy_from_slice(src);
     });
 
-    let (zr_weight, zr_bias) = gru.gate_weights();
+    let zr_weight = Tensor::cat(vec![convz.weight.val(), convr.weight.val()], 0);
+    let zr_bias = match (&convz.bias, &convr.bias) {
+        (Some(bz), Some(br)) => Some(Tensor::cat(vec![bz.val(), br.val()], 0)),
+        _ => None,
+    };
     let (zr_weight, zr_bias) = (host_values(zr_weight), zr_bias.map(host_values));
-    let [_, _, kh, kw] = gru.convz.weight.dims();
-    let [_, _, qh, qw] = gru.convq.weight.dims();
-    let q_weight = host_values(gru.convq.weight.val());
-    let q_bias = gru.convq.bias.as_ref().map(|b| host_values(b.val()));
+    let [_, _, kh, kw] = convz.weight.dims();
+    let [_, _, qh, qw] = convq.weight.dims();
+    let q_weight = host_values(convq.weight.val());
+    let q_bias = convq.bias.as_ref().map(|b| host_values(b.val()));
     let dims = [n, channels, hh, ww];
     // With Winograd (the GRUs' sizes) the candidate's x channels are transformed once, by the
     // gates' convolution, which keeps the candidate's products over them.
@@ -105,7 +118,7 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, inputs: &[Ten
             (gates, None)
         }
     };
-    let zr_ctx = host_values(ctx.zr.clone());
+    let zr_ctx = host_values(zr_ctx.clone());
 
     // Pass one: z (kept) and r·h: into its own buffer where the candidate's x channels are
     // pending, else over h's planes of `hx` (the x planes stay).
@@ -138,7 +151,7 @@ pub(crate) fn step(gru: &ConvGru, h: Tensor<4>, ctx: &GateContext, inputs: &[Ten
             conv2d_host_slices(&hx, dims, &q_weight, [c, channels, qh, qw], q_bias.as_deref(), &q_options).0
         }
     };
-    let q_ctx = host_values(ctx.q.clone());
+    let q_ctx = host_values(q_ctx.clone());
 
     // Pass two: the new state.
     let out = planes_from(n * c, plane, |i| {

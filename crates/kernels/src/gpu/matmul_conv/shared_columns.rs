@@ -14,9 +14,9 @@
 use burn::tensor::Tensor;
 use burn::tensor::ops::ConvOptions;
 
-use super::{WindowShape, epilogue_bias, finish, gathered_columns};
-use crate::gpu_routes::GpuRoute;
-use crate::host_conv::conv_output_size;
+use super::columns::{WindowShape, epilogue_bias, finish, gathered_columns};
+use crate::geometry::conv_output_size;
+use crate::settings::GpuRoute;
 
 /// The gathered column matrix of the part of a convolution's input that several convolutions
 /// share, with the geometry they all use.
@@ -90,7 +90,7 @@ mod tests {
     use burn::tensor::{Device, Distribution};
 
     use super::*;
-    use crate::tensor::max_abs_diff;
+    use dgstereo_core::tensor::max_abs_diff;
 
     /// Against burn's convolution of the concatenated input: two convolutions sharing one
     /// part's columns (as the ConvGRU's gates and candidate do), a batch of two, padded and
