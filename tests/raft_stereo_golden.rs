@@ -3,7 +3,10 @@
 //! The numbers come from `../shared/golden/raft_stereo_random.activations.safetensors`: the
 //! official RAFT-Stereo (princeton-vl/RAFT-Stereo, commit 6068c1a), default configuration, run
 //! in float32 on CPU with the random-weight checkpoint `raft_stereo_random.pth` on a 64x128 crop
-//! of the Cones pair for 4 iterations (see `../shared/golden/README.md`).
+//! of the Cones pair for 4 iterations (see `../shared/golden/README.md`); and from
+//! `raft_stereo_realtime_random.activations.safetensors`, the realtime architecture (shared
+//! backbone, n_downsample 3, 2 GRU levels, slow-fast GRU) for 7 iterations, which the
+//! checkpoint's tensors alone must select.
 
 use std::path::PathBuf;
 
@@ -28,6 +31,22 @@ fn every_reference_tensor_matches() {
     println!("{report}");
     assert!(report.unmatched.is_empty(), "keys not produced: {:?}", report.unmatched);
     assert!(report.lines.len() >= 40, "only {} tensors compared", report.lines.len());
+    assert!(report.passed(), "some tensors are off:\n{report}");
+    assert!(report.final_flow_error < verify::FLOW_TOLERANCE);
+}
+
+#[test]
+fn every_realtime_reference_tensor_matches() {
+    let weights = "golden/raft_stereo_realtime_random.pth";
+    let Some(shared) = shared_dir_for_test("every_realtime_reference_tensor_matches", weights) else { return };
+    let reference = shared.join("golden/raft_stereo_realtime_random.activations.safetensors");
+    let report =
+        verify::verify_raft_stereo(&shared.join(weights), &reference, &default_device()).expect("verification runs");
+    println!("{report}");
+    assert!(report.configuration.contains("shared backbone"), "{}", report.configuration);
+    assert!(report.unmatched.is_empty(), "keys not produced: {:?}", report.unmatched);
+    // fmap.{left,right}, context.hidden.{0,1}, 7 iterations' flow_up, final.{flow_lowres,flow_up}.
+    assert_eq!(report.lines.len(), 13, "{report}");
     assert!(report.passed(), "some tensors are off:\n{report}");
     assert!(report.final_flow_error < verify::FLOW_TOLERANCE);
 }
