@@ -51,6 +51,28 @@ fn every_realtime_reference_tensor_matches() {
     assert!(report.final_flow_error < verify::FLOW_TOLERANCE);
 }
 
+/// The realtime reference tells the slow-fast schedule from the plain one: without the extra
+/// coarse updates, the final flow is off by far more than the tolerance.
+#[test]
+fn the_realtime_reference_needs_the_slow_fast_schedule() {
+    let weights = "golden/raft_stereo_realtime_random.pth";
+    let Some(shared) = shared_dir_for_test("the_realtime_reference_needs_the_slow_fast_schedule", weights) else {
+        return;
+    };
+    let device = default_device();
+    let refs = verify::read_reference(&shared.join("golden/raft_stereo_realtime_random.activations.safetensors")).unwrap();
+    let (mut model, config) = dgstereo_model::checkpoint_config::load_detected(&shared.join(weights), &device).unwrap();
+    assert!(model.slow_fast_gru && config.valid_iters == 7);
+    model.slow_fast_gru = false;
+    let f = |k: &str| {
+        let (s, v) = &refs[k];
+        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
+    };
+    let out = model.forward_flow(f("input.left"), f("input.right"), None, 7, Default::default());
+    let diff = max_abs_diff(out.flow_up.last().unwrap().clone(), f("final.flow_up"));
+    assert!(diff > 10.0 * verify::FLOW_TOLERANCE, "plain schedule within {diff} of the slow-fast reference");
+}
+
 #[test]
 fn on_the_fly_correlation_equals_materialised_pyramid() {
     let Some((weights, reference)) = golden("on_the_fly_correlation_equals_materialised_pyramid") else { return };
