@@ -60,7 +60,8 @@ fn the_realtime_reference_needs_the_slow_fast_schedule() {
         return;
     };
     let device = default_device();
-    let refs = verify::read_reference(&shared.join("golden/raft_stereo_realtime_random.activations.safetensors")).unwrap();
+    let refs =
+        verify::read_reference(&shared.join("golden/raft_stereo_realtime_random.activations.safetensors")).unwrap();
     let (mut model, config) = dgstereo_model::checkpoint_config::load_detected(&shared.join(weights), &device).unwrap();
     assert!(model.slow_fast_gru && config.valid_iters == 7);
     model.slow_fast_gru = false;

@@ -8,7 +8,8 @@
 //! autodiff gives a finite gradient to every parameter that takes part. Every combination
 //! round-trips through our safetensors format (saved, loaded into a fresh model of the same
 //! config: identical parameters), and one without fusion or guidance (an official architecture)
-//! through detection: its official state dict reads back as its configuration.
+//! through detection: its official state dict reads back as its configuration (a second
+//! property checks more such architectures, without the forward pass).
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Gradients, Tensor};
@@ -183,7 +184,7 @@ fn parameter_differences(a: &RaftStereo, b: &RaftStereo) -> Vec<String> {
             .iter()
             .map(|t| {
                 let data = burn::store::bridge::to_data(t).expect("parameter data");
-                (t.name.clone(), data.convert::<f32>().to_vec::<f32>().expect("float parameter"))
+                (t.name.clone(), data.convert::<f32>().try_to_vec::<f32>().expect("float parameter"))
             })
             .collect()
     };
@@ -263,5 +264,25 @@ proptest! {
         model.network.visit(&mut check);
         prop_assert!(check.problems.is_empty(), "{:?}: {:?}", c, check.problems);
         prop_assert!(check.checked > 20, "only {} parameters took part", check.checked);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(16))]
+
+    /// The architectures an official checkpoint can have (no fusion, no guidance), more of them
+    /// than the full test above trains: each round-trips through save and load and detection.
+    #[test]
+    fn every_official_architecture_round_trips(
+        c in combination(),
+        hidden in prop_oneof![Just(8usize), Just(16), Just(24)],
+    ) {
+        let mut config = experiment(&c).model;
+        config.fusion = FusionConfig::None;
+        config.updater.guidance = GuidanceKind::None;
+        config.updater.hidden_dims = [hidden; 3];
+        prop_assert!(config.validate().is_ok(), "{:?}", config.validate());
+        let trip = round_trips(&config, c.size[0] * 100 + c.size[1]);
+        prop_assert!(trip.is_ok(), "{:?}: {:?}", config, trip);
     }
 }
