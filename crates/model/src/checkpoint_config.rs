@@ -134,10 +134,10 @@ pub fn summary(config: &ModelConfig) -> String {
 /// where the product allows it, else radius 4, else 4 levels, else the fewest levels whose
 /// quotient is odd (at least 3); `None` when no split exists (a power of two).
 pub fn correlation_split(channels: usize) -> Option<(usize, usize)> {
-    if channels >= 9 && channels % 9 == 0 {
+    if channels >= 9 && channels.is_multiple_of(9) {
         return Some((channels / 9, 4));
     }
-    let odd = |levels: usize| channels % levels == 0 && (channels / levels) % 2 == 1 && channels / levels >= 3;
+    let odd = |levels: usize| channels.is_multiple_of(levels) && (channels / levels) % 2 == 1 && channels / levels >= 3;
     if odd(4) {
         return Some((4, (channels / 4 - 1) / 2));
     }
