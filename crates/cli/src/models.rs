@@ -89,7 +89,16 @@ pub fn load_model(
             };
             let network = config.init(device)?;
             let network = match ext.as_str() {
-                "pth" | "pt" => checkpoint::load_pytorch(network, weights)?,
+                "pth" | "pt" => checkpoint::load_pytorch(network, weights).map_err(|e| {
+                    // Name what the file holds, when its tensors show it.
+                    match checkpoint_config::detect(weights, device) {
+                        Ok(d) => anyhow::anyhow!(
+                            "{e}; the checkpoint's tensors show: {}",
+                            checkpoint_config::summary(&d.model)
+                        ),
+                        Err(_) => e.into(),
+                    }
+                })?,
                 "safetensors" => checkpoint::load_safetensors(network, weights)?,
                 _ => bail!("{}: unknown weights format (expected .pth or .safetensors)", weights.display()),
             };

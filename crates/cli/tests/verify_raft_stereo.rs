@@ -106,3 +106,26 @@ fn infer_reads_the_realtime_architecture_from_the_checkpoint() {
     assert!(stderr.contains("slow_fast_gru off, 2 iterations"), "{stderr}");
     let _ = std::fs::remove_dir_all(&out_dir);
 }
+
+#[test]
+fn an_experiment_that_does_not_fit_the_checkpoint_names_its_architecture() {
+    let weights = "golden/raft_stereo_realtime_random.pth";
+    let Some(shared) = shared_dir_for_test("an_experiment_that_does_not_fit_the_checkpoint", weights) else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let experiment = tmp.path().join("default.toml");
+    std::fs::write(&experiment, "[model.updater]\nn_gru_layers = 3\n").unwrap();
+    let out = infer_cones(&[
+        "--weights",
+        shared.join(weights).to_str().unwrap(),
+        "--experiment",
+        experiment.to_str().unwrap(),
+        "--out",
+        tmp.path().join("out").to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let line = stderr.lines().find(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("{stderr}"));
+    assert!(line.contains("raft_stereo_realtime_random.pth"), "{line}");
+    assert!(line.contains("the checkpoint's tensors show: shared backbone, n_downsample 3, 2 GRU levels"), "{line}");
+}

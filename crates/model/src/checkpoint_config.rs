@@ -55,7 +55,11 @@ impl OfficialPreset {
     pub fn of(config: &ModelConfig) -> Self {
         let (e, u) = (&config.encoder, &config.updater);
         let c = &config.correlation;
-        let standard = u.hidden_dims == [128; 3] && c.levels == 4 && c.radius == 4 && e.feature_dim == 256;
+        let standard = u.hidden_dims == [128; 3]
+            && c.levels == 4
+            && c.radius == 4
+            && e.feature_dim == 256
+            && e.trunk_dims == [64, 96, 128];
         if !standard {
             Self::Custom
         } else if e.shared_backbone && u.n_downsample == 3 && u.n_gru_layers == 2 && e.context_norm == NormKind::Batch {
