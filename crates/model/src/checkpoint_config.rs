@@ -223,6 +223,21 @@ fn architecture(keys: &BTreeMap<&str, &[usize]>) -> std::result::Result<ModelCon
     } else {
         NormKind::Instance
     };
+    let [d32, d16, d08] = config.updater.hidden_dims;
+    if d32 != d08 {
+        // `context_zqr_convs.0` takes the 1/4 context (`d08` channels) with `hidden_dims[0]` inputs,
+        // in the reference as here.
+        problems.push(format!(
+            "'update_block.gru32.convz.weight' ({d32}) and 'update_block.gru08.convz.weight' ({d08}) \
+             differ: the reference runs only with hidden_dims[0] = hidden_dims[2]"
+        ));
+    }
+    if config.encoder.context_norm == NormKind::Group {
+        let [c1, c2, c3] = config.encoder.trunk_dims;
+        if let Some(w) = [c1, c2, c3, d32, d16, d08].into_iter().find(|w| *w < 8) {
+            problems.push(format!("'cnet.norm1.weight' is a group norm (width/8 groups), but a width is {w}"));
+        }
+    }
     if problems.is_empty() { Ok(config) } else { Err(problems) }
 }
 

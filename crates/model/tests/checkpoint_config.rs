@@ -172,6 +172,11 @@ fn inconsistent_state_dicts_are_errors_naming_the_keys() {
     let e = detection_error(&keys);
     assert!(e.contains("update_block.mask.2.weight"), "{e}");
 
+    // Hidden widths the reference cannot run (`context_zqr_convs.0` needs hidden_dims[0] = [2]).
+    let keys = official_keys(&variant(|c| c.updater.hidden_dims = [24, 32, 32]));
+    let e = detection_error(&keys);
+    assert!(e.contains("update_block.gru32.convz.weight"), "{e}");
+
     // No state dict at all.
     let e = detection_error(&[]);
     assert!(e.contains("fnet") && e.contains("missing key"), "{e}");
