@@ -19,7 +19,7 @@ use crate::working_size::MinSize;
 #[derive(Args)]
 pub struct DemoArgs {
     /// Output folder.
-    #[arg(long, default_value = "out/demo")]
+    #[arg(short, long, default_value = "out/demo")]
     out: PathBuf,
     /// Weights (default: the project's default model).
     #[arg(long)]

@@ -38,7 +38,7 @@ pub struct InferArgs {
     #[arg(long, conflicts_with_all = ["left", "right"])]
     list: Option<PathBuf>,
     /// Output folder.
-    #[arg(long, default_value = "out/infer")]
+    #[arg(short, long, default_value = "out/infer")]
     out: PathBuf,
     /// Outputs, comma-separated: pfm, npy, png16, color, preview (left image and colour map side
     /// by side), depth, ply, rejected (the pixels --lr-check replaced).
