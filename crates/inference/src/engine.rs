@@ -252,6 +252,35 @@ mod tests {
     }
 
     #[test]
+    fn the_bundled_default_predicts_at_the_input_size_with_each_policy() {
+        use crate::working_size::MinSize;
+        let engine = Engine::load(&EngineConfig::default()).unwrap();
+        assert!(engine.weights().ends_with(crate::weights::DEFAULT_PLAIN), "{}", engine.weights().display());
+        assert!(engine.notes().is_empty(), "{:?}", engine.notes());
+        // A horizontal ramp seen 3 px apart: any trained model finds a positive disparity.
+        let left = RgbImage::from_fn(64, 48, |x, y| [(x * 4) as f32, (y * 5) as f32, ((x * y) % 255) as f32]);
+        let right =
+            RgbImage::from_fn(64, 48, |x, y| [((x + 3) * 4) as f32, (y * 5) as f32, (((x + 3) * y) % 255) as f32]);
+        let quick = PredictOptions { iters: 1, min_size: MinSize::Off, ..PredictOptions::default() };
+        let p = engine.predict(&left, &right, "ramp", &quick).unwrap();
+        assert_eq!((p.disparity.width, p.disparity.height), (64, 48));
+        assert_eq!(
+            (p.info.network_size, p.info.corr, p.info.rejected),
+            ((64, 48), CorrelationImplementation::Reg, None)
+        );
+        let options = PredictOptions { max_size: Some(32), lr_check: Some(2.0), ..quick.clone() };
+        let p = engine.predict(&left, &right, "ramp", &options).unwrap();
+        assert_eq!((p.disparity.width, p.disparity.height), (64, 48));
+        assert_eq!(p.info.network_size, (32, 24));
+        assert_eq!(p.info.rejected.map(|m| (m.width, m.height)), Some((64, 48)));
+        // A tiny budget turns the materialised volume down; bad options name their field.
+        let tight = PredictOptions { memory_budget: 1, ..quick.clone() };
+        assert_eq!(engine.predict(&left, &right, "ramp", &tight).unwrap().info.corr, CorrelationImplementation::Alt);
+        let e = engine.predict(&left, &right, "ramp", &PredictOptions { iters: 0, ..quick }).unwrap_err();
+        assert!(e.to_string().contains("`iters`"), "{e}");
+    }
+
+    #[test]
     fn views_of_different_sizes_are_refused_naming_both_sizes() {
         let (a, b) = (RgbImage::new(40, 30), RgbImage::new(41, 30));
         assert!(check_same_size(&a, &a).is_ok());
