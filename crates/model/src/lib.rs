@@ -10,6 +10,7 @@
 
 pub mod checkpoint;
 pub mod config;
+pub mod file_keys;
 pub mod flops;
 pub mod grown_inputs;
 pub mod inference;

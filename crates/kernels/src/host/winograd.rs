@@ -230,7 +230,6 @@ mod tests {
         assert_eq!(rows, plan.tiles_h);
     }
 
-
     /// Both convolutions of a split pair against [`winograd_conv`] of the whole inputs, for both
     /// variants and a batch of two.
     #[test]
