@@ -20,9 +20,9 @@ use burn::tensor::{Distribution, Int, Tensor};
 use criterion::{BenchmarkId, Criterion, criterion_group};
 use dgstereo_core::{Probe, default_device};
 use dgstereo_costvolume::{
-    CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, LookupKernel, OnTheFlyCorrelation,
+    CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, OnTheFlyCorrelation,
 };
-use dgstereo_kernels::KeptWeights;
+use dgstereo_kernels::{KeptWeights, Path, with_path};
 use dgstereo_model::encoder::{ContextExtractor, FeatureExtractor};
 use dgstereo_model::fusion::{FusionConfig, ImageFusion};
 use dgstereo_model::updater::{GateContext, Updater, convex_upsample};
@@ -83,14 +83,16 @@ fn correlation(c: &mut Criterion) {
                 b.iter(|| black_box(config.build_with(implementation, f1.clone(), f2.clone())))
             });
         }
-        for kernel in [LookupKernel::Host, LookupKernel::Stock] {
-            let pyramid = CorrelationPyramid::with_kernel(f1.clone(), f2.clone(), config.levels, config.radius, kernel);
+        for kernel in [Path::Host, Path::Stock] {
+            let pyramid =
+                with_path(kernel, || CorrelationPyramid::new(f1.clone(), f2.clone(), config.levels, config.radius));
             group.bench_function(BenchmarkId::new(format!("lookup reg {kernel:?}"), name), |b| {
                 b.iter(|| black_box(pyramid.lookup(x.clone())))
             });
         }
-        for kernel in [LookupKernel::Host, LookupKernel::Stock] {
-            let alt = OnTheFlyCorrelation::with_kernel(f1.clone(), f2.clone(), config.levels, config.radius, kernel);
+        for kernel in [Path::Host, Path::Stock] {
+            let alt =
+                with_path(kernel, || OnTheFlyCorrelation::new(f1.clone(), f2.clone(), config.levels, config.radius));
             group.bench_function(BenchmarkId::new(format!("lookup alt {kernel:?}"), name), |b| {
                 b.iter(|| black_box(alt.lookup(x.clone())))
             });

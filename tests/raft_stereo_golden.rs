@@ -3,7 +3,10 @@
 //! The numbers come from `../shared/golden/raft_stereo_random.activations.safetensors`: the
 //! official RAFT-Stereo (princeton-vl/RAFT-Stereo, commit 6068c1a), default configuration, run
 //! in float32 on CPU with the random-weight checkpoint `raft_stereo_random.pth` on a 64x128 crop
-//! of the Cones pair for 4 iterations (see `../shared/golden/README.md`).
+//! of the Cones pair for 4 iterations (see `../shared/golden/README.md`); and from
+//! `raft_stereo_realtime_random.activations.safetensors`, the realtime architecture (shared
+//! backbone, n_downsample 3, 2 GRU levels, slow-fast GRU) for 7 iterations, which the
+//! checkpoint's tensors alone must select.
 
 use std::path::PathBuf;
 
@@ -30,6 +33,45 @@ fn every_reference_tensor_matches() {
     assert!(report.lines.len() >= 40, "only {} tensors compared", report.lines.len());
     assert!(report.passed(), "some tensors are off:\n{report}");
     assert!(report.final_flow_error < verify::FLOW_TOLERANCE);
+}
+
+#[test]
+fn every_realtime_reference_tensor_matches() {
+    let weights = "golden/raft_stereo_realtime_random.pth";
+    let Some(shared) = shared_dir_for_test("every_realtime_reference_tensor_matches", weights) else { return };
+    let reference = shared.join("golden/raft_stereo_realtime_random.activations.safetensors");
+    let report =
+        verify::verify_raft_stereo(&shared.join(weights), &reference, &default_device()).expect("verification runs");
+    println!("{report}");
+    assert!(report.configuration.contains("shared backbone"), "{}", report.configuration);
+    assert!(report.unmatched.is_empty(), "keys not produced: {:?}", report.unmatched);
+    // fmap.{left,right}, context.hidden.{0,1}, 7 iterations' flow_up, final.{flow_lowres,flow_up}.
+    assert_eq!(report.lines.len(), 13, "{report}");
+    assert!(report.passed(), "some tensors are off:\n{report}");
+    assert!(report.final_flow_error < verify::FLOW_TOLERANCE);
+}
+
+/// The realtime reference tells the slow-fast schedule from the plain one: without the extra
+/// coarse updates, the final flow is off by far more than the tolerance.
+#[test]
+fn the_realtime_reference_needs_the_slow_fast_schedule() {
+    let weights = "golden/raft_stereo_realtime_random.pth";
+    let Some(shared) = shared_dir_for_test("the_realtime_reference_needs_the_slow_fast_schedule", weights) else {
+        return;
+    };
+    let device = default_device();
+    let refs =
+        verify::read_reference(&shared.join("golden/raft_stereo_realtime_random.activations.safetensors")).unwrap();
+    let (mut model, config) = dgstereo_model::checkpoint_config::load_detected(&shared.join(weights), &device).unwrap();
+    assert!(model.slow_fast_gru && config.valid_iters == 7);
+    model.slow_fast_gru = false;
+    let f = |k: &str| {
+        let (s, v) = &refs[k];
+        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
+    };
+    let out = model.forward_flow(f("input.left"), f("input.right"), None, 7, Default::default());
+    let diff = max_abs_diff(out.flow_up.last().unwrap().clone(), f("final.flow_up"));
+    assert!(diff > 10.0 * verify::FLOW_TOLERANCE, "plain schedule within {diff} of the slow-fast reference");
 }
 
 #[test]

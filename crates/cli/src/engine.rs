@@ -28,6 +28,7 @@ use dgstereo_core::device::Precision;
 use dgstereo_costvolume::CorrelationImplementation;
 use dgstereo_data::resize::{disparity_to_size, resize_rgb};
 use dgstereo_data::{DisparityMap, Mask, RgbImage};
+use dgstereo_model::checkpoint_config::summary;
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
@@ -47,6 +48,10 @@ pub enum CorrChoice {
     Alt,
 }
 
+/// Update iterations when neither `--iters` nor a checkpoint's preset gives them (the official
+/// `--valid_iters`).
+pub const DEFAULT_ITERS: usize = 32;
+
 /// Model options shared by `infer` and `eval`.
 #[derive(Args, Clone, Debug)]
 pub struct ModelArgs {
@@ -60,9 +65,14 @@ pub struct ModelArgs {
     /// The run of a sweep experiment to use (its name as `dgstereo experiment` lists it).
     #[arg(long, requires = "experiment")]
     pub run: Option<String>,
-    /// Update iterations.
-    #[arg(long, default_value_t = 32)]
-    pub iters: usize,
+    /// Update iterations (default: the official preset of a `.pth` checkpoint's architecture,
+    /// 7 for the realtime model, else 32).
+    #[arg(long)]
+    pub iters: Option<usize>,
+    /// Slow-fast GRU schedule, `true` or `false` (default: the experiment's, or the official
+    /// preset of a `.pth` checkpoint's architecture: on for the realtime model).
+    #[arg(long)]
+    pub slow_fast_gru: Option<bool>,
     /// Depth prior: `none`, `file:DIR` (precomputed `{name}_left`/`{name}_right` maps) or
     /// `depth-anything-v2:WEIGHTS` (default: the experiment's `[prior]`, else none).
     #[arg(long)]
@@ -250,7 +260,10 @@ impl RunInfo {
 pub struct Engine {
     model: StereoModel,
     prior: Option<Prior>,
-    iters: usize,
+    /// Update iterations per pair.
+    pub iters: usize,
+    /// The model configuration chosen, on one line, with where it came from.
+    pub configuration: String,
     max_size: Option<usize>,
     /// Pairs whose longer side is under this are upscaled to it (`--min-size`, resolved).
     pub min_size: Option<usize>,
@@ -266,7 +279,7 @@ pub struct Engine {
 impl Engine {
     /// Loads the weights (into the experiment's model when given) and builds the prior.
     pub fn new(a: &ModelArgs) -> anyhow::Result<Self> {
-        if a.iters == 0 {
+        if a.iters == Some(0) {
             bail!("--iters must be at least 1");
         }
         if a.max_size == Some(0) || a.max_size.is_some_and(|m| m < 32) {
@@ -306,10 +319,22 @@ impl Engine {
             Some(w) => w.clone(),
             None => default_weights(prior_config.gives_prior() && a.experiment.is_none())?,
         };
-        let model = load_model(&weights, config, &device).with_context(|| match &a.experiment {
+        let from_experiment = config.is_some();
+        let (mut model, detected) = load_model(&weights, config, &device).with_context(|| match &a.experiment {
             Some(e) => format!("weights {} do not fit the model of {}", weights.display(), e.display()),
             None => format!("cannot load weights {}", weights.display()),
         })?;
+        if let Some(on) = a.slow_fast_gru {
+            model.network.slow_fast_gru = on;
+            model.config.updater.slow_fast_gru = on;
+        }
+        let iters = a.iters.or(detected.as_ref().map(|d| d.valid_iters)).unwrap_or(DEFAULT_ITERS);
+        let source = match (&detected, from_experiment) {
+            (Some(d), _) => format!("from the checkpoint's tensors; preset: {}", d.preset.name()),
+            (None, true) => "from the experiment".into(),
+            (None, false) => "from the weights file".into(),
+        };
+        let configuration = format!("{}, {iters} iterations ({source})", summary(&model.config));
         let prior = if prior_config.gives_prior() {
             if prior_config.uses_ground_truth() {
                 bail!("--prior: a simulated prior needs ground truth and cannot be used for inference");
@@ -337,7 +362,8 @@ impl Engine {
         Ok(Self {
             model,
             prior,
-            iters: a.iters,
+            iters,
+            configuration,
             max_size: a.max_size,
             min_size,
             budget,

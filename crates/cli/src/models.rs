@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use burn::tensor::Device;
 use dgstereo_core::device::{cast_float_params, float_dtype};
+use dgstereo_model::checkpoint_config::{self, CheckpointConfig};
 use dgstereo_model::{ModelConfig, StereoModel, checkpoint};
 
 /// Folders that may hold the repository's `assets/`: beside the binary (installed layouts),
@@ -62,25 +63,49 @@ pub fn default_weights(with_prior: bool) -> anyhow::Result<PathBuf> {
 }
 
 /// Loads weights (`.pth` official layout or our `.safetensors`) into a model of `config`.
-/// A safetensors checkpoint that carries its own config uses it unless `config` is given.
-pub fn load_model(weights: &Path, config: Option<ModelConfig>, device: &Device) -> anyhow::Result<StereoModel> {
+/// A safetensors checkpoint that carries its own config uses it unless `config` is given; an
+/// official `.pth` without `config` loads into the architecture its tensors show, with its
+/// official preset's options, returned beside the model ([`checkpoint_config`]).
+pub fn load_model(
+    weights: &Path,
+    config: Option<ModelConfig>,
+    device: &Device,
+) -> anyhow::Result<(StereoModel, Option<CheckpointConfig>)> {
     let ext = weights.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let config = match (config, ext.as_str()) {
-        (Some(c), _) => c,
-        (None, "safetensors") => match checkpoint::safetensors_metadata(weights, "model_config")? {
-            Some(json) => serde_json::from_str(&json)
-                .with_context(|| format!("{}: its model_config metadata does not parse", weights.display()))?,
-            None => ModelConfig::default(),
-        },
-        (None, _) => ModelConfig::default(),
-    };
-    let network = config.init(device)?;
-    let network = match ext.as_str() {
-        "pth" | "pt" => checkpoint::load_pytorch(network, weights)?,
-        "safetensors" => checkpoint::load_safetensors(network, weights)?,
-        _ => bail!("{}: unknown weights format (expected .pth or .safetensors)", weights.display()),
+    let (network, config, detected) = match (config, ext.as_str()) {
+        (None, "pth" | "pt") => {
+            let (network, detected) = checkpoint_config::load_detected(weights, device)?;
+            (network, detected.model.clone(), Some(detected))
+        }
+        (config, _) => {
+            let config = match (config, ext.as_str()) {
+                (Some(c), _) => c,
+                (None, "safetensors") => match checkpoint::safetensors_metadata(weights, "model_config")? {
+                    Some(json) => serde_json::from_str(&json)
+                        .with_context(|| format!("{}: its model_config metadata does not parse", weights.display()))?,
+                    None => ModelConfig::default(),
+                },
+                (None, _) => ModelConfig::default(),
+            };
+            let network = config.init(device)?;
+            let network = match ext.as_str() {
+                "pth" | "pt" => checkpoint::load_pytorch(network, weights).map_err(|e| {
+                    // Name what the file holds, when its tensors show it.
+                    match checkpoint_config::detect(weights, device) {
+                        Ok(d) => anyhow::anyhow!(
+                            "{e}; the checkpoint's tensors show: {}",
+                            checkpoint_config::summary(&d.model)
+                        ),
+                        Err(_) => e.into(),
+                    }
+                })?,
+                "safetensors" => checkpoint::load_safetensors(network, weights)?,
+                _ => bail!("{}: unknown weights format (expected .pth or .safetensors)", weights.display()),
+            };
+            (network, config, None)
+        }
     };
     // The stores keep the file's dtype: bring the weights to the device's (see `--precision`).
     let network = cast_float_params(network, float_dtype(device));
-    Ok(StereoModel::new(network, config, device.clone()))
+    Ok((StereoModel::new(network, config, device.clone()), detected))
 }

@@ -6,44 +6,17 @@
 //! Two implementations sit behind the [`CostVolume`] trait: [`CorrelationPyramid`] materialises
 //! the `W x W` volume per row once (fast lookups; "reg" in the reference) and
 //! [`OnTheFlyCorrelation`] stores only the pooled features and takes the dot products at the
-//! sampled positions (memory linear in `W`; "alt"). They agree to float rounding. For CPU
-//! inference both keep their data on the host and look it up with one hand-written loop
-//! ([`host_lookup`], [`host_on_the_fly`], [`LookupKernel::Host`]); the tensor-op lookups stay
-//! the reference and the differentiable path, and each host kernel is tested against them.
+//! sampled positions (memory linear in `W`; "alt"). They agree to float rounding. Both are the
+//! kernels crate's lookups (`dgstereo_kernels::ops::lookup`), which keep their data where the
+//! dispatch's path samples it: host buffers and one loop for CPU inference, gathered levels for
+//! GPU inference, burn's tensor operations (the reference and the differentiable path)
+//! elsewhere. This crate is the stage: its configuration, its trait and the choice between the
+//! two.
 #![deny(missing_docs)]
 
-pub mod host_lookup;
-pub mod host_on_the_fly;
-mod lookup;
-mod on_the_fly;
-mod pyramid;
-
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Tensor;
+pub use dgstereo_kernels::ops::lookup::{CorrelationPyramid, OnTheFlyCorrelation, all_pairs};
 use serde::{Deserialize, Serialize};
-
-pub use on_the_fly::OnTheFlyCorrelation;
-pub use pyramid::CorrelationPyramid;
-
-/// How a volume is stored and looked up.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LookupKernel {
-    /// burn tensor operations (differentiable, any device): the reference path.
-    Stock,
-    /// A hand-written host loop ([`host_lookup`] for the pyramid, [`host_on_the_fly`] for the
-    /// on-the-fly volume): CPU inference, no gradient.
-    Host,
-}
-
-impl LookupKernel {
-    /// The fast kernel where it applies: the CPU backend without autodiff; else the stock one.
-    pub fn for_device(device: &Device) -> Self {
-        if dgstereo_kernels::path(device, dgstereo_kernels::Op::Lookup) == dgstereo_kernels::Path::Host {
-            Self::Host
-        } else {
-            Self::Stock
-        }
-    }
-}
 
 /// The stage trait: correlation features around the current match positions.
 ///
@@ -141,6 +114,18 @@ pub enum Correlation {
     Reg(CorrelationPyramid),
     /// On-the-fly.
     Alt(OnTheFlyCorrelation),
+}
+
+impl CostVolume for CorrelationPyramid {
+    fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
+        CorrelationPyramid::lookup(self, coords_x)
+    }
+}
+
+impl CostVolume for OnTheFlyCorrelation {
+    fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
+        OnTheFlyCorrelation::lookup(self, coords_x)
+    }
 }
 
 impl CostVolume for Correlation {

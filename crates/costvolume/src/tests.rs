@@ -5,10 +5,21 @@ use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, max_abs_diff, to_vec};
 use proptest::prelude::*;
 
+use dgstereo_kernels::{Op, Path, path, with_path};
+
 use crate::{
-    Correlation, CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, LookupKernel,
-    OnTheFlyCorrelation,
+    Correlation, CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, OnTheFlyCorrelation,
 };
+
+/// The pyramid stored and looked up on `pinned` (where the device allows it).
+fn pyramid(pinned: Path, f1: Tensor<4>, f2: Tensor<4>, levels: usize, radius: usize) -> CorrelationPyramid {
+    with_path(pinned, || CorrelationPyramid::new(f1, f2, levels, radius))
+}
+
+/// The on-the-fly volume stored and looked up on `pinned`.
+fn on_the_fly(pinned: Path, f1: Tensor<4>, f2: Tensor<4>, levels: usize, radius: usize) -> OnTheFlyCorrelation {
+    with_path(pinned, || OnTheFlyCorrelation::new(f1, f2, levels, radius))
+}
 
 fn features(n: usize, c: usize, h: usize, w: usize, seed: u64) -> Tensor<4> {
     let device = default_device();
@@ -54,10 +65,10 @@ proptest! {
     fn host_and_stock_on_the_fly_agree(w1 in 1usize..40, w2 in 1usize..40, h in 1usize..4, n in 1usize..3, c in 1usize..40, levels in 1usize..7, radius in 0usize..5, seed in 0u64..1000, shift in -50f32..50.0) {
         let (f1, f2) = (features(n, c, h, w1, seed), features(n, c, h, w2, seed + 1));
         let scale = correlation_scale(f1.clone(), f2.clone());
-        let stock = OnTheFlyCorrelation::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Stock);
-        let host = OnTheFlyCorrelation::with_kernel(f1, f2, levels, radius, LookupKernel::Host);
-        prop_assert_eq!(stock.kernel(), LookupKernel::Stock);
-        prop_assert_eq!(host.kernel(), LookupKernel::Host);
+        let stock = on_the_fly(Path::Stock, f1.clone(), f2.clone(), levels, radius);
+        let host = on_the_fly(Path::Host, f1, f2, levels, radius);
+        prop_assert_eq!(stock.path(), Path::Stock);
+        prop_assert_eq!(host.path(), Path::Host);
         let x = coords(n, h, w1, shift);
         let (a, b) = (stock.lookup(x.clone()), host.lookup(x));
         prop_assert_eq!(a.dims(), [n, levels * (2 * radius + 1), h, w1]);
@@ -72,11 +83,11 @@ proptest! {
         let c = 16;
         let (f1, f2) = (features(n, c, h, w, seed), features(n, c, h, w, seed + 1));
         let scale = correlation_scale(f1.clone(), f2.clone());
-        let alt = OnTheFlyCorrelation::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Host);
+        let alt = on_the_fly(Path::Host, f1.clone(), f2.clone(), levels, radius);
         let x = coords(n, h, w, shift);
         let b = alt.lookup(x.clone());
-        for kernel in [LookupKernel::Stock, LookupKernel::Host] {
-            let reg = CorrelationPyramid::with_kernel(f1.clone(), f2.clone(), levels, radius, kernel);
+        for kernel in [Path::Stock, Path::Host] {
+            let reg = pyramid(kernel, f1.clone(), f2.clone(), levels, radius);
             let a = reg.lookup(x.clone());
             prop_assert_eq!(a.dims(), b.dims());
             let (diff, scale) = (max_abs_diff(a.clone(), b.clone()), max_abs(a).max(scale));
@@ -108,9 +119,9 @@ proptest! {
         let device = default_device();
         let c = 16;
         let (f1, f2) = (features(n, c, h, w, seed), features(n, c, h, w, seed + 1));
-        let stock = CorrelationPyramid::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Stock);
-        let host = CorrelationPyramid::with_kernel(f1, f2, levels, radius, LookupKernel::Host);
-        prop_assert_eq!(host.kernel(), LookupKernel::Host);
+        let stock = pyramid(Path::Stock, f1.clone(), f2.clone(), levels, radius);
+        let host = pyramid(Path::Host, f1, f2, levels, radius);
+        prop_assert_eq!(host.path(), Path::Host);
         for (a, b) in stock.levels().into_iter().zip(host.levels()) {
             prop_assert_eq!(a.dims(), b.dims());
             if a.dims()[1] > 0 {
@@ -137,8 +148,8 @@ proptest! {
     fn gathered_and_stock_lookups_agree(w in 1usize..40, h in 1usize..4, n in 1usize..3, levels in 1usize..7, radius in 0usize..5, seed in 0u64..1000, shift in -50f32..50.0) {
         let c = 16;
         let (f1, f2) = (features(n, c, h, w, seed), features(n, c, h, w, seed + 1));
-        let stock = CorrelationPyramid::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Stock);
-        let gathered = CorrelationPyramid::gathered(f1, f2, levels, radius);
+        let stock = pyramid(Path::Stock, f1.clone(), f2.clone(), levels, radius);
+        let gathered = pyramid(Path::Gpu, f1, f2, levels, radius);
         let coords = coords(n, h, w, shift);
         let a = stock.lookup(coords.clone());
         let b = gathered.lookup(coords);
@@ -154,8 +165,8 @@ proptest! {
 fn gathered_lookup_of_empty_levels_is_zero() {
     let (n, c, h, w, levels, radius) = (1, 8, 1, 3, 4, 2);
     let (f1, f2) = (features(n, c, h, w, 3), features(n, c, h, w, 4));
-    let stock = CorrelationPyramid::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Stock);
-    let gathered = CorrelationPyramid::gathered(f1, f2, levels, radius);
+    let stock = pyramid(Path::Stock, f1.clone(), f2.clone(), levels, radius);
+    let gathered = pyramid(Path::Gpu, f1, f2, levels, radius);
     for x in [-4.0f32, -1.0, 0.0, 1.0, 2.0, 4.0] {
         let coords = from_vec(vec![x; n * h * w], [n, 1, h, w], &default_device());
         let diff = max_abs_diff(stock.lookup(coords.clone()), gathered.lookup(coords));
@@ -167,8 +178,11 @@ fn gathered_lookup_of_empty_levels_is_zero() {
 #[test]
 fn kernel_follows_the_device() {
     let device = default_device();
-    assert_eq!(LookupKernel::for_device(&device), LookupKernel::Host);
-    assert_eq!(LookupKernel::for_device(&device.clone().autodiff()), LookupKernel::Stock);
+    assert_eq!(path(&device, Op::Lookup), Path::Host);
+    assert_eq!(path(&device.clone().autodiff(), Op::Lookup), Path::Stock);
+    let (f1, f2) = (features(1, 4, 2, 6, 1), features(1, 4, 2, 6, 2));
+    assert_eq!(CorrelationPyramid::new(f1.clone(), f2.clone(), 2, 1).path(), Path::Host);
+    assert_eq!(pyramid(Path::Gpu, f1, f2, 2, 1).path(), Path::Gpu);
 }
 
 /// The on-the-fly volume picks its host kernel on the CPU and keeps the differentiable stock
@@ -179,13 +193,13 @@ fn on_the_fly_kernel_follows_the_device() {
     let alt = CorrelationConfig { implementation: CorrelationImplementation::Alt, levels: 2, radius: 1 }
         .build(features(n, c, h, w, 1), features(n, c, h, w, 2));
     let Correlation::Alt(alt) = alt else { panic!("an Alt config builds the on-the-fly volume") };
-    assert_eq!(alt.kernel(), LookupKernel::Host);
+    assert_eq!(alt.path(), Path::Host);
 
     let ad = default_device().autodiff();
     let f1 = from_vec(to_vec(features(n, c, h, w, 1)), [n, c, h, w], &ad).require_grad();
     let f2 = from_vec(to_vec(features(n, c, h, w, 2)), [n, c, h, w], &ad).require_grad();
     let alt = OnTheFlyCorrelation::new(f1.clone(), f2.clone(), 2, 1);
-    assert_eq!(alt.kernel(), LookupKernel::Stock);
+    assert_eq!(alt.path(), Path::Stock);
     let x: Vec<f32> = (0..n * h * w).map(|i| (i % w) as f32 - 0.5).collect();
     let grads = alt.lookup(from_vec(x, [n, 1, h, w], &ad)).sum().backward();
     for (name, f) in [("fmap1", f1), ("fmap2", f2)] {
@@ -200,8 +214,8 @@ fn on_the_fly_kernel_follows_the_device() {
 fn on_the_fly_host_kernel_on_exhausted_levels() {
     let (n, c, h, w, levels, radius) = (2, 8, 2, 5, 4, 2); // widths 5, 2, 1, 0
     let (f1, f2) = (features(n, c, h, w, 3), features(n, c, h, w, 4));
-    let stock = OnTheFlyCorrelation::with_kernel(f1.clone(), f2.clone(), levels, radius, LookupKernel::Stock);
-    let host = OnTheFlyCorrelation::with_kernel(f1, f2, levels, radius, LookupKernel::Host);
+    let stock = on_the_fly(Path::Stock, f1.clone(), f2.clone(), levels, radius);
+    let host = on_the_fly(Path::Host, f1, f2, levels, radius);
     let pattern = [0.0, 0.5, -0.5, 4.75, 1e3, -7.25, 2.0, 3.5, -1e3, 1.25];
     let x: Vec<f32> = (0..n * h * w).map(|i| pattern[i % pattern.len()]).collect();
     let x = from_vec(x, [n, 1, h, w], &default_device());

@@ -1,10 +1,15 @@
 //! Any valid combination of the swappable stages builds, runs and trains.
 //!
 //! For random combinations of fusion (none / conv / deformable into both encoders or the context
-//! encoder only), guidance (none / gradient / depth), GRU levels, correlation implementation,
-//! shared backbone, slow-fast GRU and loss, at small random sizes: the configuration validates,
-//! the model builds, every iteration's disparity is finite and of the input's size, and one
-//! training step under autodiff gives a finite gradient to every parameter that takes part.
+//! encoder only), guidance (none / gradient / depth), GRU levels, n_downsample, context norm,
+//! correlation implementation, levels and radius, hidden and feature widths, shared backbone,
+//! slow-fast GRU and loss, at small random sizes: the configuration validates, the model builds,
+//! every iteration's disparity is finite and of the input's size, and one training step under
+//! autodiff gives a finite gradient to every parameter that takes part. Every combination
+//! round-trips through our safetensors format (saved, loaded into a fresh model of the same
+//! config: identical parameters), and one without fusion or guidance (an official architecture)
+//! through detection: its official state dict reads back as its configuration (a second
+//! property checks more such architectures, without the forward pass).
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Gradients, Tensor};
@@ -15,7 +20,10 @@ use dgstereo_experiment::smoke::synthetic_pair;
 use dgstereo_experiment::{ExperimentConfig, smoke_test};
 use dgstereo_fusion::{FusionConfig, FusionTarget};
 use dgstereo_loss::{DisparityLoss, LossConfig, LossTarget};
-use dgstereo_model::{ModelConfig, StereoModel};
+use dgstereo_model::checkpoint_config::config_from_keys;
+use dgstereo_model::encoder::NormKind;
+use dgstereo_model::official_keys::model_official_keys;
+use dgstereo_model::{ModelConfig, RaftStereo, StereoModel, checkpoint};
 use dgstereo_prior::{PriorConfig, SimulatedPriorConfig};
 use dgstereo_updater::GuidanceKind;
 use proptest::prelude::*;
@@ -28,6 +36,9 @@ struct Combination {
     implementation: CorrelationImplementation,
     shared_backbone: bool,
     slow_fast_gru: bool,
+    n_downsample: usize,
+    context_norm: NormKind,
+    correlation: (usize, usize),
     loss: LossConfig,
     hidden: usize,
     feature_dim: usize,
@@ -47,12 +58,19 @@ fn combination() -> impl Strategy<Value = Combination> {
         (0.8f64..0.95).prop_map(|gamma| LossConfig::SequenceL1 { gamma, max_disparity: 700.0 }),
         (0.1f64..3.0).prop_map(|tau| LossConfig::EdgeAware { tau, gamma: 0.9, max_disparity: 700.0 }),
     ];
+    let norm =
+        prop_oneof![Just(NormKind::Batch), Just(NormKind::Group), Just(NormKind::Instance), Just(NormKind::None)];
+    // (levels, radius) as detection splits their product: radius 4, or 4 levels, or a few others.
+    let correlation =
+        prop_oneof![(1usize..=4).prop_map(|l| (l, 4)), (1usize..=3).prop_map(|r| (4, r)), Just((2, 3)), Just((1, 2))];
     let model = (fusion, guidance, 1usize..=3, implementation, any::<bool>(), any::<bool>());
+    let architecture = (2usize..=3, norm, correlation);
     let sizes =
         (loss, prop_oneof![Just(8usize), Just(16)], prop_oneof![Just(16usize), Just(32)], 20usize..=32, 36usize..=64);
-    (model, sizes).prop_map(
+    (model, architecture, sizes).prop_map(
         |(
             (fusion, guidance, n_gru_layers, implementation, shared_backbone, slow_fast_gru),
+            (n_downsample, context_norm, correlation),
             (loss, hidden, feature_dim, h, w),
         )| {
             Combination {
@@ -62,6 +80,9 @@ fn combination() -> impl Strategy<Value = Combination> {
                 implementation,
                 shared_backbone,
                 slow_fast_gru,
+                n_downsample,
+                context_norm,
+                correlation,
                 loss,
                 hidden,
                 feature_dim,
@@ -80,6 +101,9 @@ fn experiment(c: &Combination) -> ExperimentConfig {
     model.correlation.implementation = c.implementation;
     model.encoder.shared_backbone = c.shared_backbone;
     model.encoder.feature_dim = c.feature_dim;
+    model.encoder.context_norm = c.context_norm;
+    model.updater.n_downsample = c.n_downsample;
+    (model.correlation.levels, model.correlation.radius) = c.correlation;
     let prior =
         if model.needs_prior() { PriorConfig::Simulated(SimulatedPriorConfig::default()) } else { PriorConfig::None };
     ExperimentConfig {
@@ -152,6 +176,59 @@ fn target(size: [usize; 2], device: &Device) -> LossTarget {
     }
 }
 
+/// Every parameter of `a` equals `b`'s of the same name; the problems otherwise.
+fn parameter_differences(a: &RaftStereo, b: &RaftStereo) -> Vec<String> {
+    use burn::store::ModuleSnapshot;
+    let values = |m: &RaftStereo| -> Vec<(String, Vec<f32>)> {
+        m.collect(None, None, false)
+            .iter()
+            .map(|t| {
+                let data = burn::store::bridge::to_data(t).expect("parameter data");
+                (t.name.clone(), data.convert::<f32>().try_to_vec::<f32>().expect("float parameter"))
+            })
+            .collect()
+    };
+    let (va, vb) = (values(a), values(b));
+    if va.len() != vb.len() {
+        return vec![format!("{} parameters saved, {} loaded", va.len(), vb.len())];
+    }
+    va.iter().zip(&vb).filter(|(x, y)| x != y).map(|(x, y)| format!("{} vs {}", x.0, y.0)).collect()
+}
+
+/// Saves `config`'s fresh model as safetensors, loads it into another fresh model of `config`,
+/// and compares their parameters; without fusion or guidance, detects the configuration from the
+/// model's official state dict.
+fn round_trips(config: &ModelConfig, case: usize) -> Result<(), String> {
+    let device = default_device();
+    let saved = config.init(&device).map_err(|e| e.to_string())?;
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let path = dir.path().join(format!("swap-{case}.safetensors"));
+    let json = serde_json::to_string(config).map_err(|e| e.to_string())?;
+    checkpoint::save_safetensors(&saved, &path, &[("model_config", &json)]).map_err(|e| e.to_string())?;
+    let loaded = checkpoint::load_safetensors(config.init(&device).map_err(|e| e.to_string())?, &path)
+        .map_err(|e| e.to_string())?;
+    let differences = parameter_differences(&saved, &loaded);
+    if !differences.is_empty() {
+        return Err(format!("save/load changed parameters: {differences:?}"));
+    }
+    if config.needs_prior() {
+        return Ok(());
+    }
+    let detected = config_from_keys(&model_official_keys(&saved), &device)?;
+    let mut expected = config.clone();
+    // What the tensors cannot show: the implementation, the schedule (from the preset), and a
+    // parameterless norm (instance, as the official checkpoints).
+    expected.correlation.implementation = detected.model.correlation.implementation;
+    expected.updater.slow_fast_gru = detected.model.updater.slow_fast_gru;
+    if expected.encoder.context_norm == NormKind::None {
+        expected.encoder.context_norm = NormKind::Instance;
+    }
+    if detected.model != expected {
+        return Err(format!("detected {detected} for {expected:?}"));
+    }
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(6))]
 
@@ -159,6 +236,8 @@ proptest! {
     fn any_valid_combination_builds_runs_and_trains(c in combination()) {
         let config = experiment(&c);
         prop_assert!(config.validate().is_ok(), "{:?}", config.validate());
+        let trip = round_trips(&config.model, c.size[0] * 100 + c.size[1]);
+        prop_assert!(trip.is_ok(), "{:?}: {:?}", c, trip);
 
         // Forward: every iteration's disparity is finite and of the input's size.
         let device = default_device();
@@ -185,5 +264,25 @@ proptest! {
         model.network.visit(&mut check);
         prop_assert!(check.problems.is_empty(), "{:?}: {:?}", c, check.problems);
         prop_assert!(check.checked > 20, "only {} parameters took part", check.checked);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(16))]
+
+    /// The architectures an official checkpoint can have (no fusion, no guidance), more of them
+    /// than the full test above trains: each round-trips through save and load and detection.
+    #[test]
+    fn every_official_architecture_round_trips(
+        c in combination(),
+        hidden in prop_oneof![Just(8usize), Just(16), Just(24)],
+    ) {
+        let mut config = experiment(&c).model;
+        config.fusion = FusionConfig::None;
+        config.updater.guidance = GuidanceKind::None;
+        config.updater.hidden_dims = [hidden; 3];
+        prop_assert!(config.validate().is_ok(), "{:?}", config.validate());
+        let trip = round_trips(&config, c.size[0] * 100 + c.size[1]);
+        prop_assert!(trip.is_ok(), "{:?}: {:?}", config, trip);
     }
 }

@@ -6,10 +6,9 @@ use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig, DeformConv2d, DeformConv2dConfig};
 use burn::tensor::{Device, Tensor};
 use dgstereo_kernels::conv2d_forward;
-use dgstereo_kernels::{Op, Path, path};
+use dgstereo_kernels::deform_conv2d_forward;
 
 use crate::ImageFusion;
-use crate::host_deform::deform_conv2d_host;
 use crate::init::{RGB, near_identity_deform_conv, zeroed};
 use crate::projection::FeatureProjection;
 
@@ -75,11 +74,7 @@ impl DeformableFusion {
         let (image_features, depth_features) = self.projection.forward(image, depth);
         let offset = self.offsets(depth_features.clone());
         let features = Tensor::cat(vec![image_features, depth_features], 1);
-        let host = match path(&features.device(), Op::Deform) {
-            Path::Host => deform_conv2d_host(&self.mixer, features.clone(), offset.clone()),
-            Path::Gpu | Path::Stock => None,
-        };
-        host.unwrap_or_else(|| self.mixer.forward(features, offset, None))
+        deform_conv2d_forward(&self.mixer, features, offset)
     }
 }
 

@@ -40,7 +40,6 @@
 pub mod conv;
 pub mod deformable;
 pub mod depth;
-pub mod host_deform;
 pub mod init;
 pub mod projection;
 

@@ -26,7 +26,9 @@ pub use ops::conv::{
     conv_options, conv2d_affine_or, conv2d_forward, conv2d_forward_then, conv2d_op, conv2d_op_then,
     conv2d_relu_forward, flat_pixels,
 };
+pub use ops::deform::deform_conv2d_forward;
 pub use ops::gru::conv_gru_step_or;
 pub use ops::norm::{PlaneNorm, add_relu, normalize_planes_or};
 pub use ops::resample::{average_pool_half, resize_bilinear};
+pub use ops::upsample::convex_upsample;
 pub use settings::{GpuRoute, Settings, configure};

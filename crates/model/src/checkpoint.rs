@@ -1,7 +1,8 @@
 //! Loading official RAFT-Stereo checkpoints and saving/loading our own.
 //!
 //! Official `.pth` files (`raftstereo-*.pth`, saved from `DataParallel`, keys prefixed
-//! `module.`) load directly through burn-store's PyTorch reader. A few keys are renamed where a
+//! `module.`) load directly through burn-store's PyTorch reader, into a model built with the
+//! checkpoint's configuration ([`crate::checkpoint_config`] reads it from the tensors). A few keys are renamed where a
 //! PyTorch `Sequential` index has no Rust field name (`outputs08.0.1` → `outputs08.0.conv`,
 //! `mask.2` → `mask.conv2`, `downsample.0` → `downsample`); `downsample.1` is the same module as
 //! `norm3` in the reference and `num_batches_tracked` is unused, so both are ignored. Any other

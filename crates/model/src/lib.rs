@@ -4,17 +4,20 @@
 //! order; [`ModelConfig`] chooses each stage's variant and builds the module with one `init`.
 //! [`StereoModel`] is the public inference API: it pads any image size to a multiple of 32,
 //! runs the network and returns positive disparity at full resolution. Official RAFT-Stereo
-//! `.pth` checkpoints load directly ([`checkpoint`]), and [`verify`] compares a forward pass
-//! with the activations the official code computed.
+//! `.pth` checkpoints load directly ([`checkpoint`]) into the architecture their tensors show
+//! ([`checkpoint_config`], which reads the state-dict keys through [`official_keys`]), and
+//! [`verify`] compares a forward pass with the activations the official code computed.
 #![deny(missing_docs)]
 
 pub mod checkpoint;
+pub mod checkpoint_config;
 pub mod config;
 pub mod file_keys;
 pub mod flops;
 pub mod grown_inputs;
 pub mod inference;
 pub mod network;
+pub mod official_keys;
 pub mod profile;
 pub mod verify;
 

@@ -1,11 +1,14 @@
 //! Conformance check against activations computed by the official PyTorch code.
 //!
-//! The reference file (`../shared/golden/raft_stereo_random.activations.safetensors`, made by
-//! the official RAFT-Stereo code at commit 6068c1a in float32 on CPU, see its README) holds the
-//! inputs and every intermediate tensor of a short run. [`verify_raft_stereo`] loads the
-//! checkpoint, runs as many iterations as the file has `iter.K.flow_up` keys, and compares each
-//! tensor: flows within 1e-3 absolute, everything else within 1e-4 relative to the tensor's
-//! largest magnitude.
+//! A reference file (`../shared/golden/raft_stereo_random.activations.safetensors` and
+//! `raft_stereo_realtime_random.activations.safetensors`, made by the official RAFT-Stereo code
+//! at commit 6068c1a in float32 on CPU, see its README) holds the inputs and intermediate
+//! tensors of a short run. [`verify_raft_stereo`] loads the checkpoint into the architecture its
+//! tensors show ([`crate::checkpoint_config`]), runs as many iterations as the file has
+//! `iter.K.flow_up` keys, and compares every tensor the file holds: flows within 1e-3 absolute,
+//! everything else within 1e-4 relative to the tensor's largest magnitude. The realtime file's
+//! names (`fmap.left`, `final.flow_up`, `final.flow_lowres`) are the same tensors as the traced
+//! `fnet.left` and the last iteration's flows.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -15,7 +18,7 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::{Error, Result, tensor::from_vec, tensor::to_vec};
 use safetensors::SafeTensors;
 
-use crate::{ForwardOptions, ModelConfig, checkpoint};
+use crate::{ForwardOptions, checkpoint_config};
 
 /// Tolerance on flows (absolute, pixels).
 pub const FLOW_TOLERANCE: f32 = 1e-3;
@@ -46,6 +49,8 @@ pub struct VerifyReport {
     pub final_flow_error: f32,
     /// Keys of the reference that this implementation does not produce.
     pub unmatched: Vec<String>,
+    /// The configuration read from the checkpoint (one line).
+    pub configuration: String,
 }
 
 impl VerifyReport {
@@ -57,6 +62,7 @@ impl VerifyReport {
 
 impl fmt::Display for VerifyReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "configuration: {}", self.configuration)?;
         for l in &self.lines {
             writeln!(
                 f,
@@ -103,17 +109,32 @@ fn tensor4(reference: &ReferenceTensors, key: &str, path: &Path, device: &Device
     Ok(from_vec(values.clone(), shape, device))
 }
 
-/// Runs the default RAFT-Stereo with `weights` on the reference's inputs and compares.
+/// The reference's names for traced tensors that the trace records under another name.
+fn aliases(last: usize) -> [(&'static str, String); 4] {
+    [
+        ("fmap.left", "fnet.left".into()),
+        ("fmap.right", "fnet.right".into()),
+        ("final.flow_up", format!("iter.{last}.flow_up")),
+        ("final.flow_lowres", format!("iter.{last}.flow_lowres")),
+    ]
+}
+
+/// Runs RAFT-Stereo, in the configuration `weights`' tensors show, on the reference's inputs
+/// and compares every tensor the reference holds.
 pub fn verify_raft_stereo(weights: &Path, reference: &Path, device: &Device) -> Result<VerifyReport> {
     let refs = read_reference(reference)?;
-    let model = ModelConfig::default().init(device)?;
-    let model = checkpoint::load_pytorch(model, weights)?;
+    let (model, config) = checkpoint_config::load_detected(weights, device)?;
     let left = tensor4(&refs, "input.left", reference, device)?;
     let right = tensor4(&refs, "input.right", reference, device)?;
     let iters = refs.keys().filter(|k| k.starts_with("iter.") && k.ends_with(".flow_up")).count();
     let mut trace = BTreeMap::new();
     let options = ForwardOptions { all_iterations: true, trace: Some(&mut trace), ..ForwardOptions::default() };
     let _ = model.forward_flow(left, right, None, iters, options);
+    for (alias, traced) in aliases(iters.saturating_sub(1)) {
+        if let Some(t) = trace.get(&traced).cloned() {
+            trace.insert(alias.to_string(), t);
+        }
+    }
 
     let mut lines = Vec::new();
     let mut unmatched = Vec::new();
@@ -147,5 +168,5 @@ pub fn verify_raft_stereo(weights: &Path, reference: &Path, device: &Device) -> 
             passed: passed && max_abs_error.is_finite(),
         });
     }
-    Ok(VerifyReport { lines, final_flow_error, unmatched })
+    Ok(VerifyReport { lines, final_flow_error, unmatched, configuration: config.to_string() })
 }

@@ -13,16 +13,15 @@ pub mod block;
 pub mod gru;
 pub mod guidance;
 pub mod motion;
-pub mod upsample;
 
 use burn::tensor::Tensor;
 use dgstereo_core::Probe;
 use serde::{Deserialize, Serialize};
 
 pub use block::MultiLevelUpdateBlock;
+pub use dgstereo_kernels::convex_upsample;
 pub use gru::{ConvGru, GateContext};
 pub use guidance::{GuidanceKind, gradient_feature};
-pub use upsample::convex_upsample;
 
 /// What one update step returns.
 ///

@@ -24,9 +24,10 @@ pub struct DemoArgs {
     /// Weights (default: the project's default model).
     #[arg(long)]
     weights: Option<PathBuf>,
-    /// Update iterations.
-    #[arg(long, default_value_t = 32)]
-    iters: usize,
+    /// Update iterations (default: the official preset of a `.pth` checkpoint's architecture,
+    /// else 32).
+    #[arg(long)]
+    iters: Option<usize>,
     /// Upscale the pair when its longer side is under this many pixels: `auto` (900 for models at
     /// 1/8 resolution such as the bundled default), `off`, or pixels.
     #[arg(long, default_value = "auto")]
@@ -61,7 +62,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     let checked = info
         .rejected_share()
         .map_or(String::new(), |s| format!(", left-right check replaced {:.1} % of the pixels", 100.0 * s));
-    println!("Cones {}x{}{network}, {} iterations{checked}: {seconds:.2} s", left.width, left.height, a.iters);
+    println!("Cones {}x{}{network}, {} iterations{checked}: {seconds:.2} s", left.width, left.height, engine.iters);
 
     std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create {}", a.out.display()))?;
     write_disparity(a.out.join("cones_disparity.pfm"), &disp)?;

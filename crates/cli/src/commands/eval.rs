@@ -89,6 +89,7 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
     let n = a.limit.unwrap_or(usize::MAX).min(dataset.len());
     let protocol = a.dataset.protocol();
     let engine = Engine::new(&a.model)?;
+    eprintln!("configuration: {}", engine.configuration);
     std::fs::create_dir_all(&a.out)
         .map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", a.out.display()))?;
     eprintln!(
@@ -97,7 +98,7 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
         dataset.len(),
         protocol.name(),
         engine.weights.display(),
-        a.model.iters,
+        engine.iters,
         match (a.model.max_size, engine.min_size) {
             (Some(m), _) => format!(", downscaled to at most {m} px (not the benchmark's protocol)"),
             (None, Some(m)) => format!(", pairs under {m} px upscaled to it (--min-size)"),

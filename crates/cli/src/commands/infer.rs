@@ -129,10 +129,11 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
         eprintln!("error: {}", f.line());
     }
     let total = list.pairs.len();
+    eprintln!("configuration: {}", engine.configuration);
     eprintln!(
         "{total} pair(s), weights {}, {} iterations, output {}",
         engine.weights.display(),
-        a.model.iters,
+        engine.iters,
         a.out.display()
     );
     let bar = ProgressBar::new(total as u64);

@@ -1,7 +1,11 @@
 //! Hand-written CPU kernels for inference on the Flex backend in f32, on host buffers.
 
 pub mod conv;
+pub mod deform;
 pub mod few_outputs;
 pub mod gru;
 pub mod norm;
+pub mod on_the_fly_lookup;
+pub mod pyramid_lookup;
+pub mod upsample;
 pub mod winograd;

@@ -195,4 +195,27 @@ mod tests {
         let stock = conv2d_relu_forward(&conv.fork(&ad), Tensor::from_data(x.into_data(), &ad));
         assert!(max_abs_diff(expected, Tensor::from_data(stock.into_data(), &device)) < 1e-5);
     }
+
+    crate::test_paths!(
+        /// Every path computes burn's convolution module, plain and with the ReLU epilogue:
+        /// 3x3 at stride 1 (Winograd's shapes on the host) and 2, 1x1, and a strided 7x7 stem.
+        fn every_path_computes_burns_convolution(pinned) {
+            use burn::nn::conv::Conv2dConfig;
+            let device = Device::flex();
+            for (k, stride, pad, [c, o]) in [(3, 1, 1, [32, 40]), (3, 2, 1, [8, 6]), (1, 1, 0, [16, 3]), (7, 2, 3, [3, 8])] {
+                let conv = Conv2dConfig::new([c, o], [k, k])
+                    .with_stride([stride, stride])
+                    .with_padding(PaddingConfig2d::Explicit(pad, pad, pad, pad))
+                    .init(&device);
+                let x = Tensor::<4>::random([2, c, 18, 20], Distribution::Normal(0.0, 1.0), &device);
+                let expected = conv.forward(x.clone());
+                let scale = expected.clone().abs().max().into_scalar::<f32>().max(1.0);
+                let diff = max_abs_diff(expected.clone(), conv2d_forward(&conv, x.clone())) / scale;
+                assert!(diff < 4e-5, "{pinned:?} {k}x{k} stride {stride}: {diff}");
+                let rectified = burn::tensor::activation::relu(expected);
+                let diff = max_abs_diff(rectified, conv2d_relu_forward(&conv, x)) / scale;
+                assert!(diff < 4e-5, "{pinned:?} {k}x{k} stride {stride} relu: {diff}");
+            }
+        }
+    );
 }

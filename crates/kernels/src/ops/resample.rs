@@ -259,4 +259,24 @@ mod tests {
             }
         }
     }
+
+    crate::test_paths!(
+        /// Every path resizes as the interpolation matrices do (up, down, both corner rules) and
+        /// pools as burn's `avg_pool2d`.
+        fn every_path_resamples_as_the_reference(pinned) {
+            let device = Device::flex();
+            let x = Tensor::<4>::random([2, 3, 9, 13], burn::tensor::Distribution::Normal(0.0, 1.0), &device);
+            for size in [[5, 7], [18, 26], [9, 20]] {
+                for align_corners in [false, true] {
+                    let want = resize_bilinear_by_matrices(x.clone(), size, align_corners);
+                    let diff = dgstereo_core::tensor::max_abs_diff(want, resize_bilinear(x.clone(), size, align_corners));
+                    assert!(diff < 1e-5, "{pinned:?} {size:?} align {align_corners}: {diff}");
+                }
+            }
+            let options = AvgPoolOptions::new([3, 3]).with_stride([2, 2]).with_padding([1, 1]);
+            let want = avg_pool2d(x.clone(), options);
+            let diff = dgstereo_core::tensor::max_abs_diff(want, average_pool_half(x));
+            assert!(diff < 1e-6, "{pinned:?} pooling: {diff}");
+        }
+    );
 }

@@ -2,7 +2,7 @@
 //!
 //! The flow head's last convolution (3x3, 256 -> 2 channels, every update iteration) built a
 //! `2304 x H·W` column matrix for a product with two rows: on an H200 the gather took 0.25 ms and
-//! the product 0.11 ms of a 4.8-ms iteration (session 17's profile). Multiplying first,
+//! the product 0.11 ms of a 4.8-ms iteration. Multiplying first,
 //! `Z = W' X` with `W'` the `O·kh·kw x C` weight and `X` the input as it lies, gives `O·kh·kw`
 //! planes of the input's size; the output sums their `kh·kw` shifted copies, gathered by the same
 //! window indices as the columns (`H·W` pointing at an appended zero). The input is read once and

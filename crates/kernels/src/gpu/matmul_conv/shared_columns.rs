@@ -3,7 +3,7 @@
 //! The ConvGRU convolves `[h, x]` for its gates and `[r·h, x]` for its candidate: the same `x`
 //! (the motion features and the neighbouring levels' states, two thirds of the channels at 1/4
 //! resolution) gathered into a column matrix twice an iteration, 0.26 ms each on an H200 at the
-//! KITTI frame's 1/4 level (session 17's profile). A convolution over channels concatenated is
+//! KITTI frame's 1/4 level. A convolution over channels concatenated is
 //! the sum of the convolutions over each part with the weight's matching input channels, so `x`'s
 //! columns are gathered once ([`SharedColumns::gather`]) and each convolution adds the product
 //! with its own first part's columns to the shared part's product

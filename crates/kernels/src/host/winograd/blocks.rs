@@ -14,7 +14,7 @@
 //!
 //! The kernel keeps 8 output channels by 48 tiles of sums in 24 vector registers and adds one input
 //! channel's products per step (three vector loads and eight broadcasts for 24 fused multiply-adds;
-//! 32 tiles in 16 registers until session 20, see [`LANES`]). The transforms are the factored
+//! see [`LANES`]). The transforms are the factored
 //! F(4x4) formulas ([`input_1d`], [`output_1d`]); the tiles' input columns are split into their
 //! four phases, and the output tiles' columns merged back into rows, by vector shuffles
 //! ([`Simd::deinterleave4`]). The band body is compiled for AVX-512 and runs where the processor
@@ -41,13 +41,8 @@ use super::weight_cache::transformed_weights;
 use crate::geometry::Epilogue;
 use crate::settings::settings;
 
-/// Tiles per block: the vectors of the transforms and the kernel's columns. 48 (three
-/// AVX-512 vectors a kernel step) rather than 32, on the AMD EPYC (Zen 4):
-/// min of 25, three rounds alternating, 32 -> 48, ms: 64->64 at 384x448 41.2-43.5 -> 39.0-40.4,
-/// 96->96 at 192x224 14.4-16.3 -> 13.4-13.6, 128->128 at 96x112 6.0-7.1 -> 6.0, 128->256 at
-/// 96x112 11.3-12.8 -> 10.9-11.4, at 96x312 29.7-31.0 -> 30.7-32.1 (the one shape it loses), 64->64
-/// at 96x112 1.86-1.93 -> 1.86-2.16. 64 tiles by 6 output channels (four vectors) lost
-/// everywhere (64->64 at 384x448 43.4-46.0 ms).
+/// Tiles per block: the vectors of the transforms and the kernel's columns, three AVX-512 vectors
+/// a kernel step (48 beat 32 on the AMD EPYC; docs/performance.md).
 const LANES: usize = 48;
 /// Vectors of tiles per kernel step (of the widest set, 16 lanes); [`Band::products`] is
 /// written out for three.
@@ -63,19 +58,9 @@ const ROWS: usize = 8;
 /// Positions of the transformed tile, α² of F(4x4).
 const K2: usize = 36;
 
-/// Most `C·O` (input times output channels) for which the blocked path runs: above it the
-/// transformed weight (`36·C·O` values, read once per block of [`LANES`] tiles) outgrows the core's
-/// caches, and the band path's products over hundreds of tiles per read of the weight win. Measured
-/// on the Xeon in one process alternating both paths, one image, 15 rounds, min (median) ms, bands
-/// -> blocks: 64->64 at 384x448 88.4 (121.7) -> 57.2 (81.8), at 384x1248 241 (298) -> 173 (204), at
-/// 96x112 5.0 (7.6) -> 4.0 (5.9); 96->96 at 192x224 30.8 (44.9) -> 24.0 (33.8), at 192x624 103
-/// (114) -> 83 (98); 128->128 at 96x112 11.0 (16.9) -> 11.1 (16.9), at 96x312 39.4 (44.2) -> 34.3
-/// (38.7); 128->126 at 96x112 14.4 (18.2) -> 13.7 (16.7); 384->128 at 96x112 34.5 (39.4) -> 46.5
-/// (52.5). Raised from `128·128` to `128·256` on the AMD EPYC (Zen 4, AVX-512, 1 MiB L2 per core;
-/// session 20), where the blocks won for the flow head's and the mask head's first layers, 128->256
-/// (min of 25 in three alternating rounds, bands -> blocks, ms): at 96x112 15.5-16.0 -> 13.6-15.0,
-/// at 80x184 20.4-23.4 -> 17.3-18.4, at 96x312 39.3-44.5 -> 32.5-33.8, at 24x28 2.3-2.5 -> 2.2; at
-/// 48x56 mixed (5.2-5.9 -> 5.1-6.0). Not measured on the Xeon at this shape.
+/// The largest `C·O` the blocks take: they beat the bands on the encoders' 64- to 128-channel
+/// layers and the flow and mask heads' 128->256 first layers, and lose on the GRUs' 384->128
+/// (figures in docs/performance.md, "Blocked Winograd").
 const MAX_CHANNEL_PRODUCT: usize = 128 * 256;
 
 /// The instruction set for the blocked path to take an F(4x4) convolution of `c` input and

@@ -59,15 +59,8 @@ pub(crate) struct Variant {
     pub(crate) bt: &'static [[f32; 6]],
     pub(crate) g: &'static [[f32; 3]],
     pub(crate) at: &'static [[f32; 6]],
-    /// Target tiles per band (rounded to whole tile rows). Measured on the GRU 1/4 convolution
-    /// (C=384, O=128, 96x112, 2 cores under a shared load): F(2x2) 56 tiles 68 ms, 128 to 512
-    /// within 62 to 65 ms; F(4x4) 32 tiles 96 to 115 ms, 64: 85 to 94, 128: 73 to 81, 192: 79
-    /// to 80, 256: 77 ms (few input rows per band read each row twice). F(4x4) 384 rather than
-    /// 192 since session 11, on the Intel Xeon (AVX-512 products, 1 MiB L2 per core): criterion
-    /// layer1 64->64 at 160x368 -15 % (GRU convolutions within the noise: at the 1/4 grid of
-    /// 384x448 the two-bands-per-thread rule sets the band either way), whole passes 384x448 x 12
-    /// median of 5 rounds 7.97 -> 7.51 s, KITTI x 12 -7 and -10 % (2 rounds), bit-identical; on the
-    /// AMD machine 384 showed no consistent difference (session 10).
+    /// Target tiles per band (rounded to whole tile rows): F(2x2) 128, F(4x4) 384, chosen on the
+    /// GRU 1/4 convolution and the encoders' layers (docs/performance.md, "Winograd F(4x4, 3x3) and F(2x2, 3x3)").
     pub(crate) band_tiles: usize,
 }
 

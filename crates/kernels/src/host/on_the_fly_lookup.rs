@@ -1,6 +1,6 @@
 //! The on-the-fly ("alt") lookup as one hand-written loop over host memory (inference on the CPU).
 //!
-//! The stock lookup ([`crate::OnTheFlyCorrelation`] on tensors) gathers, for every level and
+//! The stock lookup (`crate::ops::lookup::OnTheFlyCorrelation` on tensors) gathers, for every level and
 //! every one of the `2r + 2` taps, a copy of the right features the size of the left map
 //! (`[N, C, H, W1]`), multiplies it with the left map and reduces over `C`, then adds the
 //! tap/mask/interpolation operations: about `levels · (2r + 2)` full passes with their own
@@ -14,13 +14,13 @@
 //! the zero-outside rule are those of the stock path ([`crate::lookup`]), in the same order;
 //! only the summation order inside a dot product differs from burn's, so the two agree to float
 //! rounding (tested within 1e-5 of the largest correlation). There is no gradient: the volume
-//! uses this kernel only where [`crate::LookupKernel::for_device`] picks the host one.
+//! uses this kernel only where the dispatch picks the host path.
 
 use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use crate::host_lookup::pixels_to_planes;
+use super::pyramid_lookup::pixels_to_planes;
 
 /// Features of one side on the host, channel-last so each pixel's channels are contiguous.
 #[derive(Debug, Clone)]

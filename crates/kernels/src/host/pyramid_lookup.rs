@@ -1,6 +1,6 @@
 //! The pyramid lookup as one hand-written loop over host memory (inference on the CPU).
 //!
-//! The stock lookup ([`crate::lookup`]) composes about twenty tensor operations per level
+//! The stock lookup (`crate::ops::lookup`) composes about twenty tensor operations per level
 //! (floor, offsets, masks, clamp, gather, two slices, interpolation, concatenation, permute),
 //! each a pass over `[H·W, 2r+2]` data with its own allocation; on the CPU the work itself is a
 //! few hundred thousand multiply-adds. This kernel does the same arithmetic, in the same order

@@ -1,11 +1,11 @@
 //! The materialised all-pairs pyramid ("reg").
 
 use burn::tensor::{Device, Tensor, TensorData};
-use dgstereo_kernels::{Op, Path, path};
 
-use crate::host_lookup::{self, HostLevel};
-use crate::lookup::{GatheredLevels, interpolate_taps, taps};
-use crate::{CostVolume, LookupKernel};
+use super::taps::{interpolate_taps, taps};
+use crate::dispatch::{Op, Path, path};
+use crate::gpu::gathered_lookup::GatheredLevels;
+use crate::host::pyramid_lookup::{self, HostLevel};
 
 #[derive(Debug, Clone)]
 enum Storage {
@@ -36,22 +36,17 @@ pub struct CorrelationPyramid {
 }
 
 impl CorrelationPyramid {
-    /// Builds the pyramid of `fmap1` (`[N, C, H, W1]`) against `fmap2` (`[N, C, H, W2]`), with
-    /// the lookup kernel suited to their device ([`LookupKernel::for_device`]).
+    /// Builds the pyramid of `fmap1` (`[N, C, H, W1]`) against `fmap2` (`[N, C, H, W2]`), stored
+    /// where the dispatch's path looks it up: host buffers, the GPU's gathered levels, or burn
+    /// tensors.
     pub fn new(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize) -> Self {
-        let kernel = LookupKernel::for_device(&fmap1.device());
-        Self::with_kernel(fmap1, fmap2, levels, radius, kernel)
-    }
-
-    /// Builds the pyramid for an explicit lookup kernel.
-    pub fn with_kernel(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize, kernel: LookupKernel) -> Self {
         let [n, _, h, w1] = fmap1.dims();
         let [_, _, _, w2] = fmap2.dims();
         let device = fmap1.device();
         let corr = all_pairs(fmap1, fmap2).reshape([n * h * w1, w2]);
         let rows = n * h * w1;
-        let pyramid = match kernel {
-            LookupKernel::Stock => {
+        let pyramid = match path(&device, Op::Lookup) {
+            Path::Gpu | Path::Stock => {
                 let mut pyramid = vec![corr];
                 for _ in 0..levels {
                     let last = pyramid.last().expect("level 0").clone();
@@ -64,11 +59,11 @@ impl CorrelationPyramid {
                     Storage::Tensors(pyramid)
                 }
             }
-            LookupKernel::Host => {
+            Path::Host => {
                 let values = corr.into_data().convert::<f32>().try_into_vec::<f32>().expect("float correlation");
                 let mut host = vec![HostLevel { values: values.into(), width: w2 }];
                 for _ in 0..levels {
-                    let next = host_lookup::pool_rows(host.last().expect("level 0"), rows);
+                    let next = pyramid_lookup::pool_rows(host.last().expect("level 0"), rows);
                     host.push(next);
                 }
                 Storage::Host { levels: host, device }
@@ -77,22 +72,12 @@ impl CorrelationPyramid {
         Self { pyramid, dims: [n, h, w1], levels, radius }
     }
 
-    /// The stock pyramid looked up by two gathers over all levels ([`GpuRoute::GatheredLookup`]),
-    /// on any device: what GPU inference runs, for the tests.
-    #[cfg(test)]
-    pub(crate) fn gathered(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize) -> Self {
-        let stock = Self::with_kernel(fmap1, fmap2, levels, radius, LookupKernel::Stock);
-        let Storage::Tensors(pyramid) = stock.pyramid else { unreachable!("the stock kernel stores tensors") };
-        let gathered = Box::new(GatheredLevels::new(&pyramid[..levels], radius));
-        Self { pyramid: Storage::Gathered(pyramid, gathered), ..stock }
-    }
-
-    /// The kernel this pyramid looks up with (the gathered lookup is the stock kernel's
-    /// operations, arranged for fewer launches).
-    pub fn kernel(&self) -> LookupKernel {
+    /// The path this pyramid looks up on.
+    pub fn path(&self) -> Path {
         match self.pyramid {
-            Storage::Tensors(_) | Storage::Gathered(..) => LookupKernel::Stock,
-            Storage::Host { .. } => LookupKernel::Host,
+            Storage::Tensors(_) => Path::Stock,
+            Storage::Gathered(..) => Path::Gpu,
+            Storage::Host { .. } => Path::Host,
         }
     }
 
@@ -129,8 +114,12 @@ fn pool_pairs(x: Tensor<2>) -> Tensor<2> {
     x.slice([0..m, 0..2 * half]).reshape([m, half, 2]).mean_dim(2).reshape([m, half])
 }
 
-impl CostVolume for CorrelationPyramid {
-    fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
+impl CorrelationPyramid {
+    /// Samples the levels around `coords_x`.
+    ///
+    /// # Shapes
+    /// - `coords_x`: `[N, 1, H, W1]`; output `[N, levels · (2·radius + 1), H, W1]`, level-major
+    pub fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
         let [n, h, w1] = self.dims;
         let k = 2 * self.radius + 1;
         let pyramid = match &self.pyramid {
@@ -141,7 +130,7 @@ impl CostVolume for CorrelationPyramid {
             }
             Storage::Host { levels, device } => {
                 let coords = coords_x.into_data().convert::<f32>().try_into_vec::<f32>().expect("float coordinates");
-                let out = host_lookup::lookup(&levels[..self.levels], &coords, self.dims, self.radius);
+                let out = pyramid_lookup::lookup(&levels[..self.levels], &coords, self.dims, self.radius);
                 return Tensor::from_data(TensorData::new(out, [n, self.levels * k, h, w1]), device);
             }
         };

@@ -4,9 +4,9 @@ use burn::tensor::module::avg_pool2d;
 use burn::tensor::ops::AvgPoolOptions;
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::host_on_the_fly::{self, ChannelLastFeatures};
-use crate::lookup::{interpolate_taps, taps};
-use crate::{CostVolume, LookupKernel};
+use super::taps::{interpolate_taps, taps};
+use crate::dispatch::{Op, Path, path};
+use crate::host::on_the_fly_lookup::{self, ChannelLastFeatures};
 
 #[derive(Debug, Clone)]
 enum Storage {
@@ -22,8 +22,8 @@ enum Storage {
 /// Pooling the volume along `x2` equals correlating with right features pooled along `x`
 /// (the dot product is linear), so the pyramid levels come from pooled `f2`. Memory is
 /// `O(C·H·W)` instead of `O(H·W²)`; each lookup costs `O(levels·r·C·H·W)`. On the CPU without
-/// autodiff the features live on the host and [`crate::host_on_the_fly`] looks them up
-/// ([`LookupKernel::Host`]); elsewhere the tensor-op lookup below runs ([`LookupKernel::Stock`]).
+/// autodiff the features live on the host and [`crate::host::on_the_fly_lookup`] looks them up
+/// ([`Path::Host`]); elsewhere the tensor-op lookup below runs.
 ///
 /// # Shapes
 /// - `fmap1`: `[N, C, H, W1]`, `pooled[i]`: `[N, C, H, W2 / 2^i]`
@@ -37,18 +37,12 @@ pub struct OnTheFlyCorrelation {
 }
 
 impl OnTheFlyCorrelation {
-    /// Prepares the lookup of `fmap1` (`[N, C, H, W1]`) against `fmap2` (`[N, C, H, W2]`), with
-    /// the lookup kernel suited to their device ([`LookupKernel::for_device`]).
+    /// Prepares the lookup of `fmap1` (`[N, C, H, W1]`) against `fmap2` (`[N, C, H, W2]`), stored
+    /// where the dispatch's path looks it up (host buffers or burn tensors).
     pub fn new(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize) -> Self {
-        let kernel = LookupKernel::for_device(&fmap1.device());
-        Self::with_kernel(fmap1, fmap2, levels, radius, kernel)
-    }
-
-    /// Prepares the lookup for an explicit kernel.
-    pub fn with_kernel(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize, kernel: LookupKernel) -> Self {
         let dims = fmap1.dims();
-        let storage = match kernel {
-            LookupKernel::Stock => {
+        let storage = match path(&fmap1.device(), Op::Lookup) {
+            Path::Gpu | Path::Stock => {
                 let mut pooled = vec![fmap2];
                 for _ in 1..levels {
                     let last = pooled.last().expect("level 0").clone();
@@ -62,7 +56,7 @@ impl OnTheFlyCorrelation {
                 }
                 Storage::Tensors { fmap1, pooled }
             }
-            LookupKernel::Host => {
+            Path::Host => {
                 let device = fmap1.device();
                 let fmap2_dims = fmap2.dims();
                 let mut pooled = vec![ChannelLastFeatures::from_channel_first(&host_values(fmap2), fmap2_dims)];
@@ -77,11 +71,11 @@ impl OnTheFlyCorrelation {
         Self { storage, dims, levels, radius }
     }
 
-    /// The kernel this volume looks up with.
-    pub fn kernel(&self) -> LookupKernel {
+    /// The path this volume looks up on.
+    pub fn path(&self) -> Path {
         match self.storage {
-            Storage::Tensors { .. } => LookupKernel::Stock,
-            Storage::Host { .. } => LookupKernel::Host,
+            Storage::Tensors { .. } => Path::Stock,
+            Storage::Host { .. } => Path::Host,
         }
     }
 }
@@ -91,15 +85,19 @@ fn host_values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
     t.into_data().convert::<f32>().try_into_vec::<f32>().expect("float tensor")
 }
 
-impl CostVolume for OnTheFlyCorrelation {
-    fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
+impl OnTheFlyCorrelation {
+    /// Samples the levels around `coords_x`.
+    ///
+    /// # Shapes
+    /// - `coords_x`: `[N, 1, H, W1]`; output `[N, levels · (2·radius + 1), H, W1]`, level-major
+    pub fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
         let [n, c, h, w1] = self.dims;
         let k = 2 * self.radius + 1;
         let (fmap1, pooled) = match &self.storage {
             Storage::Tensors { fmap1, pooled } => (fmap1, pooled),
             Storage::Host { fmap1, pooled, device } => {
                 assert_eq!(coords_x.dims(), [n, 1, h, w1], "coordinates must be [N, 1, H, W1] of the left features");
-                let out = host_on_the_fly::lookup(fmap1, &pooled[..self.levels], &host_values(coords_x), self.radius);
+                let out = on_the_fly_lookup::lookup(fmap1, &pooled[..self.levels], &host_values(coords_x), self.radius);
                 return Tensor::from_data(TensorData::new(out, [n, self.levels * k, h, w1]), device);
             }
         };
