@@ -325,7 +325,7 @@ impl Engine {
             None => format!("cannot load weights {}", weights.display()),
         })?;
         if let Some(on) = a.slow_fast_gru {
-            model.network.slow_fast_gru = on;
+            model.network.update_block.slow_fast_gru = on;
             model.config.updater.slow_fast_gru = on;
         }
         let iters = a.iters.or(detected.as_ref().map(|d| d.valid_iters)).unwrap_or(DEFAULT_ITERS);
