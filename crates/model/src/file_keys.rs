@@ -9,7 +9,7 @@
 use crate::RaftStereo;
 
 /// The pattern and replacement that turn a module path into its file key.
-pub const TO_FILE: (&str, &str) = (r"^encoder\.(Separate|Shared)\.", "");
+pub const TO_FILE: (&str, &str) = (r"^encoder\.[A-Z][A-Za-z0-9]*\.", "");
 
 /// The pattern and replacement that turn a file key into a module path of `model`.
 pub fn from_file(model: &RaftStereo) -> (&'static str, String) {

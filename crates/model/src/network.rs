@@ -9,11 +9,10 @@ use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::activation::{relu, tanh};
 use burn::tensor::{DType, Device, FloatDType, Tensor, TensorData};
+use dgstereo_core::DepthPrior;
 use dgstereo_core::device::float_dtype;
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::tensor::cast_float;
-use dgstereo_core::timing::StageClock;
-use dgstereo_core::{DepthPrior, Probe};
 use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementation, CostVolume};
 use dgstereo_encoder::{ContextFeatures, Encoded, EncoderInputs, Encoders};
 use dgstereo_fusion::{Fusion, FusionTarget, ImageFusion};
@@ -22,7 +21,7 @@ use dgstereo_updater::{GateContext, GuidanceKind, MultiLevelUpdateBlock, Updater
 
 use crate::config::ModelConfig;
 
-pub use dgstereo_core::Trace;
+pub use dgstereo_core::{Probe, Trace};
 
 /// RAFT-Stereo with the paper's optional depth fusion and GRU guidance.
 ///
@@ -63,11 +62,10 @@ pub struct ForwardOptions<'a> {
     pub implementation: Option<CorrelationImplementation>,
     /// Upsample and return the flow after every iteration (training), not the last one only.
     pub all_iterations: bool,
-    /// Records intermediate tensors under the names of the reference activations
-    /// (`fnet.left`, `context.hidden.0`, `iter.3.flow_up`, ...).
-    pub trace: Option<&'a mut Trace>,
-    /// Times every stage (`feature encoder`, `correlation lookup`, `GRU 1/4`, ...).
-    pub clock: Option<&'a mut StageClock>,
+    /// Where intermediate tensors are recorded, under the names of the reference activations
+    /// (`fnet.left`, `context.hidden.0`, `iter.3.flow_up`, ...), and stages timed
+    /// (`feature encoder`, `correlation lookup`, `GRU 1/4`, ...); [`Probe::none`] by default.
+    pub probe: Probe<'a>,
 }
 
 /// The result of [`RaftStereo::forward_flow`].
@@ -128,8 +126,8 @@ impl RaftStereo {
         iters: usize,
         options: ForwardOptions<'_>,
     ) -> FlowOutput {
-        let ForwardOptions { flow_init, implementation, all_iterations, trace, clock } = options;
-        let probe = &mut Probe::new(trace, clock);
+        let ForwardOptions { flow_init, implementation, all_iterations, mut probe } = options;
+        let probe = &mut probe;
         let Encoded { fmap1, fmap2, context } =
             self.encoder.encode(self.fuse(left, right, prior, probe), self.n_gru_layers, probe);
         probe.record("fnet.left", &fmap1);
