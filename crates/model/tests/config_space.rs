@@ -7,7 +7,8 @@
 //! sizes: a configuration either fails
 //! validation with an error naming a key, or builds, runs an inference pass (finite disparity
 //! of the input's size after padding by `pad_divisor`) and a training-mode pass on the autodiff
-//! device whose backward gives finite gradients.
+//! device whose backward gives finite gradients. Beside it: unequal hidden widths at the
+//! reference's sizes, and the checkpoint keys of both encoder layouts.
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Gradients, Tensor};
@@ -172,4 +173,33 @@ fn unequal_hidden_widths_run() {
     config.updater.hidden_dims = [64, 96, 128];
     config.validate().expect("unequal hidden widths are valid");
     builds_and_runs(&config, [64, 64], 2).expect("runs");
+}
+
+/// Saved checkpoints keep the reference's top-level keys (`fnet.`, `cnet.`, `conv2.`) for both
+/// encoder layouts, and load back into the same layout.
+#[test]
+fn saved_keys_keep_the_reference_names() {
+    let device = default_device();
+    for shared in [false, true] {
+        let mut config = ModelConfig::default();
+        config.encoder.shared_backbone = shared;
+        config.encoder.trunk_dims = [16, 16, 24];
+        let model = config.init(&device).unwrap();
+        let path = std::env::temp_dir().join(format!("config-space-keys-{}-{shared}.safetensors", std::process::id()));
+        dgstereo_model::checkpoint::save_safetensors(&model, &path, &[]).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let file = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+        let mut tops: Vec<String> =
+            file.names().iter().map(|k| k.split('.').next().unwrap_or_default().to_string()).collect();
+        tops.sort();
+        tops.dedup();
+        let expected: &[&str] = if shared {
+            &["cnet", "context_zqr_convs", "conv2", "update_block"]
+        } else {
+            &["cnet", "context_zqr_convs", "fnet", "update_block"]
+        };
+        assert_eq!(tops, expected);
+        dgstereo_model::checkpoint::load_safetensors(config.init(&device).unwrap(), &path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+    }
 }
