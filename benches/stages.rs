@@ -18,7 +18,7 @@ use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Distribution, Int, Tensor};
 use criterion::{BenchmarkId, Criterion, criterion_group};
-use dgstereo_core::default_device;
+use dgstereo_core::{Probe, default_device};
 use dgstereo_costvolume::{
     CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, OnTheFlyCorrelation,
 };
@@ -51,7 +51,10 @@ fn coords(h: usize, w: usize) -> Tensor<4> {
 
 fn encoders(c: &mut Criterion) {
     let model = model();
-    let fnet = model.fnet.as_ref().expect("RAFT-Stereo has a feature encoder");
+    let dgstereo_model::encoder::Encoders::Separate(encoders) = &model.encoder else {
+        panic!("RAFT-Stereo has separate encoders")
+    };
+    let fnet = &encoders.fnet;
     let mut group = c.benchmark_group("encoders");
     group.sample_size(10);
     for (size, name) in SIZES {
@@ -61,7 +64,7 @@ fn encoders(c: &mut Criterion) {
             b.iter(|| black_box(fnet.features(pair.clone())))
         });
         group.bench_function(BenchmarkId::new("context encoder", name), |b| {
-            b.iter(|| black_box(model.cnet.context(left.clone(), 3)))
+            b.iter(|| black_box(encoders.cnet.context(left.clone(), 3)))
         });
     }
     group.finish();
@@ -150,7 +153,7 @@ fn update(c: &mut Criterion) {
             let _kept = KeptWeights::new();
             b.iter(|| {
                 let mut state = hidden.clone();
-                black_box(block.step(&mut state, &gates, corr.clone(), flow.clone(), None, None))
+                black_box(block.step(&mut state, &gates, corr.clone(), flow.clone(), None, &mut Probe::none()))
             })
         });
         group.bench_function(BenchmarkId::new("mask head + convex upsample", name), |b| {

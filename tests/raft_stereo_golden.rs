@@ -63,8 +63,8 @@ fn the_realtime_reference_needs_the_slow_fast_schedule() {
     let refs =
         verify::read_reference(&shared.join("golden/raft_stereo_realtime_random.activations.safetensors")).unwrap();
     let (mut model, config) = dgstereo_model::checkpoint_config::load_detected(&shared.join(weights), &device).unwrap();
-    assert!(model.slow_fast_gru && config.valid_iters == 7);
-    model.slow_fast_gru = false;
+    assert!(model.update_block.slow_fast_gru && config.valid_iters == 7);
+    model.update_block.slow_fast_gru = false;
     let f = |k: &str| {
         let (s, v) = &refs[k];
         from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)

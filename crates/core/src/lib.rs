@@ -4,7 +4,8 @@
 //! and on nothing else of the workspace, so the stages stay swappable and independent. What lives
 //! here is what more than one stage needs: the device and precision choice, the error type, the
 //! input padder that makes any image size a multiple of 32, a few tensor helpers, the locator of
-//! the shared reference data and the stage clock of the profiler. The kernels live in
+//! the shared reference data, the stage clock of the profiler and the probe through which a
+//! forward pass reports its intermediate tensors and stage times. The kernels live in
 //! `dgstereo-kernels`, which depends on this crate.
 #![deny(missing_docs)]
 
@@ -12,6 +13,7 @@ pub mod device;
 pub mod error;
 pub mod layers;
 pub mod padding;
+pub mod probe;
 pub mod shared;
 pub mod tensor;
 pub mod timing;
@@ -19,6 +21,7 @@ pub mod timing;
 pub use device::{DeviceChoice, default_device};
 pub use error::{Error, Result};
 pub use padding::InputPadder;
+pub use probe::{Probe, Trace};
 
 /// A relative depth map per view, as the prior stage produces it.
 ///

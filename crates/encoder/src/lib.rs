@@ -3,19 +3,30 @@
 //! Both encoders share the reference's residual trunk; the feature encoder ends in a 1x1
 //! projection at 1/4 resolution, the context encoder in two heads per level at 1/4, 1/8 and
 //! 1/16. Field names mirror the reference's state dict so official checkpoints load by path.
-//! The stage traits [`FeatureExtractor`] and [`ContextExtractor`] are what the model calls; the
-//! normalisations ([`norm`]) are swappable by [`NormKind`].
+//! The stage traits [`FeatureExtractor`] and [`ContextExtractor`] are what single-stage tools
+//! call; the normalisations ([`norm`]) are swappable by [`NormKind`].
+//!
+//! The layout (separate feature and context encoders, or one shared backbone) is this crate's
+//! choice: [`EncoderConfig::init`] builds an [`Encoders`] module with one `match`, and the model
+//! calls [`Encoders::encode`], so a new layout touches this crate and the experiment files only.
+//! The layout is a module enum, so its variant name is part of each module path
+//! (`encoder.Separate.fnet...`); checkpoints keep the reference's keys (`fnet.`, `cnet.`,
+//! `conv2.`), and the model's checkpoint code maps between the two.
 #![deny(missing_docs)]
 
+pub mod config;
 pub mod context;
 pub mod feature;
+pub mod layout;
 pub mod norm;
 pub mod residual;
 
 use burn::tensor::Tensor;
 
+pub use config::EncoderConfig;
 pub use context::ContextEncoder;
 pub use feature::{FeatureEncoder, SharedFeatureHead};
+pub use layout::{Encoded, EncoderInputs, Encoders, SeparateEncoders, SharedBackbone};
 pub use norm::NormKind;
 
 /// Context of each GRU level, finest first: `[hidden, context]` before their activations.

@@ -122,7 +122,7 @@ impl Engine {
                 None => format!("cannot load weights {}", weights.display()),
             })?;
         if let Some(on) = config.slow_fast_gru {
-            model.network.slow_fast_gru = on;
+            model.network.update_block.slow_fast_gru = on;
             model.config.updater.slow_fast_gru = on;
         }
         let preset_iters = detected.as_ref().map(|d| d.valid_iters);

@@ -16,6 +16,7 @@ use burn::store::{ApplyError, ModuleSnapshot, PytorchStore, SafetensorsStore};
 use dgstereo_core::{Error, Result};
 
 use crate::RaftStereo;
+use crate::file_keys::{TO_FILE, from_file};
 
 /// Renames from the reference's state-dict keys to our module paths, applied in order.
 const RENAMES: &[(&str, &str)] = &[
@@ -27,6 +28,8 @@ const RENAMES: &[(&str, &str)] = &[
     (r"^conv2\.1\.", "conv2.conv."),
     (r"update_block\.mask\.0\.", "update_block.mask.conv1."),
     (r"update_block\.mask\.2\.", "update_block.mask.conv2."),
+    // The encoder layout's module (enum variants are skipped when reading `.pth` files).
+    (r"^(fnet|cnet|conv2)\.", "encoder.$1."),
 ];
 
 /// Our module path of an official state-dict key (with or without the `module.` prefix): the
@@ -112,7 +115,7 @@ pub fn check_finite(model: &RaftStereo, path: &Path) -> Result<()> {
 /// the file appears complete or not at all (written to a temporary name, then renamed).
 pub fn save_safetensors(model: &RaftStereo, path: &Path, metadata: &[(&str, &str)]) -> Result<()> {
     let tmp = path.with_extension("safetensors.tmp");
-    let mut store = SafetensorsStore::from_file(&tmp).overwrite(true);
+    let mut store = SafetensorsStore::from_file(&tmp).overwrite(true).with_key_remapping(TO_FILE.0, TO_FILE.1);
     for (k, v) in metadata {
         store = store.metadata(*k, *v);
     }
@@ -133,7 +136,8 @@ fn load_safetensors_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Re
     if !path.is_file() {
         return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
     }
-    let mut store = SafetensorsStore::from_file(path).allow_partial(true).validate(false);
+    let (from, to) = from_file(&model);
+    let mut store = SafetensorsStore::from_file(path).allow_partial(true).validate(false).with_key_remapping(from, to);
     let result = model
         .load_from(&mut store)
         .map_err(|e| Error::Checkpoint { path: path.into(), message: format!("cannot read checkpoint: {e}") })?;

@@ -1,48 +1,10 @@
 //! Configuration of the stereo network.
 
 use dgstereo_costvolume::CorrelationConfig;
-use dgstereo_encoder::NormKind;
+pub use dgstereo_encoder::EncoderConfig;
 use dgstereo_fusion::FusionConfig;
 use dgstereo_updater::{GuidanceKind, UpdaterConfig};
 use serde::{Deserialize, Serialize};
-
-/// Encoder options of RAFT-Stereo.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct EncoderConfig {
-    /// Normalisation of the context encoder (`context_norm`: batch, group, instance, none).
-    #[serde(default)]
-    pub context_norm: NormKind,
-    /// One trunk for context and features (`shared_backbone`).
-    #[serde(default)]
-    pub shared_backbone: bool,
-    /// Channels of the matching features (256).
-    #[serde(default = "default_feature_dim")]
-    pub feature_dim: usize,
-    /// Widths of the residual trunk's three stages in both encoders (`[64, 96, 128]`); smaller
-    /// widths make a CPU-trainable model, but official checkpoints need the reference's.
-    #[serde(default = "default_trunk_dims")]
-    pub trunk_dims: [usize; 3],
-}
-
-fn default_feature_dim() -> usize {
-    256
-}
-
-fn default_trunk_dims() -> [usize; 3] {
-    [64, 96, 128]
-}
-
-impl Default for EncoderConfig {
-    fn default() -> Self {
-        Self {
-            context_norm: NormKind::Batch,
-            shared_backbone: false,
-            feature_dim: 256,
-            trunk_dims: default_trunk_dims(),
-        }
-    }
-}
 
 /// The whole network: RAFT-Stereo's options plus the paper's fusion and guidance.
 ///
@@ -81,12 +43,7 @@ impl ModelConfig {
         if self.correlation.levels == 0 {
             return err("correlation.levels must be at least 1".into());
         }
-        if self.encoder.feature_dim == 0 {
-            return err("encoder.feature_dim must be positive".into());
-        }
-        if self.encoder.trunk_dims.contains(&0) {
-            return err("encoder.trunk_dims must be positive".into());
-        }
+        self.encoder.validate()?;
         // `init` would panic on an invalid fusion (fewer than 3 feature channels).
         self.fusion.validate()?;
         Ok(())

@@ -12,6 +12,7 @@
 pub mod checkpoint;
 pub mod checkpoint_config;
 pub mod config;
+pub mod file_keys;
 pub mod flops;
 pub mod grown_inputs;
 pub mod inference;
@@ -22,7 +23,7 @@ pub mod verify;
 
 pub use config::{EncoderConfig, ModelConfig};
 pub use inference::{StereoModel, padded_disparities};
-pub use network::{FlowOutput, ForwardOptions, RaftStereo, Trace};
+pub use network::{FlowOutput, ForwardOptions, Probe, RaftStereo, Trace};
 /// The stage crates, re-exported so benchmarks and tools can drive single stages of a model
 /// (their traits included) through this crate alone.
 pub use {

@@ -1,6 +1,9 @@
 //! The network: encoders, correlation, iterative updates, upsampling.
-
-use std::collections::BTreeMap;
+//!
+//! Each stage owns its variants: the fusion, the encoder layout, the cost volume and the update
+//! schedule are chosen in their crates' configs and built there, so the forward pass below only
+//! wires them in RAFT-Stereo's order. It reports intermediate tensors and stage times through
+//! one [`Probe`].
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
@@ -10,31 +13,26 @@ use dgstereo_core::DepthPrior;
 use dgstereo_core::device::float_dtype;
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::tensor::cast_float;
-use dgstereo_core::timing::{StageClock, timed};
-use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CostVolume};
-use dgstereo_encoder::{
-    ContextEncoder, ContextExtractor, FeatureEncoder, FeatureExtractor, NormKind, SharedFeatureHead,
-};
+use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementation, CostVolume};
+use dgstereo_encoder::{ContextFeatures, Encoded, EncoderInputs, Encoders};
 use dgstereo_fusion::{Fusion, FusionTarget, ImageFusion};
 use dgstereo_kernels::{KeptWeights, conv2d_forward};
 use dgstereo_updater::{GateContext, GuidanceKind, MultiLevelUpdateBlock, Updater, convex_upsample};
 
 use crate::config::ModelConfig;
 
+pub use dgstereo_core::{Probe, Trace};
+
 /// RAFT-Stereo with the paper's optional depth fusion and GRU guidance.
 ///
-/// Field names follow the official state dict (`fnet`, `cnet`, `conv2`, `context_zqr_convs`,
-/// `update_block`), so official checkpoints load by path.
+/// Field names follow the official state dict (`context_zqr_convs`, `update_block`; the encoder
+/// layout holds `fnet`, `cnet` and `conv2`), so official checkpoints load by path.
 #[derive(Module, Debug)]
 pub struct RaftStereo {
     /// Image/depth fusion (identity for RAFT-Stereo).
     pub fusion: Fusion,
-    /// Feature encoder (absent with a shared backbone).
-    pub fnet: Option<FeatureEncoder>,
-    /// Context encoder.
-    pub cnet: ContextEncoder,
-    /// Feature head of the shared backbone.
-    pub conv2: Option<SharedFeatureHead>,
+    /// Feature and context encoders, separate or with a shared backbone.
+    pub encoder: Encoders,
     /// Per level, the 3x3 convolution giving the GRU's context terms `cz, cr, cq`.
     pub context_zqr_convs: Vec<Conv2d>,
     /// The update operator.
@@ -52,12 +50,7 @@ pub struct RaftStereo {
     pub n_gru_layers: usize,
     /// `log2` of the upsampling factor.
     pub n_downsample: usize,
-    /// Extra coarse GRU updates per iteration.
-    pub slow_fast_gru: bool,
 }
-
-/// Named intermediate tensors of one forward pass, for conformance checks.
-pub type Trace = BTreeMap<String, Tensor<4>>;
 
 /// Options of [`RaftStereo::forward_flow`] beyond the images, the prior and the iteration count;
 /// `ForwardOptions::default()` is inference (last iteration only, configured cost volume).
@@ -69,11 +62,10 @@ pub struct ForwardOptions<'a> {
     pub implementation: Option<CorrelationImplementation>,
     /// Upsample and return the flow after every iteration (training), not the last one only.
     pub all_iterations: bool,
-    /// Records intermediate tensors under the names of the reference activations
-    /// (`fnet.left`, `context.hidden.0`, `iter.3.flow_up`, ...).
-    pub trace: Option<&'a mut Trace>,
-    /// Times every stage (`feature encoder`, `correlation lookup`, `GRU 1/4`, ...).
-    pub clock: Option<&'a mut StageClock>,
+    /// Where intermediate tensors are recorded, under the names of the reference activations
+    /// (`fnet.left`, `context.hidden.0`, `iter.3.flow_up`, ...), and stages timed
+    /// (`feature encoder`, `correlation lookup`, `GRU 1/4`, ...); [`Probe::none`] by default.
+    pub probe: Probe<'a>,
 }
 
 /// The result of [`RaftStereo::forward_flow`].
@@ -98,17 +90,15 @@ impl RaftStereo {
     pub fn new(config: &ModelConfig, device: &Device) -> Self {
         let u = &config.updater;
         let dims = u.hidden_dims;
-        let shared = config.encoder.shared_backbone;
-        let trunk = config.encoder.trunk_dims;
         Self {
             fusion: config.fusion.init(device),
-            fnet: (!shared).then(|| {
-                FeatureEncoder::new(config.encoder.feature_dim, trunk, NormKind::Instance, u.n_downsample, device)
-            }),
-            cnet: ContextEncoder::new(dims, trunk, config.encoder.context_norm, u.n_downsample, device),
-            conv2: shared.then(|| SharedFeatureHead::new(trunk[2], config.encoder.feature_dim, device)),
+            encoder: config.encoder.init(dims, u.n_downsample, device),
+            // Level `i` counts from the finest (1/4, `hidden_dims[2]`) as the context does.
             context_zqr_convs: (0..u.n_gru_layers)
-                .map(|i| conv2d([dims[i], dims[i] * 3], 3, 1, 1, ConvInit::TorchDefault, device))
+                .map(|i| {
+                    let d = dims[2 - i];
+                    conv2d([d, d * 3], 3, 1, 1, ConvInit::TorchDefault, device)
+                })
                 .collect(),
             update_block: MultiLevelUpdateBlock::new(u, config.correlation.channels(), device),
             correlation: config.correlation.clone(),
@@ -116,7 +106,6 @@ impl RaftStereo {
             fuse_features: config.fusion.target() == FusionTarget::Both,
             n_gru_layers: u.n_gru_layers,
             n_downsample: u.n_downsample,
-            slow_fast_gru: u.slow_fast_gru,
         }
     }
 
@@ -137,69 +126,13 @@ impl RaftStereo {
         iters: usize,
         options: ForwardOptions<'_>,
     ) -> FlowOutput {
-        let ForwardOptions { flow_init, implementation, all_iterations, mut trace, mut clock } = options;
-        fn rec(trace: &mut Option<&mut Trace>, name: String, t: &Tensor<4>) {
-            if let Some(tr) = trace.as_deref_mut() {
-                tr.insert(name, t.clone());
-            }
-        }
-        macro_rules! record {
-            ($name:expr, $t:expr) => {
-                rec(&mut trace, $name, $t)
-            };
-        }
-        let (prior_left, prior_right) = match prior {
-            Some(p) => (Some(p.left.clone()), Some(p.right.clone())),
-            None => (None, None),
-        };
-        let fused_left = timed(&mut clock, "fusion", || self.fusion.fuse(left.clone(), prior_left.clone()));
-        let (feat_left, feat_right) = if self.fuse_features {
-            (fused_left.clone(), timed(&mut clock, "fusion", || self.fusion.fuse(right.clone(), prior_right)))
-        } else {
-            (left, right)
-        };
-        let normalise = |x: Tensor<4>| x.div_scalar(255.0).mul_scalar(2.0).sub_scalar(1.0);
-        let levels = self.n_gru_layers;
-
-        let (context, fmap1, fmap2) = match (&self.fnet, &self.conv2) {
-            (Some(fnet), _) => {
-                let context = timed(&mut clock, "context encoder", || self.cnet.context(normalise(fused_left), levels));
-                // One image at a time (the reference batches the pair): the result is the same,
-                // as every layer acts per image, and the full-resolution activations of the
-                // stem and layer1, the process's peak memory, are half as large.
-                let f1 = timed(&mut clock, "feature encoder", || fnet.features(normalise(feat_left)));
-                let f2 = timed(&mut clock, "feature encoder", || fnet.features(normalise(feat_right)));
-                (context, f1, f2)
-            }
-            (None, Some(head)) => {
-                // Shared backbone: the trunk sees both images; the heads only the left.
-                let n = feat_left.dims()[0];
-                let trunk = timed(&mut clock, "context encoder", || {
-                    self.cnet.trunk(normalise(Tensor::cat(vec![fused_left, feat_right], 0)))
-                });
-                let context =
-                    timed(&mut clock, "context encoder", || self.cnet.heads(trunk.clone().narrow(0, 0, n), levels));
-                let feats = timed(&mut clock, "feature encoder", || head.forward(trunk));
-                (context, feats.clone().narrow(0, 0, n), feats.narrow(0, n, n))
-            }
-            (None, None) => unreachable!("a network has either fnet or conv2"),
-        };
-        record!("fnet.left".into(), &fmap1);
-        record!("fnet.right".into(), &fmap2);
-
-        let mut hidden: Vec<Tensor<4>> = Vec::with_capacity(levels);
-        let mut gates: Vec<GateContext> = Vec::with_capacity(levels);
-        for (i, [h, c]) in context.levels.into_iter().enumerate() {
-            let (h, g) = timed(&mut clock, "context encoder", || {
-                (tanh(h), GateContext::from_zqr(conv2d_forward(&self.context_zqr_convs[i], relu(c))))
-            });
-            record!(format!("context.hidden.{i}"), &h);
-            record!(format!("context.z.{i}"), &g.z);
-            record!(format!("context.r.{i}"), &g.r);
-            record!(format!("context.q.{i}"), &g.q);
-            hidden.push(h);
-            gates.push(g);
-        }
+        let ForwardOptions { flow_init, implementation, all_iterations, mut probe } = options;
+        let probe = &mut probe;
+        let Encoded { fmap1, fmap2, context } =
+            self.encoder.encode(self.fuse(left, right, prior, probe), self.n_gru_layers, probe);
+        probe.record("fnet.left", &fmap1);
+        probe.record("fnet.right", &fmap2);
+        let (mut hidden, gates) = self.gru_context(context, probe);
 
         // In half precision the correlation, its lookup, the match positions and the upsampling
         // stay in f32, as in the reference's mixed precision (its `fmap1.float()` before the
@@ -209,20 +142,18 @@ impl RaftStereo {
         let dtype = float_dtype(&fmap1.device());
         let (fmap1, fmap2) = (cast_float(fmap1, FloatDType::F32), cast_float(fmap2, FloatDType::F32));
         let implementation = implementation.unwrap_or(self.correlation.implementation);
-        let corr_fn =
-            timed(&mut clock, "correlation build", || self.correlation.build_with(implementation, fmap1, fmap2));
-        if let (Some(tr), dgstereo_costvolume::Correlation::Reg(p)) = (trace.as_deref_mut(), &corr_fn) {
+        let corr_fn = probe.time("correlation build", || self.correlation.build_with(implementation, fmap1, fmap2));
+        if let (true, Correlation::Reg(p)) = (probe.tracing(), &corr_fn) {
             for (i, level) in p.levels().iter().enumerate() {
                 let [m, w] = level.dims();
-                tr.insert(format!("corr.pyramid.{i}"), level.clone().reshape([m, 1, 1, w]));
+                probe.record(format_args!("corr.pyramid.{i}"), &level.clone().reshape([m, 1, 1, w]));
             }
         }
 
         let [n, _, h, w] = hidden[0].dims();
         let device = hidden[0].device();
         let grid = [h, w];
-        let guidance =
-            timed(&mut clock, "guidance", || prior.and_then(|p| self.guidance.feature(p.left.clone(), grid)));
+        let guidance = probe.time("guidance", || prior.and_then(|p| self.guidance.feature(p.left.clone(), grid)));
         let f32_on = (&device, DType::F32);
         let coords0 =
             Tensor::<1>::from_data(TensorData::new((0..w).map(|x| x as f32).collect::<Vec<_>>(), [w]), f32_on)
@@ -240,40 +171,73 @@ impl RaftStereo {
         let _kept = KeptWeights::new();
         for k in 0..iters {
             flow_x = flow_x.detach();
-            let corr = timed(&mut clock, "correlation lookup", || {
-                cast_float(corr_fn.lookup(coords0.clone() + flow_x.clone()), dtype)
-            });
-            record!(format!("iter.{k}.corr"), &corr);
-            if self.slow_fast_gru {
-                if levels == 3 {
-                    self.update_block.update_coarse(&mut hidden, &gates, true, false, &mut clock);
-                }
-                if levels >= 2 {
-                    self.update_block.update_coarse(&mut hidden, &gates, levels == 3, true, &mut clock);
-                }
-            }
+            let corr = probe
+                .time("correlation lookup", || cast_float(corr_fn.lookup(coords0.clone() + flow_x.clone()), dtype));
+            probe.record(format_args!("iter.{k}.corr"), &corr);
             let flow = Tensor::cat(vec![cast_float(flow_x.clone(), dtype), zeros.clone()], 1);
-            let out = self.update_block.step(&mut hidden, &gates, corr, flow, guidance.as_ref(), clock.as_deref_mut());
+            let out = self.update_block.step(&mut hidden, &gates, corr, flow, guidance.as_ref(), probe);
             flow_x = flow_x + cast_float(out.delta_x, FloatDType::F32);
             for (i, hi) in hidden.iter().enumerate() {
-                record!(format!("iter.{k}.hidden.{i}"), hi);
+                probe.record(format_args!("iter.{k}.hidden.{i}"), hi);
             }
-            record!(format!("iter.{k}.flow_lowres"), &flow_x);
+            probe.record(format_args!("iter.{k}.flow_lowres"), &flow_x);
             // The mask never feeds back into the state: computed only where it is used.
             let upsampled = all_iterations || k + 1 == iters;
-            if upsampled || trace.is_some() {
-                let up_mask = timed(&mut clock, "mask head", || Updater::upsample_mask(&self.update_block, &hidden));
-                record!(format!("iter.{k}.up_mask"), &up_mask);
+            if upsampled || probe.tracing() {
+                let up_mask = probe.time("mask head", || self.update_block.upsample_mask(&hidden));
+                probe.record(format_args!("iter.{k}.up_mask"), &up_mask);
                 if !upsampled {
                     continue;
                 }
-                let up = timed(&mut clock, "convex upsample", || {
+                let up = probe.time("convex upsample", || {
                     convex_upsample(flow_x.clone(), cast_float(up_mask, FloatDType::F32), factor)
                 });
-                record!(format!("iter.{k}.flow_up"), &up);
+                probe.record(format_args!("iter.{k}.flow_up"), &up);
                 flow_up.push(up);
             }
         }
         FlowOutput { flow_up, flow_lowres: flow_x }
+    }
+
+    /// The images each encoder sees: the fused left view for the context, and for the features
+    /// the fused views or the raw ones ([`FusionTarget`]).
+    fn fuse(
+        &self,
+        left: Tensor<4>,
+        right: Tensor<4>,
+        prior: Option<&DepthPrior>,
+        probe: &mut Probe<'_>,
+    ) -> EncoderInputs {
+        let (prior_left, prior_right) = match prior {
+            Some(p) => (Some(p.left.clone()), Some(p.right.clone())),
+            None => (None, None),
+        };
+        let context_left = probe.time("fusion", || self.fusion.fuse(left.clone(), prior_left));
+        let (features_left, features_right) = if self.fuse_features {
+            (context_left.clone(), probe.time("fusion", || self.fusion.fuse(right, prior_right)))
+        } else {
+            (left, right)
+        };
+        EncoderInputs { context_left, features_left, features_right }
+    }
+
+    /// The GRUs' initial hidden states (tanh of the first heads) and their gate context terms
+    /// (the `context_zqr_convs` of the ReLU of the second heads), finest level first.
+    fn gru_context(&self, context: ContextFeatures, probe: &mut Probe<'_>) -> (Vec<Tensor<4>>, Vec<GateContext>) {
+        let levels = context.levels.len();
+        let mut hidden: Vec<Tensor<4>> = Vec::with_capacity(levels);
+        let mut gates: Vec<GateContext> = Vec::with_capacity(levels);
+        for (i, [h, c]) in context.levels.into_iter().enumerate() {
+            let (h, g) = probe.time("context encoder", || {
+                (tanh(h), GateContext::from_zqr(conv2d_forward(&self.context_zqr_convs[i], relu(c))))
+            });
+            probe.record(format_args!("context.hidden.{i}"), &h);
+            probe.record(format_args!("context.z.{i}"), &g.z);
+            probe.record(format_args!("context.r.{i}"), &g.r);
+            probe.record(format_args!("context.q.{i}"), &g.q);
+            hidden.push(h);
+            gates.push(g);
+        }
+        (hidden, gates)
     }
 }

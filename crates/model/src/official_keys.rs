@@ -23,6 +23,9 @@ pub type KeyShape = (String, Vec<usize>);
 const INVERSE_RENAMES: &[(&str, &str)] = &[
     // Enum modules (`Norm::Batch`, ...) add their variant to our paths; the reference has none.
     (r"\.[A-Z][A-Za-z0-9]*\.", "."),
+    // The encoder layout's module (`encoder.Separate.`, `encoder.Shared.`) holds `fnet`, `cnet`
+    // and `conv2`, which the reference has at the top level.
+    (r"^encoder\.", ""),
     (r"(outputs08|outputs16)\.(\d+)\.block\.", "$1.$2.0."),
     (r"(outputs08|outputs16)\.(\d+)\.conv\.", "$1.$2.1."),
     (r"downsample\.(weight|bias)$", "downsample.0.$1"),

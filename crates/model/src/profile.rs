@@ -12,7 +12,7 @@ use dgstereo_core::timing::StageClock;
 use dgstereo_core::{DepthPrior, Error, Result};
 
 use crate::flops::StageMacs;
-use crate::{ForwardOptions, ModelConfig, RaftStereo};
+use crate::{ForwardOptions, ModelConfig, Probe, RaftStereo};
 
 /// The time and work of one stage, summed over the iterations where it repeats.
 #[derive(Debug, Clone, PartialEq)]
@@ -88,8 +88,13 @@ pub fn profile_forward(
     }
     let macs = StageMacs::new(config, [h, w]);
     let mut clock = StageClock::synced(left.device());
-    let out =
-        model.forward_flow(left, right, prior, iters, ForwardOptions { clock: Some(&mut clock), ..Default::default() });
+    let out = model.forward_flow(
+        left,
+        right,
+        prior,
+        iters,
+        ForwardOptions { probe: Probe::new(None, Some(&mut clock)), ..Default::default() },
+    );
     // MACs per call of each counted stage; the encoders and the build run once per pass.
     let per_call = |name: &str, calls: usize| -> u64 {
         match name {

@@ -18,7 +18,7 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::{Error, Result, tensor::from_vec, tensor::to_vec};
 use safetensors::SafeTensors;
 
-use crate::{ForwardOptions, checkpoint_config};
+use crate::{ForwardOptions, Probe, checkpoint_config};
 
 /// Tolerance on flows (absolute, pixels).
 pub const FLOW_TOLERANCE: f32 = 1e-3;
@@ -128,7 +128,8 @@ pub fn verify_raft_stereo(weights: &Path, reference: &Path, device: &Device) -> 
     let right = tensor4(&refs, "input.right", reference, device)?;
     let iters = refs.keys().filter(|k| k.starts_with("iter.") && k.ends_with(".flow_up")).count();
     let mut trace = BTreeMap::new();
-    let options = ForwardOptions { all_iterations: true, trace: Some(&mut trace), ..ForwardOptions::default() };
+    let options =
+        ForwardOptions { all_iterations: true, probe: Probe::new(Some(&mut trace), None), ..ForwardOptions::default() };
     let _ = model.forward_flow(left, right, None, iters, options);
     for (alias, traced) in aliases(iters.saturating_sub(1)) {
         if let Some(t) = trace.get(&traced).cloned() {

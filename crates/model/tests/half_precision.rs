@@ -120,7 +120,10 @@ fn check_mixed_precision_dtypes(device: &burn::tensor::Device, dtype: DType) {
     let network = bundled_config().init(device).unwrap();
     let (left, right) = pair_on(device);
     let mut trace = dgstereo_model::Trace::new();
-    let options = dgstereo_model::ForwardOptions { trace: Some(&mut trace), ..Default::default() };
+    let options = dgstereo_model::ForwardOptions {
+        probe: dgstereo_model::Probe::new(Some(&mut trace), None),
+        ..Default::default()
+    };
     let out = network.forward_flow(left, right, None, 1, options);
     for (name, expected) in [
         ("fnet.left", dtype),

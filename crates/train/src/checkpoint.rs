@@ -95,7 +95,8 @@ pub fn prune_checkpoints(dir: &Path, keep: usize) -> Result<()> {
 /// The safetensors bytes of `model`'s tensors under their module paths.
 fn tensor_bytes(model: &RaftStereo) -> Result<Vec<u8>> {
     let fail = |m: String| Error::Other(format!("cannot serialise the checkpoint: {m}"));
-    let mut store = SafetensorsStore::from_bytes(None);
+    let (from, to) = dgstereo_model::file_keys::TO_FILE;
+    let mut store = SafetensorsStore::from_bytes(None).with_key_remapping(from, to);
     model.save_into(&mut store).map_err(|e| fail(e.to_string()))?;
     store.get_bytes().map_err(|e| fail(e.to_string()))
 }
@@ -237,7 +238,9 @@ pub fn load_checkpoint(parts: TrainParts, path: &Path, device: &burn::tensor::De
 fn read_model(parts: &TrainParts, bytes: Vec<u8>, path: &Path, device: &burn::tensor::Device) -> Result<RaftStereo> {
     let bad = |m: String| Error::Checkpoint { path: path.into(), message: m };
     let mut model = init_model(&parts.model, device, None)?;
-    let mut store = SafetensorsStore::from_bytes(Some(bytes)).allow_partial(true).validate(false);
+    let (from, to) = dgstereo_model::file_keys::from_file(&model);
+    let mut store =
+        SafetensorsStore::from_bytes(Some(bytes)).allow_partial(true).validate(false).with_key_remapping(from, to);
     let result = model.load_from(&mut store).map_err(|e| bad(format!("cannot read the weights: {e}")))?;
     if let Some(e) = result.errors.first() {
         return Err(bad(e.to_string()));

@@ -18,7 +18,7 @@ fn tiny_model_overfits_one_synthetic_pair() {
     parts.train.schedule_extra_steps = 0;
     let device = default_device();
     let mut trainer = Trainer::new(parts, &device).unwrap();
-    let bn_before = dgstereo_core::tensor::to_vec(match &trainer.model.cnet.norm1 {
+    let bn_before = dgstereo_core::tensor::to_vec(match &trainer.model.encoder.context_encoder().norm1 {
         dgstereo_encoder::norm::Norm::Batch(bn) => bn.running_var.val(),
         _ => panic!("the context encoder uses batch norm"),
     });
@@ -52,7 +52,7 @@ fn tiny_model_overfits_one_synthetic_pair() {
     );
     assert!(first.epe > 1.0, "the untrained model should be far off (EPE {})", first.epe);
     assert!(m.epe < 0.5, "EPE after overfitting is {} px", m.epe);
-    let bn_after = dgstereo_core::tensor::to_vec(match &model.cnet.norm1 {
+    let bn_after = dgstereo_core::tensor::to_vec(match &model.encoder.context_encoder().norm1 {
         dgstereo_encoder::norm::Norm::Batch(bn) => bn.running_var.val(),
         _ => unreachable!(),
     });

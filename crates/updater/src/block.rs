@@ -3,8 +3,8 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
+use dgstereo_core::Probe;
 use dgstereo_core::layers::{ConvInit, conv2d};
-use dgstereo_core::timing::{StageClock, timed};
 use dgstereo_kernels::{average_pool_half, resize_bilinear};
 use dgstereo_kernels::{conv2d_forward, conv2d_forward_then, conv2d_relu_forward};
 
@@ -36,7 +36,9 @@ pub struct MaskHead {
 ///
 /// One call runs, in the reference's order, the 1/16 GRU (fed by the pooled old 1/8 state),
 /// the 1/8 GRU (pooled old 1/4 state and the upsampled new 1/16 state), then the motion encoder
-/// and the 1/4 GRU (with the upsampled new 1/8 state), and the heads on the 1/4 state.
+/// and the 1/4 GRU (with the upsampled new 1/8 state), and the flow head on the 1/4 state.
+/// With `slow_fast_gru` the coarse levels first run extra updates, as the reference's
+/// `raft_stereo.py` schedules them: the 1/16 GRU alone, then the 1/16 and 1/8 GRUs, then all.
 #[derive(Module, Debug)]
 pub struct MultiLevelUpdateBlock {
     /// Motion encoder.
@@ -53,6 +55,8 @@ pub struct MultiLevelUpdateBlock {
     pub mask: MaskHead,
     /// GRU levels in use (1..=3).
     pub n_gru_layers: usize,
+    /// Extra coarse-level updates before each step (`slow_fast_gru`).
+    pub slow_fast_gru: bool,
 }
 
 /// `F.avg_pool2d(x, 3, stride=2, padding=1)` (padding counted in the average): a finer
@@ -89,6 +93,7 @@ impl MultiLevelUpdateBlock {
                 conv2: conv2d([256, factor * factor * 9], 1, 1, 0, init, device),
             },
             n_gru_layers: n,
+            slow_fast_gru: config.slow_fast_gru,
         }
     }
 
@@ -101,37 +106,27 @@ impl MultiLevelUpdateBlock {
         delta.narrow(1, 0, 1)
     }
 
-    /// The convex-upsampling logits of the finest state, scaled by 0.25 as in the reference.
-    ///
-    /// # Shapes
-    /// - `hidden_fine`: `[N, hidden, H, W]`; output `[N, 9·f², H, W]`
-    pub fn upsample_mask(&self, hidden_fine: Tensor<4>) -> Tensor<4> {
-        conv2d_forward_then(&self.mask.conv2, conv2d_relu_forward(&self.mask.conv1, hidden_fine), |m| {
-            m.mul_scalar(0.25)
-        })
-    }
-
-    /// Updates the coarser GRUs only (the slow-fast schedule's extra calls), timing them on
-    /// `clock` if given.
-    pub fn update_coarse(
+    /// Updates the coarser GRUs only: the 1/16 level with `iter32`, then the 1/8 level with
+    /// `iter16` (levels the block does not use are skipped).
+    fn update_coarse(
         &self,
         hidden: &mut [Tensor<4>],
         context: &[GateContext],
         iter32: bool,
         iter16: bool,
-        clock: &mut Option<&mut StageClock>,
+        probe: &mut Probe<'_>,
     ) {
         let n = self.n_gru_layers;
         if iter32 && n == 3 {
-            let pooled = timed(clock, "interpolation", || pool2x(hidden[1].clone()));
-            hidden[2] = timed(clock, "GRU 1/16", || self.gru32.forward(hidden[2].clone(), &context[2], vec![pooled]));
+            let pooled = probe.time("interpolation", || pool2x(hidden[1].clone()));
+            hidden[2] = probe.time("GRU 1/16", || self.gru32.forward(hidden[2].clone(), &context[2], vec![pooled]));
         }
         if iter16 && n >= 2 {
-            let mut inputs = vec![timed(clock, "interpolation", || pool2x(hidden[0].clone()))];
+            let mut inputs = vec![probe.time("interpolation", || pool2x(hidden[0].clone()))];
             if n > 2 {
-                inputs.push(timed(clock, "interpolation", || interp(hidden[2].clone(), &hidden[1])));
+                inputs.push(probe.time("interpolation", || interp(hidden[2].clone(), &hidden[1])));
             }
-            hidden[1] = timed(clock, "GRU 1/8", || self.gru16.forward(hidden[1].clone(), &context[1], inputs));
+            hidden[1] = probe.time("GRU 1/8", || self.gru16.forward(hidden[1].clone(), &context[1], inputs));
         }
     }
 }
@@ -144,21 +139,27 @@ impl Updater for MultiLevelUpdateBlock {
         corr: Tensor<4>,
         flow: Tensor<4>,
         guidance: Option<&Tensor<4>>,
-        clock: Option<&mut StageClock>,
+        probe: &mut Probe<'_>,
     ) -> UpdateOutput {
-        let mut clock = clock;
         let n = self.n_gru_layers;
-        self.update_coarse(hidden, context, n == 3, n >= 2, &mut clock);
-        let motion = timed(&mut clock, "motion encoder", || self.encoder.forward_parts(flow, corr, guidance));
+        if self.slow_fast_gru {
+            self.update_coarse(hidden, context, true, false, probe);
+            self.update_coarse(hidden, context, true, true, probe);
+        }
+        self.update_coarse(hidden, context, true, true, probe);
+        let motion = probe.time("motion encoder", || self.encoder.forward_parts(flow, corr, guidance));
         let mut inputs = Vec::from(motion);
         if n > 1 {
-            inputs.push(timed(&mut clock, "interpolation", || interp(hidden[1].clone(), &hidden[0])));
+            inputs.push(probe.time("interpolation", || interp(hidden[1].clone(), &hidden[0])));
         }
-        hidden[0] = timed(&mut clock, "GRU 1/4", || self.gru08.forward(hidden[0].clone(), &context[0], inputs));
-        UpdateOutput { delta_x: timed(&mut clock, "flow head", || self.delta_x(hidden[0].clone())) }
+        hidden[0] = probe.time("GRU 1/4", || self.gru08.forward(hidden[0].clone(), &context[0], inputs));
+        UpdateOutput { delta_x: probe.time("flow head", || self.delta_x(hidden[0].clone())) }
     }
 
+    /// The mask head on the finest state, its logits scaled by 0.25 as in the reference.
     fn upsample_mask(&self, hidden: &[Tensor<4>]) -> Tensor<4> {
-        MultiLevelUpdateBlock::upsample_mask(self, hidden[0].clone())
+        conv2d_forward_then(&self.mask.conv2, conv2d_relu_forward(&self.mask.conv1, hidden[0].clone()), |m| {
+            m.mul_scalar(0.25)
+        })
     }
 }

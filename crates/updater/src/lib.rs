@@ -15,7 +15,7 @@ pub mod guidance;
 pub mod motion;
 
 use burn::tensor::Tensor;
-use dgstereo_core::timing::StageClock;
+use dgstereo_core::Probe;
 use serde::{Deserialize, Serialize};
 
 pub use block::MultiLevelUpdateBlock;
@@ -38,9 +38,10 @@ pub trait Updater {
     /// One iteration: updates `hidden` in place and predicts the flow update.
     ///
     /// `hidden` and `context` are ordered finest level first; `flow` is `[N, 2, H, W]` (x, y=0),
-    /// `corr` the correlation lookup, `guidance` the feature of [`GuidanceKind::feature`]. With
-    /// a `clock`, each GRU level, the motion encoder, the interpolations and the flow head are
-    /// timed as stages (`GRU 1/4`, `motion encoder`, ...).
+    /// `corr` the correlation lookup, `guidance` the feature of [`GuidanceKind::feature`]. The
+    /// step includes the configured schedule of the coarse levels (`slow_fast_gru`). On a
+    /// `probe` with a clock, each GRU level, the motion encoder, the interpolations and the
+    /// flow head are timed as stages (`GRU 1/4`, `motion encoder`, ...).
     fn step(
         &self,
         hidden: &mut [Tensor<4>],
@@ -48,7 +49,7 @@ pub trait Updater {
         corr: Tensor<4>,
         flow: Tensor<4>,
         guidance: Option<&Tensor<4>>,
-        clock: Option<&mut StageClock>,
+        probe: &mut Probe<'_>,
     ) -> UpdateOutput;
 
     /// The convex-upsampling weights of the current state, `[N, 9·f², H, W]` (logits already

@@ -1,0 +1,93 @@
+//! The encoders' options and the one place that builds the chosen layout.
+
+use burn::tensor::Device;
+use serde::{Deserialize, Serialize};
+
+use crate::context::ContextEncoder;
+use crate::feature::{FeatureEncoder, SharedFeatureHead};
+use crate::layout::{Encoders, SeparateEncoders, SharedBackbone};
+use crate::norm::NormKind;
+
+/// Encoder options of RAFT-Stereo.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EncoderConfig {
+    /// Normalisation of the context encoder (`context_norm`: batch, group, instance, none).
+    #[serde(default)]
+    pub context_norm: NormKind,
+    /// One trunk for context and features (`shared_backbone`).
+    #[serde(default)]
+    pub shared_backbone: bool,
+    /// Channels of the matching features (256).
+    #[serde(default = "default_feature_dim")]
+    pub feature_dim: usize,
+    /// Widths of the residual trunk's three stages in both encoders (`[64, 96, 128]`); smaller
+    /// widths make a CPU-trainable model, but official checkpoints need the reference's.
+    #[serde(default = "default_trunk_dims")]
+    pub trunk_dims: [usize; 3],
+}
+
+fn default_feature_dim() -> usize {
+    256
+}
+
+fn default_trunk_dims() -> [usize; 3] {
+    [64, 96, 128]
+}
+
+impl Default for EncoderConfig {
+    fn default() -> Self {
+        Self {
+            context_norm: NormKind::Batch,
+            shared_backbone: false,
+            feature_dim: 256,
+            trunk_dims: default_trunk_dims(),
+        }
+    }
+}
+
+impl EncoderConfig {
+    /// Checks the options; the message names the key (under `encoder.`).
+    ///
+    /// # Errors
+    /// [`dgstereo_core::Error::Config`] for a zero width, or a trunk width that the group
+    /// norm (`channels / 8` groups) cannot split.
+    pub fn validate(&self) -> dgstereo_core::Result<()> {
+        let err = |m: String| Err(dgstereo_core::Error::Config(m));
+        if self.feature_dim == 0 {
+            return err("encoder.feature_dim must be positive".into());
+        }
+        if self.trunk_dims.contains(&0) {
+            return err("encoder.trunk_dims must be positive".into());
+        }
+        if self.context_norm == NormKind::Group {
+            if let Some(c) = self.trunk_dims.iter().find(|&&c| c < 8 || c % (c / 8) != 0) {
+                return err(format!(
+                    "encoder.trunk_dims = {:?}: with context_norm = \"group\" ({c} / 8 groups) every width must be at least 8 and divisible by its group count",
+                    self.trunk_dims
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Builds the layout: separate feature and context encoders, or one shared backbone.
+    /// `context_dims` are the GRU's hidden widths (coarsest first), `n_downsample` the `log2` of
+    /// the encoders' output stride.
+    pub fn init(&self, context_dims: [usize; 3], n_downsample: usize, device: &Device) -> Encoders {
+        // Built in the order of the reference's constructor (`fnet`, `cnet`, `conv2`), which is
+        // the order fresh weights are drawn in.
+        let trunk = self.trunk_dims;
+        let cnet = || ContextEncoder::new(context_dims, trunk, self.context_norm, n_downsample, device);
+        match self.shared_backbone {
+            false => Encoders::Separate(SeparateEncoders {
+                fnet: FeatureEncoder::new(self.feature_dim, trunk, NormKind::Instance, n_downsample, device),
+                cnet: cnet(),
+            }),
+            true => Encoders::Shared(SharedBackbone {
+                cnet: cnet(),
+                conv2: SharedFeatureHead::new(trunk[2], self.feature_dim, device),
+            }),
+        }
+    }
+}

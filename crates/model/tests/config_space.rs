@@ -1,0 +1,205 @@
+//! Every configuration that `ModelConfig::validate` accepts builds and runs; every other one is
+//! refused with a message naming its key.
+//!
+//! Random points of the configuration space (n_downsample, context norm, correlation levels and
+//! radius, equal and unequal hidden widths, GRU levels, shared backbone, slow-fast schedule,
+//! fusion and guidance kinds, correlation implementation, trunk widths) at small widths and
+//! sizes: a configuration either fails
+//! validation with an error naming a key, or builds, runs an inference pass (finite disparity
+//! of the input's size after padding by `pad_divisor`) and a training-mode pass on the autodiff
+//! device whose backward gives finite gradients. Beside it: unequal hidden widths at the
+//! reference's sizes, and the checkpoint keys of both encoder layouts.
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::tensor::{Device, Gradients, Tensor};
+use dgstereo_core::tensor::{from_vec, to_vec};
+use dgstereo_core::{DepthPrior, default_device};
+use dgstereo_model::costvolume::CorrelationImplementation;
+use dgstereo_model::encoder::NormKind;
+use dgstereo_model::fusion::{FusionConfig, FusionTarget};
+use dgstereo_model::updater::GuidanceKind;
+use dgstereo_model::{ModelConfig, StereoModel};
+use proptest::prelude::*;
+
+fn norm() -> impl Strategy<Value = NormKind> {
+    prop_oneof![Just(NormKind::Batch), Just(NormKind::Group), Just(NormKind::Instance), Just(NormKind::None)]
+}
+
+fn fusion() -> impl Strategy<Value = FusionConfig> {
+    let target = prop_oneof![Just(FusionTarget::Both), Just(FusionTarget::ContextOnly)];
+    (0usize..3, target, 1usize..=8).prop_map(|(kind, target, features)| match kind {
+        0 => FusionConfig::None,
+        1 => FusionConfig::Conv { target, features },
+        _ => FusionConfig::Deformable { target, features },
+    })
+}
+
+fn hidden_dims() -> impl Strategy<Value = [usize; 3]> {
+    let width = prop::sample::select(vec![8usize, 16, 24]);
+    prop_oneof![width.clone().prop_map(|d| [d; 3]), [width.clone(), width.clone(), width]]
+}
+
+fn config() -> impl Strategy<Value = ModelConfig> {
+    let guidance = prop_oneof![Just(GuidanceKind::None), Just(GuidanceKind::Gradient), Just(GuidanceKind::Depth)];
+    let updater = (2usize..=3, 1usize..=3, hidden_dims(), any::<bool>(), guidance);
+    // Trunk widths that a group norm (width / 8 groups) can and cannot split.
+    let trunk = prop::sample::select(vec![[16usize, 16, 24], [8, 16, 16], [12, 16, 20], [16, 17, 24], [4, 16, 16]]);
+    let encoder = (norm(), any::<bool>(), prop::sample::select(vec![16usize, 32]), trunk);
+    let implementation = prop_oneof![Just(CorrelationImplementation::Reg), Just(CorrelationImplementation::Alt)];
+    let correlation = (0usize..=4, 0usize..=4, implementation);
+    (updater, encoder, correlation, fusion()).prop_map(
+        |(
+            (n_downsample, n_gru_layers, hidden, slow_fast, guidance),
+            (norm, shared, feature_dim, trunk),
+            (levels, radius, implementation),
+            fusion,
+        )| {
+            let mut c = ModelConfig { fusion, ..Default::default() };
+            c.updater.n_downsample = n_downsample;
+            c.updater.n_gru_layers = n_gru_layers;
+            c.updater.hidden_dims = hidden;
+            c.updater.slow_fast_gru = slow_fast;
+            c.updater.guidance = guidance;
+            c.encoder.context_norm = norm;
+            c.encoder.shared_backbone = shared;
+            c.encoder.feature_dim = feature_dim;
+            c.encoder.trunk_dims = trunk;
+            c.correlation.levels = levels;
+            c.correlation.radius = radius;
+            c.correlation.implementation = implementation;
+            c
+        },
+    )
+}
+
+/// A textured pair (the right view shifted by 2 pixels) and a ramp prior, `[1, C, h, w]`.
+fn inputs(size: [usize; 2], device: &Device) -> (Tensor<4>, Tensor<4>, DepthPrior) {
+    let [h, w] = size;
+    let view = |shift: f32| {
+        let values = (0..3 * h * w)
+            .map(|i| {
+                let (c, y, x) = (i / (h * w), (i / w) % h, i % w);
+                let x = x as f32 + shift;
+                127.5 + 100.0 * ((0.37 * x + c as f32).sin() * (0.23 * y as f32 + 0.7).cos())
+            })
+            .collect();
+        from_vec(values, [1, 3, h, w], device)
+    };
+    let ramp = || from_vec((0..h * w).map(|i| 1.0 + (i % w) as f32 / w as f32).collect(), [1, 1, h, w], device);
+    (view(0.0), view(2.0), DepthPrior { left: ramp(), right: ramp() })
+}
+
+/// Counts the parameters with a gradient; notes the non-finite ones.
+struct GradientCheck<'a> {
+    grads: &'a Gradients,
+    with_gradient: usize,
+    non_finite: usize,
+}
+
+impl ModuleVisitor for GradientCheck<'_> {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        if let Some(grad) = param.val().grad(self.grads) {
+            self.with_gradient += 1;
+            self.non_finite += to_vec(grad).iter().any(|g| !g.is_finite()) as usize;
+        }
+    }
+}
+
+/// Builds `config`, runs inference and one training-mode forward and backward pass.
+fn builds_and_runs(config: &ModelConfig, size: [usize; 2], iters: usize) -> Result<(), String> {
+    let device = default_device();
+    let prior = |p: DepthPrior| config.needs_prior().then_some(p);
+    let network = config.init(&device).map_err(|e| e.to_string())?;
+    let (left, right, p) = inputs(size, &device);
+    let model = StereoModel::new(network, config.clone(), device.clone());
+    let out = model.predict(left, right, prior(p).as_ref(), iters, false, None).map_err(|e| e.to_string())?;
+    let disparity = out.disparities.last().ok_or("no disparity")?.clone();
+    if disparity.dims() != [1, 1, size[0], size[1]] {
+        return Err(format!("disparity is {:?}", disparity.dims()));
+    }
+    if to_vec(disparity).iter().any(|d| !d.is_finite()) {
+        return Err("non-finite disparity".into());
+    }
+
+    let ad = device.clone().autodiff();
+    let network = config.init(&device).map_err(|e| e.to_string())?.fork(&ad).train();
+    let (left, right, p) = inputs(size, &ad);
+    let model = StereoModel::new(network, config.clone(), ad.clone());
+    let out = model.predict(left, right, prior(p).as_ref(), iters, true, None).map_err(|e| e.to_string())?;
+    if out.disparities.len() != iters {
+        return Err(format!("{} disparities for {iters} iterations", out.disparities.len()));
+    }
+    let loss = out.disparities.into_iter().map(|d| d.sub_scalar(2.0).abs().mean()).reduce(|a, b| a + b).unwrap();
+    if !to_vec(loss.clone())[0].is_finite() {
+        return Err("non-finite loss".into());
+    }
+    let grads = loss.backward();
+    let mut check = GradientCheck { grads: &grads, with_gradient: 0, non_finite: 0 };
+    model.network.visit(&mut check);
+    if check.with_gradient == 0 || check.non_finite > 0 {
+        return Err(format!("{} parameters with a gradient, {} non-finite", check.with_gradient, check.non_finite));
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 12, max_shrink_iters: 32, ..ProptestConfig::default() })]
+
+    #[test]
+    fn every_accepted_configuration_builds_and_runs(
+        config in config(),
+        size in (24usize..=64, 24usize..=64),
+        iters in 2usize..=3,
+    ) {
+        match config.validate() {
+            Err(e) => {
+                let message = e.to_string();
+                let keys = ["updater.", "encoder.", "correlation.", "fusion"];
+                prop_assert!(keys.iter().any(|k| message.contains(k)), "{message} names no key");
+            }
+            Ok(()) => {
+                let run = builds_and_runs(&config, [size.0, size.1], iters);
+                prop_assert!(run.is_ok(), "{config:?}: {run:?}");
+            }
+        }
+    }
+}
+
+/// The reference's widths with unequal hidden widths (each level's context convolution takes its
+/// own level's width).
+#[test]
+fn unequal_hidden_widths_run() {
+    let mut config = ModelConfig::default();
+    config.updater.hidden_dims = [64, 96, 128];
+    config.validate().expect("unequal hidden widths are valid");
+    builds_and_runs(&config, [64, 64], 2).expect("runs");
+}
+
+/// Saved checkpoints keep the reference's top-level keys (`fnet.`, `cnet.`, `conv2.`) for both
+/// encoder layouts, and load back into the same layout.
+#[test]
+fn saved_keys_keep_the_reference_names() {
+    let device = default_device();
+    for shared in [false, true] {
+        let mut config = ModelConfig::default();
+        config.encoder.shared_backbone = shared;
+        config.encoder.trunk_dims = [16, 16, 24];
+        let model = config.init(&device).unwrap();
+        let path = std::env::temp_dir().join(format!("config-space-keys-{}-{shared}.safetensors", std::process::id()));
+        dgstereo_model::checkpoint::save_safetensors(&model, &path, &[]).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let file = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+        let mut tops: Vec<String> =
+            file.names().iter().map(|k| k.split('.').next().unwrap_or_default().to_string()).collect();
+        tops.sort();
+        tops.dedup();
+        let expected: &[&str] = if shared {
+            &["cnet", "context_zqr_convs", "conv2", "update_block"]
+        } else {
+            &["cnet", "context_zqr_convs", "fnet", "update_block"]
+        };
+        assert_eq!(tops, expected);
+        dgstereo_model::checkpoint::load_safetensors(config.init(&device).unwrap(), &path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+    }
+}
