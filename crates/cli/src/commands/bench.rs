@@ -167,9 +167,6 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     dgstereo_kernels::configure(settings)?;
     // The precision is set before the device's first tensor: burn fixes it there.
     let device = a.device.parse::<DeviceChoice>()?.device_with_precision(precision)?;
-    if a.train {
-        return super::bench_train::run(&a, &device);
-    }
     let config = match &a.config {
         Some(p) => {
             let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;

@@ -11,7 +11,8 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use dgstereo_kernels::{Op, Path, path};
+use dgstereo_core::DeviceChoice;
+use dgstereo_kernels::{Op, Path, Settings, path};
 use dgstereo_model::flops::StageMacs;
 use dgstereo_train::step_timing::{StepSeconds, random_batch};
 use dgstereo_train::{TrainParts, Trainer};
@@ -19,9 +20,15 @@ use dgstereo_train::{TrainParts, Trainer};
 use super::bench::{BenchArgs, machine_line, median, parse_size, peak_memory_bytes};
 use super::train::parts_of;
 
-/// Times `a.runs` training steps after `a.warmup` on `device` (an autodiff device).
-pub fn run(a: &BenchArgs, device: &burn::tensor::Device) -> anyhow::Result<ExitCode> {
+/// Times `a.runs` training steps after `a.warmup` (`dgstereo bench --train`).
+pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     let [h, w] = parse_size(&a.size)?;
+    if a.iters == 0 || a.runs == 0 {
+        bail!("--iters and --runs must be at least 1");
+    }
+    let settings: Settings = a.kernels.parse().with_context(|| format!("--kernels '{}'", a.kernels))?;
+    dgstereo_kernels::configure(settings)?;
+    let device = &a.device.parse::<DeviceChoice>()?.device()?;
     if a.batch == 0 {
         bail!("--batch must be at least 1");
     }
