@@ -1,52 +1,29 @@
-//! Running a model on one stereo pair as a user asks: the options shared by `infer` and `eval`
-//! ([`ModelArgs`]) and the [`Engine`] they build.
+//! The model options shared by `infer`, `eval` and `demo` ([`ModelArgs`]) and the [`Engine`]
+//! they build: the inference crate's engine with the options the command line chose.
 //!
-//! The engine owns the network, the prior provider and the per-pair policy:
-//! - `--max-size N` downscales both views so the longer side is at most `N` pixels, and
-//!   `--min-size` (default `auto`) upscales small pairs for 1/8-resolution models
-//!   ([`crate::working_size`]); the disparity is resized back to the input size and multiplied
-//!   by the inverse scale;
-//! - the cost volume is the materialised pyramid ("reg", fast) unless its estimated size
-//!   ([`CorrelationConfig::pyramid_bytes`] at the padded feature resolution) exceeds
-//!   `--memory-budget`, then the on-the-fly volume ("alt", memory linear in the width) is used;
-//!   `--corr reg|alt` forces one;
-//! - `--lr-check` also runs the mirrored pair and fills the pixels the right view does not
-//!   confirm ([`crate::consistency`]).
+//! The flags map one to one onto [`EngineConfig`] and [`PredictOptions`]; an experiment file
+//! (`--experiment`, `--run`) gives the model and prior configurations, and `--prior` /
+//! `--prior-weights` override its prior. The library's errors name option fields
+//! (`` `min_size` ``); [`flag_names`] turns them into the flags that set them (`--min-size`).
 //!
 //! Design decision: every whole-run problem (weights that do not load or do not match the
 //! experiment, a prior that cannot be built, a device that does not exist) is found here, once,
 //! before any pair is read, so `infer` can fail fast on those and keep going on per-pair ones.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use anyhow::{Context, bail};
-use burn::tensor::Device;
-use clap::{Args, ValueEnum};
+use clap::Args;
 use dgstereo_core::DeviceChoice;
 use dgstereo_core::device::Precision;
-use dgstereo_costvolume::CorrelationImplementation;
-use dgstereo_data::resize::{disparity_to_size, resize_rgb};
-use dgstereo_data::{DisparityMap, Mask, RgbImage};
-use dgstereo_model::checkpoint_config::summary;
-use dgstereo_model::{ModelConfig, StereoModel};
-use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
+use dgstereo_data::{DisparityMap, RgbImage};
+use dgstereo_inference::{CorrChoice, EngineConfig, MinSize, PredictOptions, RunInfo};
+use dgstereo_model::ModelConfig;
+use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig};
 
-use crate::consistency::{self, fill_rejected, mirror_disparity, mirror_rgb, rejected_pixels};
-use crate::convert::{disparity_map, image_tensor};
-use crate::models::{default_weights, load_model};
-use crate::working_size::{MinSize, working_scale};
-
-/// Which cost volume to build.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum CorrChoice {
-    /// "reg" unless it would exceed `--memory-budget`, then "alt".
-    Auto,
-    /// Always the materialised pyramid.
-    Reg,
-    /// Always on-the-fly correlation.
-    Alt,
-}
+/// The threshold of `--lr-check` given without a value, in pixels
+/// ([`dgstereo_inference::consistency::DEFAULT_THRESHOLD`], as clap takes a default).
+pub const DEFAULT_LR_CHECK: &str = "2";
 
 /// Update iterations when neither `--iters` nor a checkpoint's preset gives them (the official
 /// `--valid_iters`).
@@ -107,7 +84,7 @@ pub struct ModelArgs {
     /// and replace the pixels where the two disagree by more than PX pixels (2 when no value is
     /// given; occlusions, mostly) with their row's nearest confirmed background. Doubles the time;
     /// `--save rejected` writes which pixels were replaced.
-    #[arg(long, value_name = "PX", num_args = 0..=1, default_missing_value = consistency::DEFAULT_THRESHOLD)]
+    #[arg(long, value_name = "PX", num_args = 0..=1, default_missing_value = DEFAULT_LR_CHECK)]
     pub lr_check: Option<f32>,
 }
 
@@ -173,7 +150,7 @@ pub fn parse_prior(spec: &str) -> anyhow::Result<PriorConfig> {
             right: dgstereo_prior::file::DEFAULT_RIGHT_PATTERN.into(),
         },
         ("depth-anything-v2" | "dav2", w) if !w.is_empty() => {
-            PriorConfig::DepthAnythingV2 { weights: w.into(), encoder: None, input_size: 518 }
+            PriorConfig::DepthAnythingV2 { weights: w.into(), encoder: None, input_size: DEFAULT_INPUT_SIZE }
         }
         _ => bail!("--prior '{spec}': expected none, file:DIR or depth-anything-v2:WEIGHTS"),
     })
@@ -189,7 +166,11 @@ fn with_prior_weights(config: PriorConfig, weights: &std::path::Path) -> PriorCo
         PriorConfig::Cache { dir, inner } => {
             PriorConfig::Cache { dir, inner: Box::new(with_prior_weights(*inner, weights)) }
         }
-        _ => PriorConfig::DepthAnythingV2 { weights: weights.to_path_buf(), encoder: None, input_size: 518 },
+        _ => PriorConfig::DepthAnythingV2 {
+            weights: weights.to_path_buf(),
+            encoder: None,
+            input_size: DEFAULT_INPUT_SIZE,
+        },
     }
 }
 
@@ -212,232 +193,102 @@ fn experiment_configs(path: &Path, run: Option<&str>) -> anyhow::Result<(ModelCo
     Ok((chosen.config.model.clone(), chosen.config.prior.clone()))
 }
 
-/// The cost volume `choice` gives for a `width x height` input of a model of `config`: with
-/// [`CorrChoice::Auto`], "alt" when the materialised pyramid of the padded input's features
-/// would take more than `budget` bytes.
-pub fn corr_for(
-    config: &ModelConfig,
-    choice: CorrChoice,
-    budget: u64,
-    width: usize,
-    height: usize,
-) -> CorrelationImplementation {
-    match choice {
-        CorrChoice::Reg => CorrelationImplementation::Reg,
-        CorrChoice::Alt => CorrelationImplementation::Alt,
-        CorrChoice::Auto => {
-            let pad = |v: usize| v.div_ceil(32) * 32;
-            let f = config.factor();
-            let bytes = config.correlation.pyramid_bytes(1, pad(height) / f, pad(width) / f);
-            if bytes as u64 > budget { CorrelationImplementation::Alt } else { CorrelationImplementation::Reg }
-        }
-    }
+/// The option fields the library's errors name, and the flags that set them.
+const FLAGS: [(&str, &str); 10] = [
+    ("iters", "--iters"),
+    ("max_size", "--max-size"),
+    ("min_size", "--min-size"),
+    ("memory_budget", "--memory-budget"),
+    ("corr", "--corr"),
+    ("lr_check", "--lr-check"),
+    ("weights", "--weights"),
+    ("prior", "--prior"),
+    ("device", "--device"),
+    ("precision", "--precision"),
+];
+
+/// `message` with each option field the library names (`` `min_size` ``) written as the flag
+/// that sets it (`--min-size`).
+pub fn flag_names(message: &str) -> String {
+    FLAGS.iter().fold(message.to_string(), |m, (field, flag)| m.replace(&format!("`{field}`"), flag))
 }
 
-/// What happened on one pair.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RunInfo {
-    /// Size the network saw (after `--max-size` / `--min-size`).
-    pub network_size: (usize, usize),
-    /// Cost volume used.
-    pub corr: CorrelationImplementation,
-    /// With `--lr-check`: the pixels the right view did not confirm (row-major, at the input's
-    /// size), which the returned disparity has filled.
-    pub rejected: Option<Mask>,
-    /// Seconds spent computing the depth prior (both passes with `--lr-check`); `None` without
-    /// a prior.
-    pub prior_seconds: Option<f64>,
+/// A library error on one line, its option fields written as flags.
+fn with_flags(e: anyhow::Error) -> anyhow::Error {
+    anyhow::anyhow!(flag_names(&error_line(&e)))
 }
 
-impl RunInfo {
-    /// With `--lr-check`, the share of the pixels it replaced (0 to 1).
-    pub fn rejected_share(&self) -> Option<f64> {
-        self.rejected.as_ref().map(|m| m.count() as f64 / m.data.len().max(1) as f64)
-    }
-}
-
-/// A loaded model with its prior and per-pair policy.
+/// A loaded model with the per-pair options of the command line.
 pub struct Engine {
-    model: StereoModel,
-    prior: Option<Prior>,
+    inner: dgstereo_inference::Engine,
+    options: PredictOptions,
+    /// Pairs whose longer side is under this are upscaled to it (`--min-size`, resolved).
+    pub min_size: Option<usize>,
+    /// The weights file.
+    pub weights: PathBuf,
     /// Update iterations per pair.
     pub iters: usize,
     /// The model configuration chosen, on one line, with where it came from.
     pub configuration: String,
-    max_size: Option<usize>,
-    /// Pairs whose longer side is under this are upscaled to it (`--min-size`, resolved).
-    pub min_size: Option<usize>,
-    budget: u64,
-    corr: CorrChoice,
-    lr_check: Option<f32>,
-    /// The weights file.
-    pub weights: PathBuf,
-    /// The device.
-    pub device: Device,
 }
 
 impl Engine {
     /// Loads the weights (into the experiment's model when given) and builds the prior.
     pub fn new(a: &ModelArgs) -> anyhow::Result<Self> {
-        if a.iters == Some(0) {
-            bail!("--iters must be at least 1");
-        }
-        if a.max_size == Some(0) || a.max_size.is_some_and(|m| m < 32) {
-            bail!("--max-size must be at least 32 pixels");
-        }
-        // An explicit lower bound is checked before the weights load (`auto` never conflicts:
-        // it is off with --max-size).
-        match (a.min_size, a.max_size) {
-            (MinSize::Pixels(lo), Some(hi)) if lo > hi => bail!("--min-size {lo} is larger than --max-size {hi}"),
-            (MinSize::Pixels(lo), _) if lo < 32 => bail!("--min-size must be at least 32 pixels (or `off`)"),
-            _ => {}
-        }
-        if let Some(t) = a.lr_check
-            && !(t.is_finite() && t > 0.0)
-        {
-            bail!("--lr-check {t}: the threshold must be a positive number of pixels");
-        }
-        let budget = parse_bytes(&a.memory_budget)?;
-        let choice: DeviceChoice = a.device.parse()?;
-        let device = choice.device_with_precision(a.precision)?;
-        let (config, experiment_prior) = match &a.experiment {
+        let options = PredictOptions {
+            iters: a.iters.unwrap_or(DEFAULT_ITERS),
+            max_size: a.max_size,
+            min_size: a.min_size,
+            corr: a.corr,
+            lr_check: a.lr_check,
+            ..PredictOptions::default()
+        };
+        // Checked before the weights load.
+        options.validate().map_err(with_flags)?;
+        let options = PredictOptions { memory_budget: parse_bytes(&a.memory_budget)?, ..options };
+        let device: DeviceChoice = a.device.parse()?;
+        let (model, experiment_prior) = match &a.experiment {
             Some(p) => {
                 let (m, pr) = experiment_configs(p, a.run.as_deref())?;
                 (Some(m), pr)
             }
             None => (None, PriorConfig::None),
         };
-        let prior_config = match (&a.prior, &a.prior_weights) {
+        let prior = match (&a.prior, &a.prior_weights) {
             (Some(spec), _) => parse_prior(spec)?,
             (None, Some(w)) => with_prior_weights(experiment_prior, w),
             (None, None) => experiment_prior,
         };
-        if a.precision != Precision::F32 && prior_config.gives_prior() {
-            bail!("--precision {}: the depth prior runs in f32 only; leave out --precision or the prior", a.precision);
-        }
-        let weights = match &a.weights {
-            Some(w) => w.clone(),
-            None => default_weights(prior_config.gives_prior() && a.experiment.is_none())?,
-        };
-        let from_experiment = config.is_some();
-        let (mut model, detected) = load_model(&weights, config, &device).with_context(|| match &a.experiment {
-            Some(e) => format!("weights {} do not fit the model of {}", weights.display(), e.display()),
-            None => format!("cannot load weights {}", weights.display()),
-        })?;
-        if let Some(on) = a.slow_fast_gru {
-            model.network.slow_fast_gru = on;
-            model.config.updater.slow_fast_gru = on;
-        }
-        let iters = a.iters.or(detected.as_ref().map(|d| d.valid_iters)).unwrap_or(DEFAULT_ITERS);
-        let source = match (&detected, from_experiment) {
-            (Some(d), _) => format!("from the checkpoint's tensors; preset: {}", d.preset.name()),
-            (None, true) => "from the experiment".into(),
-            (None, false) => "from the weights file".into(),
-        };
-        let configuration = format!("{}, {iters} iterations ({source})", summary(&model.config));
-        let prior = if prior_config.gives_prior() {
-            if prior_config.uses_ground_truth() {
-                bail!("--prior: a simulated prior needs ground truth and cannot be used for inference");
-            }
-            if !model.config.needs_prior() {
-                eprintln!("note: this model uses no depth prior; --prior is ignored");
-                None
-            } else {
-                Some(prior_config.init(&device).context("--prior")?)
-            }
-        } else {
-            None
-        };
-        if a.lr_check.is_some() && prior.is_some() && matches!(prior_config, PriorConfig::File { .. }) {
-            bail!(
-                "--lr-check runs the mirrored pair, and a precomputed (file:) prior has no mirrored views: use a depth-anything-v2 prior or leave out --lr-check"
-            );
-        }
-        if model.config.needs_prior() && prior.is_none() {
-            bail!(
-                "this model uses a depth prior (fusion or guidance): pass --prior (e.g. depth-anything-v2:WEIGHTS or file:DIR)"
-            );
-        }
-        let min_size = a.min_size.resolve(model.config.factor(), a.max_size);
-        Ok(Self {
+        let config = EngineConfig {
+            weights: a.weights.clone(),
             model,
             prior,
-            iters,
-            configuration,
-            max_size: a.max_size,
-            min_size,
-            budget,
-            corr: a.corr,
-            lr_check: a.lr_check,
-            weights,
             device,
-        })
-    }
-
-    /// The cost volume for a network input of `width x height` (before padding).
-    pub fn choose_corr(&self, width: usize, height: usize) -> CorrelationImplementation {
-        corr_for(&self.model.config, self.corr, self.budget, width, height)
+            precision: a.precision,
+            slow_fast_gru: a.slow_fast_gru,
+        };
+        let inner = dgstereo_inference::Engine::load(&config).map_err(|e| match &a.experiment {
+            Some(experiment) => with_flags(e.context(experiment.display().to_string())),
+            None => with_flags(e),
+        })?;
+        for note in inner.notes() {
+            eprintln!("note: {}", flag_names(note));
+        }
+        let iters = a.iters.or(inner.preset_iters()).unwrap_or(DEFAULT_ITERS);
+        let options = PredictOptions { iters, ..options };
+        inner.check(&options).map_err(with_flags)?;
+        let min_size = inner.min_size(&options);
+        let weights = inner.weights().to_path_buf();
+        let configuration =
+            format!("{}, {iters} iterations ({})", inner.configuration_summary(), inner.configuration_source());
+        Ok(Self { inner, options, min_size, weights, iters, configuration })
     }
 
     /// The disparity of a rectified pair at the left image's size (with `--lr-check`, the pixels
     /// the right view does not confirm filled, and named in [`RunInfo::rejected`]).
     pub fn disparity(&self, left: &RgbImage, right: &RgbImage, name: &str) -> anyhow::Result<(DisparityMap, RunInfo)> {
-        if (left.width, left.height) != (right.width, right.height) {
-            bail!(
-                "left image is {}x{} but right image is {}x{}: a rectified pair has one size",
-                left.width,
-                left.height,
-                right.width,
-                right.height
-            );
-        }
-        let (disparity, info) = self.network_disparity(left, right, name)?;
-        let Some(threshold) = self.lr_check else {
-            return Ok((disparity, info));
-        };
-        // The right view's disparity is the left one of the mirrored, swapped pair.
-        let (mirrored, mirrored_info) = self.network_disparity(&mirror_rgb(right), &mirror_rgb(left), name)?;
-        let rejected = rejected_pixels(&disparity, &mirror_disparity(&mirrored), threshold);
-        let filled = fill_rejected(&disparity, &rejected);
-        let prior_seconds = info.prior_seconds.zip(mirrored_info.prior_seconds).map(|(a, b)| a + b);
-        Ok((filled, RunInfo { rejected: Some(rejected), prior_seconds, ..info }))
-    }
-
-    /// The network's disparity of a pair of one size, at that size.
-    fn network_disparity(
-        &self,
-        left: &RgbImage,
-        right: &RgbImage,
-        name: &str,
-    ) -> anyhow::Result<(DisparityMap, RunInfo)> {
-        let (w, h) = (left.width, left.height);
-        let scale = working_scale(w, h, self.min_size, self.max_size);
-        let (l, r) = if scale != 1.0 {
-            (resize_rgb(left, scale, scale), resize_rgb(right, scale, scale))
-        } else {
-            (left.clone(), right.clone())
-        };
-        // The last pass's freed buffers go back to the system where this pass's size differs;
-        // a pass of the same size (the next frame, the mirrored pass) reuses them.
-        dgstereo_kernels::allocator::release_before_pass([l.height, l.width]);
-        let corr = self.choose_corr(l.width, l.height);
-        let (lt, rt) = (image_tensor(&l, &self.device), image_tensor(&r, &self.device));
-        let prior_start = Instant::now();
-        let prior = match &self.prior {
-            Some(p) => p.provide(&PriorInput {
-                left: lt.clone(),
-                right: rt.clone(),
-                gt_disparity: None,
-                names: vec![name.to_string()],
-            })?,
-            None => None,
-        };
-        let prior_seconds = prior.is_some().then(|| prior_start.elapsed().as_secs_f64());
-        let pred = self.model.predict(lt, rt, prior.as_ref(), self.iters, false, Some(corr))?;
-        let small = disparity_map(pred.last());
-        drop(pred);
-        let info = RunInfo { network_size: (l.width, l.height), corr, rejected: None, prior_seconds };
-        Ok((disparity_to_size(&small, w, h)?, info))
+        let p = self.inner.predict(left, right, name, &self.options)?;
+        Ok((p.disparity, p.info))
     }
 }
 
@@ -461,15 +312,13 @@ mod tests {
     }
 
     #[test]
-    fn large_inputs_switch_to_the_on_the_fly_volume() {
-        let config = ModelConfig::default();
-        // 1024 x 768 at 1/4: 256 x 192 features; rows of 256 + 128 + 64 + 32 + 16 floats each.
-        let bytes = 4 * 192 * 256 * (256 + 128 + 64 + 32 + 16);
-        assert_eq!(config.correlation.pyramid_bytes(1, 192, 256), bytes);
-        let pick = |budget| corr_for(&config, CorrChoice::Auto, budget, 1000, 750);
-        assert_eq!(pick(bytes as u64), CorrelationImplementation::Reg);
-        assert_eq!(pick(bytes as u64 - 1), CorrelationImplementation::Alt);
-        assert_eq!(corr_for(&config, CorrChoice::Reg, 0, 1000, 750), CorrelationImplementation::Reg);
+    fn library_fields_become_flags() {
+        assert_eq!(
+            flag_names("`min_size` 300 is larger than `max_size` 200"),
+            "--min-size 300 is larger than --max-size 200"
+        );
+        assert_eq!(flag_names("the depth prior runs in f32 only"), "the depth prior runs in f32 only");
+        assert_eq!(DEFAULT_LR_CHECK.parse::<f32>().unwrap(), dgstereo_inference::consistency::DEFAULT_THRESHOLD);
     }
 
     #[test]

@@ -1,20 +1,15 @@
 //! The `dgstereo` command-line tool: a thin layer over the library crates.
 //!
-//! Each subcommand lives in `commands/`; errors are reported as one line naming the file and
+//! Each subcommand lives in `commands/`; what running a model involves is the inference crate's
+//! ([`dgstereo_inference`]), the binary keeps argument parsing, file reading and writing, and printing; errors are reported as one line naming the file and
 //! the problem, with a non-zero exit status, never a panic message.
 
-mod calib;
 mod commands;
-mod consistency;
-mod convert;
 mod engine;
 mod inputs;
-mod models;
 mod outputs;
-mod pointcloud;
 mod sigpipe;
 mod visualize;
-mod working_size;
 
 use std::process::ExitCode;
 

@@ -7,7 +7,7 @@
 //! | `png16` | `NAME_disparity_png16.png` | KITTI-style 16-bit PNG, disparity × 256, 0 = invalid |
 //! | `color` | `NAME_disparity_color.png` | turbo colour map with a legend of its range (px) |
 //! | `depth` | `NAME_depth.pfm` | float32 depth in metres, `inf` where unknown (needs calibration) |
-//! | `ply` | `NAME_points.ply` | coloured point cloud, see [`crate::pointcloud`] (needs calibration) |
+//! | `ply` | `NAME_points.ply` | coloured point cloud, see [`dgstereo_inference::pointcloud`] (needs calibration) |
 //! | `rejected` | `NAME_rejected.png` | 255 where `--lr-check` replaced the disparity, else 0 (needs `--lr-check`) |
 //!
 //! Design decision: the kind decides the suffix, the pair decides `NAME` (see [`crate::inputs`]),
@@ -19,8 +19,9 @@ use anyhow::Context;
 use clap::ValueEnum;
 use dgstereo_data::{DisparityMap, Mask, RgbImage, save_mask, save_rgb, write_disparity};
 
-use crate::calib::Calibration;
-use crate::pointcloud::{PlyEncoding, depth_map, point_cloud, write_ply};
+use dgstereo_inference::calibration::Calibration;
+use dgstereo_inference::pointcloud::{PlyEncoding, depth_map, point_cloud, write_ply};
+
 use crate::visualize::{colorize, display_range, side_by_side};
 
 /// One kind of output.

@@ -1,5 +1,4 @@
-//! Dataset layouts on small fake trees, Middlebury calibration, the shared Cones folder, and the
-//! prefetching loader.
+//! Dataset layouts on small fake trees, the shared Cones folder, and the prefetching loader.
 
 mod common;
 
@@ -8,7 +7,7 @@ use std::sync::Arc;
 
 use dgstereo_data::datasets::{
     DrivingStereoWeather, KittiVersion, SceneFlowPass, SceneFlowSubset, drivingstereo, eth3d, folder_pairs, kitti,
-    middlebury2014, read_middlebury_calib, sceneflow,
+    middlebury2014, sceneflow,
 };
 use dgstereo_data::{
     Dataset, DisparityMap, Mask, PrefetchLoader, RgbImage, SyntheticConfig, SyntheticDataset, ValidRule, save_mask,
@@ -28,7 +27,7 @@ fn disp(p: &Path, v: f32) {
 }
 
 #[test]
-fn middlebury_2014_layout_and_calib() {
+fn middlebury_2014_layout() {
     let root = common::scratch("midd");
     for scene in ["Adirondack", "Jadeplant"] {
         img(&root.join(scene).join("im0.png"));
@@ -45,23 +44,6 @@ fn middlebury_2014_layout_and_calib() {
     assert!(s.nonoccluded.is_some() && ds.get(1).unwrap().nonoccluded.is_none());
     let valid = s.valid.unwrap();
     assert!(!valid.get(0, 0) && valid.get(1, 0), "inf is invalid");
-
-    let calib = root.join("calib.txt");
-    std::fs::write(
-        &calib,
-        "cam0=[4161.221 0 1445.577; 0 4161.221 984.686; 0 0 1]\ncam1=[4161.221 0 1654.636; 0 4161.221 984.686; 0 0 1]\n\
-         doffs=209.059\nbaseline=176.252\nwidth=2880\nheight=1988\nndisp=280\nisint=0\nvmin=33\nvmax=218\n",
-    )
-    .unwrap();
-    let c = read_middlebury_calib(&calib).unwrap();
-    assert_eq!((c.width, c.height, c.ndisp), (2880, 1988, 280));
-    assert_eq!(c.cam0[0][2], 1445.577);
-    assert_eq!(c.cam1[0][2], 1654.636);
-    assert_eq!((c.doffs, c.baseline), (209.059, 176.252));
-    assert!((c.depth(100.0) - 176.252 * 4161.221 / 309.059).abs() < 1e-9);
-    std::fs::write(&calib, "cam0=[1 0 0; 0 1 0]\ndoffs=1\n").unwrap();
-    let e = read_middlebury_calib(&calib).unwrap_err().to_string();
-    assert!(e.contains("calib.txt") && e.contains("cam0"), "{e}");
 }
 
 #[test]

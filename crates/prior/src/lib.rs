@@ -35,6 +35,7 @@ use dgstereo_core::Result;
 
 pub use cache::CachedPrior;
 pub use config::{Prior, PriorConfig};
+pub use depth_anything::preprocess::DEFAULT_INPUT_SIZE;
 pub use depth_anything::verify::{TensorComparison, VerificationReport, verify_depth_anything_v2};
 pub use depth_anything::{DepthAnythingV2, DepthAnythingV2Encoder, DepthAnythingV2Prior};
 pub use file::FilePrior;

@@ -29,7 +29,7 @@ pub struct AblateArgs {
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
     /// Output folder: one sub-folder per run, and the tables.
-    #[arg(long)]
+    #[arg(short, long)]
     pub out: PathBuf,
     /// Train this many steps instead of each file's `train.steps`.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]

@@ -23,12 +23,12 @@ use clap::Args;
 use dgstereo_core::device::Precision;
 use dgstereo_core::timing::process_cpu_seconds;
 use dgstereo_core::{DepthPrior, DeviceChoice, InputPadder};
-use dgstereo_costvolume::CorrelationImplementation;
+use dgstereo_inference::cost_volume::{CorrChoice, DEFAULT_MEMORY_BUDGET, corr_for, corr_name};
 use dgstereo_kernels::{Op, Path, Settings, path};
 use dgstereo_model::flops::StageMacs;
 use dgstereo_model::profile::profile_forward;
 use dgstereo_model::{ModelConfig, StereoModel};
-use dgstereo_prior::{PriorConfig, PriorInput, PriorProvider};
+use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig, PriorInput, PriorProvider};
 
 /// Options of `dgstereo bench`.
 #[derive(Args)]
@@ -48,9 +48,9 @@ pub struct BenchArgs {
     /// Untimed warm-up runs.
     #[arg(long, default_value_t = 1)]
     pub warmup: usize,
-    /// Cost volume: `reg` (materialised) or `alt` (on the fly).
-    #[arg(long, default_value = "reg")]
-    pub corr: String,
+    /// Cost volume (`auto`: within the 4 GiB that `infer --corr auto` allows by default).
+    #[arg(long, value_enum, default_value_t = CorrChoice::Reg)]
+    pub corr: CorrChoice,
     /// Model configuration (a TOML file of `ModelConfig`; default RAFT-Stereo's).
     #[arg(long)]
     pub config: Option<std::path::PathBuf>,
@@ -70,7 +70,7 @@ pub struct BenchArgs {
     /// Float precision of the whole forward pass: `f32`, `f16` or `bf16` (the host kernels are
     /// f32-only, so a half precision on the CPU runs burn's operations).
     #[arg(long, default_value = "f32")]
-    pub precision: String,
+    pub precision: Precision,
     /// Depth Anything V2 weights (`depth_anything_v2_vit{s,b,l}.pth`): every run also computes
     /// the depth prior of both views, as `infer` does, and its time is reported apart (the model
     /// configuration, `--config`, must use a prior). Without it a model with a prior gets a
@@ -157,12 +157,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     if a.runs == 0 {
         bail!("--runs must be at least 1");
     }
-    let implementation = match a.corr.as_str() {
-        "reg" => CorrelationImplementation::Reg,
-        "alt" => CorrelationImplementation::Alt,
-        other => bail!("--corr '{other}': expected reg or alt"),
-    };
-    let precision = a.precision.parse::<Precision>()?;
+    let precision = a.precision;
     let settings: Settings = a.kernels.parse().with_context(|| format!("--kernels '{}'", a.kernels))?;
     dgstereo_kernels::configure(settings)?;
     // The precision is set before the device's first tensor: burn fixes it there.
@@ -175,6 +170,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         }
         None => ModelConfig::default(),
     };
+    let implementation = corr_for(&config, a.corr, DEFAULT_MEMORY_BUDGET, w, h);
     let network = config.init(&device)?;
     let model = StereoModel::new(network, config.clone(), device.clone());
     let image = || Tensor::<4>::random([1, 3, h, w], Distribution::Uniform(0.0, 255.0), &device);
@@ -193,7 +189,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
             )
         }
         Some(weights) => Some(
-            PriorConfig::DepthAnythingV2 { weights: weights.clone(), encoder: None, input_size: 518 }
+            PriorConfig::DepthAnythingV2 { weights: weights.clone(), encoder: None, input_size: DEFAULT_INPUT_SIZE }
                 .init(&device)
                 .with_context(|| format!("--prior-weights {}", weights.display()))?,
         ),
@@ -267,7 +263,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         padded[0],
         padded[1],
         a.iters,
-        a.corr,
+        corr_name(implementation),
         a.device,
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );

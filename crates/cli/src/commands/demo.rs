@@ -9,17 +9,17 @@ use clap::Args;
 use dgstereo_data::{load_mask, load_rgb, read_disparity, save_rgb, write_disparity};
 use dgstereo_eval::{ValidOptions, evaluate};
 
-use crate::consistency;
-use crate::engine::{Engine, ModelArgs};
-use crate::models::asset;
+use dgstereo_inference::MinSize;
+use dgstereo_inference::weights::asset;
+
+use crate::engine::{DEFAULT_LR_CHECK, Engine, ModelArgs};
 use crate::visualize::{colorize, error_image, side_by_side};
-use crate::working_size::MinSize;
 
 /// Options of the demo.
 #[derive(Args)]
 pub struct DemoArgs {
     /// Output folder.
-    #[arg(long, default_value = "out/demo")]
+    #[arg(short, long, default_value = "out/demo")]
     out: PathBuf,
     /// Weights (default: the project's default model).
     #[arg(long)]
@@ -34,7 +34,7 @@ pub struct DemoArgs {
     min_size: MinSize,
     /// Left-right consistency check (see `dgstereo infer --help`): fill the pixels the right view
     /// does not confirm, at this threshold in pixels (2 when no value is given).
-    #[arg(long, value_name = "PX", num_args = 0..=1, default_missing_value = consistency::DEFAULT_THRESHOLD)]
+    #[arg(long, value_name = "PX", num_args = 0..=1, default_missing_value = DEFAULT_LR_CHECK)]
     lr_check: Option<f32>,
 }
 

@@ -47,7 +47,7 @@ pub struct EvalArgs {
     #[arg(long)]
     subset: Option<FlyingThingsTestSubset>,
     /// Output folder for eval.csv and eval.json.
-    #[arg(long, default_value = "out/eval")]
+    #[arg(short, long, default_value = "out/eval")]
     out: PathBuf,
     /// Evaluate only the first N samples.
     #[arg(long)]

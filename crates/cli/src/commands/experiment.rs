@@ -40,7 +40,7 @@ pub enum ExperimentCommand {
         /// Experiment file (its first run when the file sweeps).
         file: PathBuf,
         /// Output folder.
-        #[arg(long, default_value = "out/samples")]
+        #[arg(short, long, default_value = "out/samples")]
         out: PathBuf,
         /// How many pairs: the batch elements of the first steps, in training order.
         #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u16).range(1..))]

@@ -14,13 +14,14 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::Args;
 use dgstereo_data::load_rgb;
+use dgstereo_inference::calibration::Calibration;
+use dgstereo_inference::check_same_size;
+use dgstereo_inference::pointcloud::PlyEncoding;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::calib::Calibration;
 use crate::engine::{Engine, ModelArgs, error_line};
 use crate::inputs::{PairList, PairPaths, from_folder, from_left_right, from_list};
 use crate::outputs::{OutputOptions, SaveKind, calibration_beside, write_outputs};
-use crate::pointcloud::PlyEncoding;
 
 /// Options of inference.
 #[derive(Args)]
@@ -38,7 +39,7 @@ pub struct InferArgs {
     #[arg(long, conflicts_with_all = ["left", "right"])]
     list: Option<PathBuf>,
     /// Output folder.
-    #[arg(long, default_value = "out/infer")]
+    #[arg(short, long, default_value = "out/infer")]
     out: PathBuf,
     /// Outputs, comma-separated: pfm, npy, png16, color, preview (left image and colour map side
     /// by side), depth, ply, rejected (the pixels --lr-check replaced).
@@ -216,17 +217,7 @@ fn process_pair(
     let t0 = Instant::now();
     let left = load_rgb(&pair.left)?;
     let right = load_rgb(&pair.right)?;
-    if (left.width, left.height) != (right.width, right.height) {
-        bail!(
-            "{} is {}x{} but {} is {}x{}: the views of a rectified pair have one size",
-            pair.left.display(),
-            left.width,
-            left.height,
-            pair.right.display(),
-            right.width,
-            right.height
-        );
-    }
+    check_same_size(&left, &right).with_context(|| format!("{} + {}", pair.left.display(), pair.right.display()))?;
     let calib = if opts.kinds.iter().any(|k| k.needs_calibration()) {
         Some(calibration_for(&pair.left, global_calib)?.for_size(left.width, left.height))
     } else {

@@ -19,7 +19,7 @@ pub struct TrainArgs {
     /// The experiment file.
     pub experiment: PathBuf,
     /// Output folder (log, plot, checkpoints, final model).
-    #[arg(long)]
+    #[arg(short, long)]
     pub out: PathBuf,
     /// Train this many steps instead of the file's `train.steps`.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]

@@ -17,7 +17,7 @@ pub use drivingstereo::{DrivingStereoWeather, drivingstereo};
 pub use flyingthings_subset::{
     FlyingThingsTestSubset, RAFT_STEREO_SUBSET_SEED, RAFT_STEREO_SUBSET_SIZE, flyingthings_test,
 };
-pub use layouts::{KittiVersion, MiddleburyCalib, eth3d, folder_pairs, kitti, middlebury2014, read_middlebury_calib};
+pub use layouts::{KittiVersion, eth3d, folder_pairs, kitti, middlebury2014};
 pub use middeval3::{MiddleburySplit, middeval3, middeval3_splits_in};
 pub use numpy_permutation::numpy_permutation;
 pub use sceneflow::{SceneFlowPass, SceneFlowSubset, sceneflow};

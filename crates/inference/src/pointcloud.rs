@@ -16,10 +16,11 @@ use std::path::Path;
 use anyhow::Context;
 use dgstereo_data::{DisparityMap, RgbImage};
 
-use crate::calib::Calibration;
+use crate::calibration::Calibration;
 
 /// PLY encoding.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum PlyEncoding {
     /// `binary_little_endian 1.0`.
     Binary,

@@ -1,4 +1,4 @@
-//! The size at which the network sees a pair: `--max-size` shrinks large pairs, `--min-size`
+//! The size at which the network sees a pair: `max_size` shrinks large pairs, `min_size`
 //! enlarges small ones; the disparity always comes back at the input size, multiplied by the
 //! inverse factor.
 //!
@@ -7,23 +7,23 @@
 //! EPE 3.54 px / bad-2 36.6 % at the given size and 2.02 px / 23.7 % with the pair upscaled 2x;
 //! on the 640x480 OAK-D desk the textureless wall, wrongly nearer than the desk top in front of
 //! it, comes closer to the truth (mean disparity 26.5 against the desk's 17.8 px at 640x480,
-//! 23.6 against 18.1 at 900x675). So `--min-size auto` (the default) upscales pairs whose longer
+//! 23.6 against 18.1 at 900x675). So `min_size auto` (the default) upscales pairs whose longer
 //! side is under [`AUTO_MIN_SIZE`] pixels for models at 1/8 resolution, and leaves 1/4-resolution
 //! models (the official RAFT-Stereo layout) at the size the reference code uses. An explicit
-//! `--max-size` turns the automatic enlargement off: asking for a cap means asking for speed.
+//! `max_size` turns the automatic enlargement off: asking for a cap means asking for speed.
 
 use std::str::FromStr;
 
 use dgstereo_data::resize::fit_scale;
 
-/// The longer side that `--min-size auto` brings small pairs up to for 1/8-resolution models
+/// The longer side that `min_size auto` brings small pairs up to for 1/8-resolution models
 /// (Cones: 2x, a 640x480 pair: 1.4x).
 pub const AUTO_MIN_SIZE: usize = 900;
 
-/// `--min-size`: `auto`, `off` (or `0`), or a number of pixels.
+/// `min_size`: `auto`, `off` (or `0`), or a number of pixels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MinSize {
-    /// [`AUTO_MIN_SIZE`] for models at 1/8 resolution without `--max-size`, else none.
+    /// [`AUTO_MIN_SIZE`] for models at 1/8 resolution without `max_size`, else none.
     Auto,
     /// Never enlarge.
     Off,
@@ -47,7 +47,7 @@ impl FromStr for MinSize {
 }
 
 impl MinSize {
-    /// The smallest longer side for a model at 1/`factor` resolution, given `--max-size`.
+    /// The smallest longer side for a model at 1/`factor` resolution, given `max_size`.
     pub fn resolve(self, factor: usize, max_size: Option<usize>) -> Option<usize> {
         match self {
             Self::Auto if factor >= 8 && max_size.is_none() => Some(AUTO_MIN_SIZE),

@@ -1,4 +1,8 @@
 //! Finding the bundled assets and default weights, and loading a model from weights.
+//!
+//! Design decision: the default weights are looked up here, not by the callers, so every front
+//! end (the command line, the Python package) falls back to the same bundled model; a fallback
+//! worth telling the user about comes back as a note, never printed.
 
 use std::path::{Path, PathBuf};
 
@@ -39,27 +43,29 @@ pub const DEFAULT_WITH_PRIOR: &str = "weights/paper-default.safetensors";
 
 /// The weights used when none are given: the bundled default without a prior, or with
 /// `with_prior` (the user gave a prior) the bundled paper model. Without bundled weights, the
-/// reference checkpoint of `../shared/golden` (random weights) stands in for the plain model.
-pub fn default_weights(with_prior: bool) -> anyhow::Result<PathBuf> {
+/// reference checkpoint of `../shared/golden` (random weights) stands in for the plain model,
+/// and the second value is a note saying so.
+pub fn default_weights(with_prior: bool) -> anyhow::Result<(PathBuf, Option<String>)> {
     if with_prior {
-        return asset(DEFAULT_WITH_PRIOR).context(
-            "no bundled default for a model with a depth prior: pass --weights FILE (trained with a prior), or drop --prior",
-        );
+        let p = asset(DEFAULT_WITH_PRIOR).context(
+            "no bundled default for a model with a depth prior: set `weights` (a model trained with a prior), or leave out `prior`",
+        )?;
+        return Ok((p, None));
     }
     if let Ok(p) = asset(DEFAULT_PLAIN) {
-        return Ok(p);
+        return Ok((p, None));
     }
     if let Some(shared) = dgstereo_core::shared::shared_dir() {
         let p = shared.join("golden/raft_stereo_random.pth");
         if p.is_file() {
-            eprintln!(
-                "note: no trained default weights are bundled; using the reference checkpoint {} (random weights)",
+            let note = format!(
+                "no trained default weights are bundled; using the reference checkpoint {} (random weights)",
                 p.display()
             );
-            return Ok(p);
+            return Ok((p, Some(note)));
         }
     }
-    bail!("no default weights found: pass --weights FILE (an official RAFT-Stereo .pth or a dgstereo .safetensors)")
+    bail!("no default weights found: set `weights` (an official RAFT-Stereo .pth or a dgstereo .safetensors)")
 }
 
 /// Loads weights (`.pth` official layout or our `.safetensors`) into a model of `config`.
@@ -105,7 +111,7 @@ pub fn load_model(
             (network, config, None)
         }
     };
-    // The stores keep the file's dtype: bring the weights to the device's (see `--precision`).
+    // The stores keep the file's dtype: bring the weights to the device's (see [`crate::EngineConfig::precision`]).
     let network = cast_float_params(network, float_dtype(device));
     Ok((StereoModel::new(network, config, device.clone()), detected))
 }

@@ -12,9 +12,9 @@
 
 use dgstereo_data::{DisparityMap, Mask, RgbImage};
 
-/// The threshold of `--lr-check` given without a value, in pixels: the two views' disparities
-/// may differ by this much before a pixel is rejected.
-pub const DEFAULT_THRESHOLD: &str = "2";
+/// The usual threshold of the check, in pixels: the two views' disparities may differ by this
+/// much before a pixel is rejected.
+pub const DEFAULT_THRESHOLD: f32 = 2.0;
 
 /// The image mirrored left to right.
 pub fn mirror_rgb(image: &RgbImage) -> RgbImage {

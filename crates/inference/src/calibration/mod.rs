@@ -1,7 +1,7 @@
 //! Stereo calibration for depth and point clouds: one [`Calibration`] read from three layouts.
 //!
 //! - Middlebury `calib.txt` (`cam0=[f 0 cx; 0 f cy; 0 0 1]`, `doffs`, `baseline` in **mm**,
-//!   `width`, `height`), read by the data crate;
+//!   `width`, `height`), read by [`middlebury`];
 //! - JSON with `fx`, `fy`, `cx` (or `cx0`, with the right camera's `cx1` giving `doffs = cx1 - cx0`),
 //!   `cy` and the baseline as `baseline_meters`/`baseline_m`/`baseline` (**metres**) or
 //!   `baseline_mm`; optional `width`, `height`, `doffs`, `depth_range: [near, far]` (metres). This
@@ -14,11 +14,15 @@
 //! calibrated ones, so depth is right whatever size the user feeds. Depth is
 //! `Z = fx · baseline / (d + doffs)`; a point is `Z · K⁻¹ · (x, y, 1)` (nalgebra).
 
+pub mod middlebury;
+
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
+
+pub use middlebury::{MiddleburyCalib, read_middlebury_calib};
 
 /// Intrinsics of the left camera and the stereo geometry.
 #[derive(Clone, Debug, PartialEq)]
@@ -107,7 +111,7 @@ impl Calibration {
 }
 
 fn from_middlebury(path: &Path) -> anyhow::Result<Calibration> {
-    let c = dgstereo_data::datasets::read_middlebury_calib(path)?;
+    let c = read_middlebury_calib(path)?;
     let k = Matrix3::from_fn(|r, col| c.cam0[r][col]);
     Ok(Calibration {
         source: path.to_path_buf(),

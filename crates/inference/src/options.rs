@@ -1,0 +1,137 @@
+//! What an [`crate::Engine`] is loaded from ([`EngineConfig`]) and what each prediction is asked
+//! to do ([`PredictOptions`]).
+//!
+//! Design decision: the two are apart because they change at different rates: loading reads the
+//! weights and builds the prior (seconds), while the per-pair policy is free to change from one
+//! call to the next. Problems with the options are errors naming the field (`` `min_size` ``),
+//! which a front end translates into its own spelling (a flag, a keyword argument).
+
+use std::path::PathBuf;
+
+use anyhow::bail;
+use dgstereo_core::DeviceChoice;
+use dgstereo_core::device::Precision;
+use dgstereo_model::ModelConfig;
+use dgstereo_prior::PriorConfig;
+
+use crate::cost_volume::{CorrChoice, DEFAULT_MEMORY_BUDGET};
+use crate::working_size::MinSize;
+
+/// The smallest side, in pixels, that `max_size` and `min_size` may ask for.
+pub const MIN_WORKING_SIZE: usize = 32;
+
+/// What to load: the weights, the model and prior configurations, the device.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EngineConfig {
+    /// Weights: a dgstereo `.safetensors` or an official RAFT-Stereo `.pth`; `None` for the
+    /// bundled default ([`crate::weights::default_weights`]).
+    pub weights: Option<PathBuf>,
+    /// The model configuration the weights were trained with; `None` for the one a
+    /// `.safetensors` file carries, else RAFT-Stereo's default.
+    pub model: Option<ModelConfig>,
+    /// The depth prior (used only by models with fusion or guidance).
+    pub prior: PriorConfig,
+    /// The device.
+    pub device: DeviceChoice,
+    /// Float precision of the network: f32, or f16 / bf16 (weights cast after loading; for
+    /// GPUs, whose tensor cores multiply half precision). Not with a depth prior.
+    pub precision: Precision,
+    /// The slow-fast GRU schedule, replacing the configuration's (an official checkpoint's
+    /// preset or the experiment's) where given.
+    pub slow_fast_gru: Option<bool>,
+}
+
+impl Default for EngineConfig {
+    fn default() -> Self {
+        Self {
+            weights: None,
+            model: None,
+            prior: PriorConfig::None,
+            device: DeviceChoice::default(),
+            precision: Precision::F32,
+            slow_fast_gru: None,
+        }
+    }
+}
+
+/// How one pair is predicted.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PredictOptions {
+    /// Update iterations (at least 1).
+    pub iters: usize,
+    /// Pairs whose longer side exceeds this many pixels are downscaled to it.
+    pub max_size: Option<usize>,
+    /// Pairs whose longer side is under this are upscaled to it ([`MinSize`]).
+    pub min_size: MinSize,
+    /// Bytes the materialised cost volume may take with [`CorrChoice::Auto`].
+    pub memory_budget: u64,
+    /// Cost volume implementation.
+    pub corr: CorrChoice,
+    /// Left-right consistency check at this threshold in pixels ([`crate::consistency`]):
+    /// runs the mirrored pair too, and fills the pixels the right view does not confirm.
+    pub lr_check: Option<f32>,
+}
+
+impl Default for PredictOptions {
+    fn default() -> Self {
+        Self {
+            iters: 32,
+            max_size: None,
+            min_size: MinSize::Auto,
+            memory_budget: DEFAULT_MEMORY_BUDGET,
+            corr: CorrChoice::Auto,
+            lr_check: None,
+        }
+    }
+}
+
+impl PredictOptions {
+    /// Checks the options on their own (an engine adds what depends on its model and prior).
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if self.iters == 0 {
+            bail!("`iters` must be at least 1");
+        }
+        if self.max_size.is_some_and(|m| m < MIN_WORKING_SIZE) {
+            bail!("`max_size` must be at least {MIN_WORKING_SIZE} pixels");
+        }
+        // `Auto` never conflicts: it is off with a `max_size`.
+        match (self.min_size, self.max_size) {
+            (MinSize::Pixels(lo), Some(hi)) if lo > hi => bail!("`min_size` {lo} is larger than `max_size` {hi}"),
+            (MinSize::Pixels(lo), _) if lo < MIN_WORKING_SIZE => {
+                bail!("`min_size` must be at least {MIN_WORKING_SIZE} pixels (or `off`)")
+            }
+            _ => {}
+        }
+        if let Some(t) = self.lr_check
+            && !(t.is_finite() && t > 0.0)
+        {
+            bail!("`lr_check` {t}: the threshold must be a positive number of pixels");
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_options_name_their_fields() {
+        assert!(PredictOptions::default().validate().is_ok());
+        for (options, message) in [
+            (PredictOptions { iters: 0, ..Default::default() }, "`iters` must be at least 1"),
+            (PredictOptions { max_size: Some(16), ..Default::default() }, "`max_size` must be at least 32"),
+            (
+                PredictOptions { min_size: MinSize::Pixels(300), max_size: Some(200), ..Default::default() },
+                "`min_size` 300 is larger than `max_size` 200",
+            ),
+            (PredictOptions { min_size: MinSize::Pixels(8), ..Default::default() }, "`min_size` must be at least"),
+            (PredictOptions { lr_check: Some(0.0), ..Default::default() }, "`lr_check` 0: the threshold"),
+        ] {
+            let e = options.validate().unwrap_err().to_string();
+            assert!(e.contains(message), "{e}");
+        }
+        // An automatic lower bound does not conflict with a cap.
+        assert!(PredictOptions { max_size: Some(100), ..Default::default() }.validate().is_ok());
+    }
+}
