@@ -66,6 +66,7 @@ fn main() -> ExitCode {
         Command::Experiment(c) => commands::experiment::run(c),
         Command::Train(a) => commands::train::run(a),
         Command::Ablate(a) => commands::ablate::run(a),
+        Command::Bench(a) if a.train => commands::bench_train::run(&a),
         Command::Bench(a) => commands::bench::run(a),
         Command::Metrics(a) => commands::metrics::run(a),
         Command::Verify(c) => commands::verify::run(c),

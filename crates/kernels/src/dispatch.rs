@@ -63,6 +63,12 @@ impl Op {
         true
     }
 
+    /// Whether the host kernel has a backward of its own ([`crate::autodiff`]), so that training
+    /// takes it too.
+    fn has_host_backward(self) -> bool {
+        matches!(self, Self::Conv)
+    }
+
     /// The GPU formulation's route, where the operation has one.
     fn gpu_route(self) -> Option<GpuRoute> {
         match self {
@@ -81,8 +87,10 @@ thread_local! {
 
 /// Where `op` runs on `device`.
 ///
-/// With gradients recorded, burn's operations (their autodiff is the reference backward). On the
-/// Flex CPU device in f32, the host kernel unless the settings say `stock`. Elsewhere without
+/// With gradients recorded, burn's operations (their autodiff is the reference backward), except
+/// on the Flex CPU device in f32 for an operation whose backward is ours ([`crate::autodiff`])
+/// unless the settings say `stock-training`. On the Flex CPU device in f32 without gradients, the
+/// host kernel unless the settings say `stock`. Elsewhere without
 /// gradients (the GPU, or the CPU with `gpu-routes`), the GPU formulation unless its route is
 /// switched off. Else burn's operation. A path pinned by [`with_path`] replaces the settings'
 /// choice where the device allows it, and gives [`Path::Stock`] where it does not.
@@ -90,13 +98,15 @@ pub fn path(device: &Device, op: Op) -> Path {
     let settings = settings();
     let autodiff = device.is_autodiff();
     let cpu = *device == Device::flex();
-    let host_possible = !autodiff && cpu && op.has_host_kernel() && float_dtype(device) == FloatDType::F32;
+    let host_possible =
+        cpu && float_dtype(device) == FloatDType::F32 && op.has_host_kernel() && (!autodiff || op.has_host_backward());
+    let host_chosen = if autodiff { settings.host_training } else { settings.host_kernels };
     let gpu_possible = !autodiff && op.gpu_route().is_some_and(|r| settings.route_enabled(r));
     match PINNED.with(Cell::get) {
         Some(Path::Host) if host_possible => Path::Host,
         Some(Path::Gpu) if gpu_possible => Path::Gpu,
         Some(_) => Path::Stock,
-        None if host_possible && settings.host_kernels => Path::Host,
+        None if host_possible && host_chosen => Path::Host,
         None if gpu_possible && (!cpu || settings.gpu_routes_on_cpu) => Path::Gpu,
         None => Path::Stock,
     }
@@ -127,7 +137,9 @@ mod tests {
         let cpu = Device::flex();
         let ad = cpu.clone().autodiff();
         assert_eq!(path(&cpu, Op::Conv), Path::Host);
-        assert_eq!(path(&ad, Op::Conv), Path::Stock);
+        assert_eq!(path(&ad, Op::Conv), Path::Host, "the convolution's backward is ours");
+        assert_eq!(path(&ad, Op::Norm), Path::Stock, "a norm's is burn's");
+        with_path(Path::Stock, || assert_eq!(path(&ad, Op::Conv), Path::Stock));
         with_path(Path::Gpu, || {
             assert_eq!(path(&cpu, Op::Conv), Path::Gpu);
             assert_eq!(path(&cpu, Op::Upsample), Path::Stock, "no GPU formulation");

@@ -11,6 +11,7 @@
 #![deny(missing_docs)]
 
 pub mod allocator;
+pub mod autodiff;
 pub mod dispatch;
 pub mod geometry;
 pub mod gpu;

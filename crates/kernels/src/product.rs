@@ -1,8 +1,8 @@
 //! The one entry to the `gemm` crate's matrix product, which every host kernel's products take.
 //!
 //! Design decision: the `gemm` crate's entry point is an `unsafe fn` on raw pointers and
-//! strides. It is called here only, in [`matmul_strided_with`], which asserts that every element
-//! its strides reach lies inside the slices it is given; the kernels work on slices.
+//! strides. It is called here only, in `product`, which asserts that every element its strides
+//! reach lies inside the slices it is given; the kernels work on slices.
 #![allow(unsafe_code)]
 
 /// `dst = lhs · rhs` on the calling thread by the `gemm` crate: `dst` is `rows x cols` (row
@@ -25,8 +25,7 @@ pub fn matmul_strided(
     matmul_strided_with(dst, dst_stride, lhs, lhs_stride, rhs, rhs_stride, dims, false);
 }
 
-/// [`matmul_strided`], or `dst += lhs · rhs` (adding to what `dst` holds) when `accumulate`:
-/// the one call of the `gemm` crate.
+/// [`matmul_strided`], or `dst += lhs · rhs` (adding to what `dst` holds) when `accumulate`.
 #[allow(clippy::too_many_arguments)]
 pub fn matmul_strided_with(
     dst: &mut [f32],
@@ -35,20 +34,57 @@ pub fn matmul_strided_with(
     lhs_stride: usize,
     rhs: &[f32],
     rhs_stride: usize,
+    dims: [usize; 3],
+    accumulate: bool,
+) {
+    product(dst, dst_stride, lhs, lhs_stride, rhs, [rhs_stride, 1], dims, accumulate);
+}
+
+/// `dst += lhs · rhs_tᵀ`: `dst` `rows x cols` (row stride `dst_stride`), `lhs` `rows x depth`
+/// (`lhs_stride`), `rhs_t` `cols x depth` (row stride `rhs_t_stride`), the product's right
+/// operand stored transposed (a convolution's column matrix, for its weight gradient).
+#[allow(clippy::too_many_arguments)]
+pub fn matmul_transposed_accumulate(
+    dst: &mut [f32],
+    dst_stride: usize,
+    lhs: &[f32],
+    lhs_stride: usize,
+    rhs_t: &[f32],
+    rhs_t_stride: usize,
+    dims: [usize; 3],
+) {
+    product(dst, dst_stride, lhs, lhs_stride, rhs_t, [1, rhs_t_stride], dims, true);
+}
+
+/// The one call of the `gemm` crate: `dst (+)= lhs · rhs` with unit column strides for `dst`
+/// and `lhs`, and `rhs`'s element `(d, j)` at `d·rhs_strides[0] + j·rhs_strides[1]`.
+#[allow(clippy::too_many_arguments)]
+fn product(
+    dst: &mut [f32],
+    dst_stride: usize,
+    lhs: &[f32],
+    lhs_stride: usize,
+    rhs: &[f32],
+    [rhs_rs, rhs_cs]: [usize; 2],
     [rows, cols, depth]: [usize; 3],
     accumulate: bool,
 ) {
-    // The last row of each operand reaches `(rows - 1)·stride + width` elements.
-    let reach = |count: usize, stride: usize, width: usize| count.checked_sub(1).map_or(0, |c| c * stride + width);
-    assert!(cols <= dst_stride && cols <= rhs_stride && depth <= lhs_stride);
-    assert!(dst.len() >= reach(rows, dst_stride, cols) && rhs.len() >= reach(depth, rhs_stride, cols));
-    assert!(lhs.len() >= reach(rows, lhs_stride, depth));
+    if rows == 0 || cols == 0 {
+        return;
+    }
+    // The furthest element of a `count x width` operand with these strides, plus one.
+    let reach = |count: usize, width: usize, [rs, cs]: [usize; 2]| {
+        if count == 0 || width == 0 { 0 } else { (count - 1) * rs + (width - 1) * cs + 1 }
+    };
+    assert!(cols <= dst_stride && depth <= lhs_stride);
+    assert!(dst.len() >= reach(rows, cols, [dst_stride, 1]) && lhs.len() >= reach(rows, depth, [lhs_stride, 1]));
+    assert!(rhs.len() >= reach(depth, cols, [rhs_rs, rhs_cs]));
     // SAFETY: the asserts keep every element the strides reach inside the three slices, which
     // live through the call; `dst` is read (when `accumulate`) and written only there.
     #[rustfmt::skip]
     unsafe {
         gemm::gemm(rows, cols, depth, dst.as_mut_ptr(), 1, dst_stride as isize, accumulate,
-                   lhs.as_ptr(), 1, lhs_stride as isize, rhs.as_ptr(), 1, rhs_stride as isize,
+                   lhs.as_ptr(), 1, lhs_stride as isize, rhs.as_ptr(), rhs_cs as isize, rhs_rs as isize,
                    if accumulate { 1.0f32 } else { 0.0 }, 1.0f32, false, false, false, gemm::Parallelism::None);
     };
 }

@@ -8,6 +8,8 @@
 //! The words, comma-separated:
 //! - `host` (the default): hand-written kernels for CPU inference, GPU formulations on the GPU;
 //! - `stock`: burn's operations everywhere on the CPU (what the kernels gain is measured so);
+//! - `stock-training`: burn's own backward passes in training (the operations with a host
+//!   backward, [`crate::autodiff`], record burn's operations instead);
 //! - `gpu-routes`: the GPU formulations on the CPU too, where no host kernel runs (with `stock`,
 //!   the CPU computes what GPU inference computes);
 //! - `no-winograd`, `no-winograd-blocks`: the host convolution without Winograd's algorithm, or
@@ -86,6 +88,9 @@ impl GpuRoute {
 pub struct Settings {
     /// The hand-written host kernels run CPU inference (`host`; off: `stock`).
     pub host_kernels: bool,
+    /// Training on the CPU takes the operations whose backward is the host kernels'
+    /// (off: `stock-training`).
+    pub host_training: bool,
     /// The GPU formulations also run on the CPU where no host kernel does (`gpu-routes`).
     pub gpu_routes_on_cpu: bool,
     /// 3x3 stride-1 host convolutions may take Winograd's algorithm (off: `no-winograd`).
@@ -100,6 +105,7 @@ impl Default for Settings {
     fn default() -> Self {
         Self {
             host_kernels: true,
+            host_training: true,
             gpu_routes_on_cpu: false,
             winograd: true,
             winograd_blocks: true,
@@ -132,7 +138,11 @@ impl FromStr for Settings {
         for word in text.split(',').map(str::trim).filter(|w| !w.is_empty()) {
             match word.to_ascii_lowercase().as_str() {
                 "host" => settings.host_kernels = true,
-                "stock" => settings.host_kernels = false,
+                "stock" => {
+                    settings.host_kernels = false;
+                    settings.host_training = false;
+                }
+                "stock-training" => settings.host_training = false,
                 "gpu-routes" => {
                     settings.host_kernels = false;
                     settings.gpu_routes_on_cpu = true;
@@ -154,8 +164,8 @@ impl FromStr for Settings {
                     },
                     None => {
                         return Err(Error::Config(format!(
-                            "unknown kernel setting '{word}' (expected host, stock, gpu-routes, no-winograd, \
-                             no-winograd-blocks or stock-route=NAME)"
+                            "unknown kernel setting '{word}' (expected host, stock, stock-training, gpu-routes, \
+                             no-winograd, no-winograd-blocks or stock-route=NAME)"
                         )));
                     }
                 },

@@ -30,6 +30,7 @@ pub mod params;
 pub mod plot;
 pub mod run;
 pub mod schedule;
+pub mod step_timing;
 pub mod trainer;
 pub mod validate;
 pub mod verify_step;

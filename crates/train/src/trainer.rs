@@ -1,6 +1,8 @@
 //! One training step: batch, prior, forward over all iterations, loss, backward, clip, AdamW,
 //! and with `train.ema_decay` the update of the weights' moving average ([`crate::ema`]).
 
+use std::time::Instant;
+
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
@@ -17,6 +19,7 @@ use crate::config::{TrainingConfig, TrainingDataConfig};
 use crate::ema::Ema;
 use crate::params::materialize;
 use crate::schedule::OneCycleLr;
+use crate::step_timing::StepSeconds;
 
 /// Everything a run is made of: the experiment's parts and its resolved text.
 ///
@@ -104,6 +107,8 @@ pub struct Trainer {
     /// initialisation, a moving average that restarts): the caller shows them, a library never
     /// prints.
     pub notices: Vec<String>,
+    /// What the parts of the last step took.
+    pub last_step_seconds: StepSeconds,
     data: TrainingData,
     prior: Prior,
 }
@@ -256,6 +261,7 @@ impl Trainer {
             device: device.clone(),
             autodiff,
             notices: Vec::new(),
+            last_step_seconds: StepSeconds::default(),
             data,
             prior,
         })
@@ -281,6 +287,7 @@ impl Trainer {
     ) -> Result<StepReport> {
         let step = self.step;
         let t = &self.parts.train;
+        let started = Instant::now();
         let prior = batch_prior(&self.prior, self.parts.model.needs_prior(), batch)?;
         let predictions = forward_disparities(
             &self.model,
@@ -302,7 +309,9 @@ impl Trainer {
         }
         let last = predictions.last().expect("at least one iteration").clone().detach();
         let sums = batch_metrics(last, batch.target.disparity_bilinear.clone(), batch.target.valid.clone())?;
+        let forward_done = Instant::now();
         let grads = GradientsParams::from_grads(loss.backward(), &self.model);
+        let backward_done = Instant::now();
         if let Some(observe) = observe {
             observe(StepInternals { model: &self.model, predictions: &predictions, grads: &grads });
         }
@@ -319,6 +328,11 @@ impl Trainer {
         if let Some(ema) = &mut self.ema {
             ema.update(&self.model, self.step);
         }
+        self.last_step_seconds = StepSeconds {
+            forward: (forward_done - started).as_secs_f64(),
+            backward: (backward_done - forward_done).as_secs_f64(),
+            optimizer: backward_done.elapsed().as_secs_f64(),
+        };
         let m = sums.metrics();
         Ok(StepReport { step, loss: loss_value, epe: m.epe, bad3: m.bad_3, lr, grad_norm: clip.total_norm })
     }

@@ -77,6 +77,16 @@ pub struct BenchArgs {
     /// synthetic one, outside the timed runs.
     #[arg(long)]
     pub prior_weights: Option<std::path::PathBuf>,
+    /// Time whole training steps instead of inference (`--iters` iterations, `--size` crops).
+    #[arg(long)]
+    pub train: bool,
+    /// Pairs per training step (`--train`).
+    #[arg(long, default_value_t = 1)]
+    pub batch: usize,
+    /// The experiment whose model, loss and recipe a training step uses (`--train`; default:
+    /// the defaults, RAFT-Stereo with the sequence loss).
+    #[arg(long)]
+    pub experiment: Option<std::path::PathBuf>,
 }
 
 /// Parses `HxW`.
@@ -133,7 +143,7 @@ pub fn machine_line() -> String {
     format!("machine: {}, {}", cpu_model_name(&cpuinfo).unwrap_or("processor not reported"), vector_level())
 }
 
-fn median(v: &mut [f64]) -> f64 {
+pub fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     let m = v.len() / 2;
     if v.len() % 2 == 1 { v[m] } else { 0.5 * (v[m - 1] + v[m]) }

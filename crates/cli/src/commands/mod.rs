@@ -2,6 +2,7 @@
 
 pub mod ablate;
 pub mod bench;
+pub mod bench_train;
 pub mod demo;
 pub mod eval;
 pub mod experiment;

@@ -183,6 +183,36 @@ fn host_conv_slices(
         let conv = Conv3x3 { x, x_dims, wt, o: w_dims[0], bias, padding: options.padding, epilogue };
         return winograd_conv(variant, &conv);
     }
+    direct_conv_slices(x, x_dims, wt, w_dims, bias, options, epilogue)
+}
+
+/// [`conv2d_host_slices`] without Winograd: the few-output kernel or im2col tiles, whose sums
+/// are the plain products' (training takes these: Winograd's transforms round differently, and
+/// an instance norm's backward magnifies the difference past the official training step's).
+///
+/// # Shapes
+/// - as [`conv2d_host_slices`]
+pub fn conv2d_host_direct_slices(
+    x: &[f32],
+    x_dims: [usize; 4],
+    wt: &[f32],
+    w_dims: [usize; 4],
+    bias: Option<&[f32]>,
+    options: &ConvOptions<2>,
+) -> (Vec<f32>, [usize; 4]) {
+    direct_conv_slices(x, x_dims, wt, w_dims, bias, options, Epilogue::Linear)
+}
+
+/// The few-output kernel where it suits, im2col tiles otherwise.
+fn direct_conv_slices(
+    x: &[f32],
+    x_dims: [usize; 4],
+    wt: &[f32],
+    w_dims: [usize; 4],
+    bias: Option<&[f32]>,
+    options: &ConvOptions<2>,
+    epilogue: Epilogue,
+) -> (Vec<f32>, [usize; 4]) {
     if few_outputs_suit(x_dims[1], w_dims[0], options.stride, options.groups) {
         check_shapes(x, x_dims, wt, w_dims, options);
         return few_outputs_conv(x, x_dims, wt, w_dims, bias, options.padding, options.dilation, epilogue);
@@ -253,6 +283,24 @@ pub(crate) fn im2col_conv_slices(
         })
     });
     (out, [n, o, out_h, out_w])
+}
+
+/// Writes the column matrix (`K x P` row-major: row `(c, ky, kx)`, column the output pixel) of
+/// output rows `rows` of one image `x` (`[C, H, W]`) for a `kh x kw` kernel with `options`, whose
+/// output is `out_w` wide: the im2col path's columns, for the weight gradient.
+pub(crate) fn image_columns(
+    col: &mut [f32],
+    x: &[f32],
+    [c, h, w]: [usize; 3],
+    [kh, kw]: [usize; 2],
+    options: &ConvOptions<2>,
+    out_w: usize,
+    rows: std::ops::Range<usize>,
+) {
+    let [sh, sw] = options.stride;
+    let [(ph, _), (pw, _)] = options.padding;
+    let [dh, dw] = options.dilation;
+    fill_columns(col, x, Geometry { c, h, w, kh, kw, sh, sw, ph, pw, dh, dw, out_w }, rows);
 }
 
 thread_local! {

@@ -1,6 +1,7 @@
 //! Hand-written CPU kernels for inference on the Flex backend in f32, on host buffers.
 
 pub mod conv;
+pub mod conv_backward;
 pub mod deform;
 pub mod few_outputs;
 pub mod gru;

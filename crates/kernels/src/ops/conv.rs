@@ -12,6 +12,7 @@ use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor};
 
+use crate::autodiff;
 use crate::dispatch::{Op, Path, path};
 use crate::gpu::matmul_conv::{conv2d_by_matmul, conv2d_by_matmul_then, suits_product};
 use crate::host::conv::{conv2d_host, conv2d_host_rectified};
@@ -35,7 +36,7 @@ pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
 /// - `x`: `[N, C, H, W]`; output `[N, O, H_out, W_out]`
 pub fn conv2d_relu_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     match conv_options(conv) {
-        Some(options) if path(&x.device(), Op::Conv) == Path::Host => {
+        Some(options) if host_inference(&x.device()) => {
             conv2d_host_rectified(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options, true)
         }
         _ => conv2d_forward_then(conv, x, burn::tensor::activation::relu),
@@ -58,7 +59,7 @@ pub fn conv2d_affine_or(
     stock: impl FnOnce(Tensor<4>) -> Tensor<4>,
 ) -> Tensor<4> {
     match conv_options(conv) {
-        Some(options) if path(&x.device(), Op::Conv) == Path::Host => {
+        Some(options) if host_inference(&x.device()) => {
             let (scale, shift) = affine();
             let o = scale.dims()[0];
             let weight = conv.weight.val() * scale.clone().reshape([o, 1, 1, 1]);
@@ -138,10 +139,20 @@ pub fn conv_options(conv: &Conv2d) -> Option<ConvOptions<2>> {
 pub fn conv2d_op(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: ConvOptions<2>) -> Tensor<4> {
     let [_, _, kh, kw] = weight.dims();
     match conv_path(&x.device(), &options, [kh, kw]) {
+        Path::Host if x.device().is_autodiff() && weight.dims()[1] >= autodiff::MIN_CHANNELS => {
+            autodiff::conv2d(x, weight, bias, options)
+        }
+        Path::Host if x.device().is_autodiff() => conv2d(x, weight, bias, options),
         Path::Host => conv2d_host(x, weight, bias, &options),
         Path::Gpu => conv2d_by_matmul(x, weight, bias, &options),
         Path::Stock => conv2d(x, weight, bias, options),
     }
+}
+
+/// Whether the host kernel runs inference on `device`: the epilogues it fuses (ReLU, a folded
+/// norm) have no backward of their own, so training composes them after the convolution.
+fn host_inference(device: &Device) -> bool {
+    path(device, Op::Conv) == Path::Host && !device.is_autodiff()
 }
 
 /// Where a convolution with `options` and a `kh x kw` kernel on `device` runs: the dispatch's

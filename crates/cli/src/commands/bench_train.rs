@@ -1,0 +1,100 @@
+//! `dgstereo bench --train`: timing of whole training steps.
+//!
+//! Design decision: a step is timed through [`Trainer::step_on`], the call `dgstereo train`
+//! makes (forward with every iteration, the experiment's loss, backward, clipping, AdamW and the
+//! one-cycle schedule), on a batch of random pairs of the requested size, so the figure is what a
+//! training run pays per step without its data loading; the split comes from the trainer's own
+//! clock ([`Trainer::last_step_seconds`]). The operation count is three times the forward's
+//! (the backward's products are twice the forward's), an estimate.
+
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use dgstereo_core::DeviceChoice;
+use dgstereo_kernels::{Op, Path, Settings, path};
+use dgstereo_model::flops::StageMacs;
+use dgstereo_train::step_timing::{StepSeconds, random_batch};
+use dgstereo_train::{TrainParts, Trainer};
+
+use super::bench::{BenchArgs, machine_line, median, parse_size, peak_memory_bytes};
+use super::train::parts_of;
+
+/// Times `a.runs` training steps after `a.warmup` (`dgstereo bench --train`).
+pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
+    let [h, w] = parse_size(&a.size)?;
+    if a.iters == 0 || a.runs == 0 {
+        bail!("--iters and --runs must be at least 1");
+    }
+    let settings: Settings = a.kernels.parse().with_context(|| format!("--kernels '{}'", a.kernels))?;
+    dgstereo_kernels::configure(settings)?;
+    let device = &a.device.parse::<DeviceChoice>()?.device()?;
+    if a.batch == 0 {
+        bail!("--batch must be at least 1");
+    }
+    let config = match &a.experiment {
+        Some(p) => {
+            let runs = dgstereo_experiment::load(p)?;
+            let Some(run) = runs.into_iter().next() else { bail!("{}: no run", p.display()) };
+            run.config
+        }
+        None => toml::from_str::<dgstereo_experiment::ExperimentConfig>("name = \"bench\"")
+            .context("the default experiment")?,
+    };
+    let mut parts: TrainParts = parts_of(config, None);
+    if let Some(p) = &a.config {
+        let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+        parts.model = toml::from_str(&text).with_context(|| format!("{}: not a model configuration", p.display()))?;
+    }
+    parts.train.iters = a.iters;
+    parts.train.batch_size = a.batch;
+    parts.train.crop = [h, w];
+    let mut trainer = Trainer::new(parts, device)?;
+    let batch = random_batch(a.batch, [h, w], (w / 4) as f32, &trainer.autodiff);
+    let kernels = match path(&trainer.autodiff, Op::Conv) {
+        Path::Host => "host convolution backward",
+        Path::Gpu | Path::Stock => "stock",
+    };
+    let mut step = || -> anyhow::Result<(f64, StepSeconds)> {
+        let start = Instant::now();
+        trainer.step_on(&batch, None)?;
+        Ok((start.elapsed().as_secs_f64(), trainer.last_step_seconds))
+    };
+    for _ in 0..a.warmup {
+        step()?;
+    }
+    let runs = (0..a.runs).map(|_| step()).collect::<anyhow::Result<Vec<_>>>()?;
+    let mut times: Vec<f64> = runs.iter().map(|r| r.0).collect();
+    let part = |f: fn(&StepSeconds) -> f64| median(&mut runs.iter().map(|r| f(&r.1)).collect::<Vec<_>>());
+    let (forward, backward, optimizer) = (part(|s| s.forward), part(|s| s.backward), part(|s| s.optimizer));
+    let min = times.iter().copied().fold(f64::INFINITY, f64::min);
+    let med = median(&mut times);
+    let macs = StageMacs::new(&trainer.parts.model, [h.next_multiple_of(32), w.next_multiple_of(32)])
+        .forward(a.iters, a.batch);
+    println!(
+        "training step: batch {} of {h}x{w}, {} iterations, loss {:?}, device {}, {kernels}, {} threads",
+        a.batch,
+        a.iters,
+        trainer.parts.loss,
+        a.device,
+        std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+    );
+    println!("{}", machine_line());
+    println!(
+        "steps {} after {} warm-up: median {med:.3} s, min {min:.3} s, {:.3} steps/s",
+        a.runs,
+        a.warmup,
+        1.0 / med
+    );
+    println!("median split: forward {forward:.3} s, backward {backward:.3} s, optimizer {optimizer:.3} s");
+    println!(
+        "work ~{:.1} GFLOP (3x the forward's direct convolutions): {:.1} GFLOP/s",
+        6.0 * macs as f64 / 1e9,
+        6.0 * macs as f64 / med / 1e9
+    );
+    match peak_memory_bytes() {
+        Some(b) => println!("peak memory (VmHWM, whole process) {:.0} MiB", b as f64 / (1024.0 * 1024.0)),
+        None => println!("peak memory: not reported by this OS"),
+    }
+    Ok(ExitCode::SUCCESS)
+}

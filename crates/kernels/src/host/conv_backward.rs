@@ -1,0 +1,122 @@
+//! The gradients of a convolution on host buffers, for training on the CPU.
+//!
+//! Design decision: burn Flex computes a convolution's input gradient as a transposed
+//! convolution and its weight gradient as a convolution of the input by the output gradient, whose
+//! products have a depth of the batch and a few output channels: skinny shapes that ran the `gemm`
+//! crate's narrowest micro-kernels for most of a training step. Here the input gradient of a
+//! stride-1 convolution is the host convolution of the output gradient with the flipped,
+//! transposed weight (im2col tiles, without Winograd: see `conv2d_host_direct_slices`), and the weight gradient
+//! is `G · Colsᵀ`, the output gradient (`O x P`) by the forward's own column matrix, tiles of
+//! a thousand and more pixels deep, summed over tiles in one accumulator per worker. burn's
+//! backward stays the reference and the path for what these do not take (strided input
+//! gradients, groups).
+
+use burn::tensor::ops::ConvOptions;
+use dgstereo_core::tensor::reuse_buffer;
+use rayon::prelude::*;
+
+use super::conv::{conv2d_host_direct_slices, image_columns};
+use crate::geometry::conv_output_size;
+use crate::product::matmul_transposed_accumulate;
+
+/// Column-matrix elements per weight-gradient tile: deep enough (pixels) for a well-shaped
+/// product, small enough for a worker's buffer (16 MiB).
+const WEIGHT_GRAD_COLUMNS: usize = 1 << 22;
+
+/// The gradient of `conv2d(x, wt)` (stride 1, dilation 1, one group) with respect to `x`, given
+/// the output gradient `g`: the convolution of `g` with the weight flipped in both axes and its
+/// channels swapped, padded by `k - 1 - p`. `None` for a stride, dilation, groups or padding of
+/// `k` or more, which burn's transposed convolution takes.
+///
+/// # Shapes
+/// - `g`: `g_dims = [N, O, H_out, W_out]`; `wt`: `w_dims = [O, C, kh, kw]`; output `x_dims = [N,
+///   C, H, W]`
+pub fn conv2d_input_grad(
+    g: &[f32],
+    g_dims: [usize; 4],
+    wt: &[f32],
+    w_dims: [usize; 4],
+    x_dims: [usize; 4],
+    options: &ConvOptions<2>,
+) -> Option<Vec<f32>> {
+    let [o, c, kh, kw] = w_dims;
+    let [(pt, pb), (pl, pr)] = options.padding;
+    let plain = options.stride == [1, 1] && options.dilation == [1, 1] && options.groups == 1;
+    if !plain || pt.max(pb) >= kh || pl.max(pr) >= kw {
+        return None;
+    }
+    let taps = kh * kw;
+    let mut flipped = vec![0.0f32; c * o * taps];
+    flipped.par_chunks_mut(o * taps).enumerate().for_each(|(ic, dst)| {
+        for oc in 0..o {
+            let src = &wt[(oc * c + ic) * taps..][..taps];
+            for (t, d) in dst[oc * taps..][..taps].iter_mut().enumerate() {
+                *d = src[taps - 1 - t];
+            }
+        }
+    });
+    let padding = [(kh - 1 - pt, kh - 1 - pb), (kw - 1 - pl, kw - 1 - pr)];
+    let transposed = ConvOptions::new_with_padding([1, 1], padding, [1, 1], 1);
+    let (out, dims) = conv2d_host_direct_slices(g, g_dims, &flipped, [c, o, kh, kw], None, &transposed);
+    assert_eq!(dims, x_dims, "conv2d_input_grad: the output gradient does not match the input");
+    Some(out)
+}
+
+/// The gradient of `conv2d(x, wt)` (one group) with respect to `wt`, given the output gradient
+/// `g`: `Σ_images Σ_tiles G_tile · Cols_tileᵀ`.
+///
+/// # Shapes
+/// - `x`: `x_dims = [N, C, H, W]`; `g`: `[N, O, H_out, W_out]`; output `w_dims = [O, C, kh, kw]`
+pub fn conv2d_weight_grad(
+    x: &[f32],
+    x_dims: [usize; 4],
+    g: &[f32],
+    w_dims: [usize; 4],
+    options: &ConvOptions<2>,
+) -> Vec<f32> {
+    let [n, c, h, w] = x_dims;
+    let [o, cw, kh, kw] = w_dims;
+    assert!(options.groups == 1 && c == cw, "conv2d_weight_grad: one group, {c} input channels, weight {w_dims:?}");
+    let [out_h, out_w] = conv_output_size("conv2d_weight_grad", [h, w], [kh, kw], options);
+    let (k, plane) = (c * kh * kw, out_h * out_w);
+    assert_eq!(g.len(), n * o * plane, "conv2d_weight_grad: the output gradient is not [{n}, {o}, {out_h}, {out_w}]");
+    let rows_per_tile = (WEIGHT_GRAD_COLUMNS / k.max(1) / out_w.max(1)).clamp(1, out_h.max(1));
+    let tiles = out_h.div_ceil(rows_per_tile);
+    (0..n * tiles)
+        .into_par_iter()
+        .fold(
+            || (vec![0.0f32; o * k], Vec::new()),
+            |(mut acc, mut buffer), job| {
+                let (b, tile) = (job / tiles, job % tiles);
+                let (oy0, oy1) = (tile * rows_per_tile, ((tile + 1) * rows_per_tile).min(out_h));
+                let p = (oy1 - oy0) * out_w;
+                let col = reuse_buffer(&mut buffer, k * p);
+                image_columns(col, &x[b * c * h * w..][..c * h * w], [c, h, w], [kh, kw], options, out_w, oy0..oy1);
+                let g_tile = &g[b * o * plane + oy0 * out_w..];
+                matmul_transposed_accumulate(&mut acc, k, g_tile, plane, col, p, [o, k, p]);
+                (acc, buffer)
+            },
+        )
+        .map(|(acc, _)| acc)
+        .reduce(
+            || vec![0.0f32; o * k],
+            |mut a, b| {
+                a.iter_mut().zip(&b).for_each(|(a, b)| *a += b);
+                a
+            },
+        )
+}
+
+/// The gradient of a convolution's bias: the output gradient summed over images and pixels.
+///
+/// # Shapes
+/// - `g`: `[N, O, H_out, W_out]` with `plane = H_out·W_out`; output `[O]`
+pub fn conv2d_bias_grad(g: &[f32], [n, o, plane]: [usize; 3]) -> Vec<f32> {
+    (0..o)
+        .into_par_iter()
+        .map(|oc| {
+            (0..n).map(|b| g[(b * o + oc) * plane..][..plane].iter().map(|&v| v as f64).sum::<f64>()).sum::<f64>()
+                as f32
+        })
+        .collect()
+}
