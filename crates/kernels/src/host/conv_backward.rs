@@ -85,19 +85,23 @@ pub fn conv2d_weight_grad(
     (0..n * tiles)
         .into_par_iter()
         .fold(
-            || (vec![0.0f32; o * k], Vec::new()),
-            |(mut acc, mut buffer), job| {
+            || vec![0.0f32; o * k],
+            |mut acc, job| {
                 let (b, tile) = (job / tiles, job % tiles);
                 let (oy0, oy1) = (tile * rows_per_tile, ((tile + 1) * rows_per_tile).min(out_h));
                 let p = (oy1 - oy0) * out_w;
-                let col = reuse_buffer(&mut buffer, k * p);
-                image_columns(col, &x[b * c * h * w..][..c * h * w], [c, h, w], [kh, kw], options, out_w, oy0..oy1);
-                let g_tile = &g[b * o * plane + oy0 * out_w..];
-                matmul_transposed_accumulate(&mut acc, k, g_tile, plane, col, p, [o, k, p]);
-                (acc, buffer)
+                // The thread's column buffer, reused across tiles and calls: every element of
+                // it that the product reads is written first.
+                COLUMNS.with_borrow_mut(|buffer| {
+                    let col = reuse_buffer(buffer, k * p);
+                    let image = &x[b * c * h * w..][..c * h * w];
+                    image_columns(col, image, [c, h, w], [kh, kw], options, out_w, oy0..oy1);
+                    let g_tile = &g[b * o * plane + oy0 * out_w..];
+                    matmul_transposed_accumulate(&mut acc, k, g_tile, plane, col, p, [o, k, p]);
+                });
+                acc
             },
         )
-        .map(|(acc, _)| acc)
         .reduce(
             || vec![0.0f32; o * k],
             |mut a, b| {
@@ -105,6 +109,11 @@ pub fn conv2d_weight_grad(
                 a
             },
         )
+}
+
+thread_local! {
+    /// Each worker thread's column matrix for the weight gradient, grown to the largest tile.
+    static COLUMNS: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// The gradient of a convolution's bias: the output gradient summed over images and pixels.
