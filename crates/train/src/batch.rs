@@ -17,7 +17,7 @@ use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use crate::config::{DataSource, TrainingConfig, TrainingDataConfig, synthetic_config};
+use crate::config::{DataSource, TrainingConfig, TrainingDataConfig, synthetic_config, with_photos};
 
 /// SplitMix64 finaliser: a well-mixed 64-bit hash of `x`.
 pub fn mix64(mut x: u64) -> u64 {
@@ -143,13 +143,15 @@ impl TrainingData {
                         textures,
                         min_disparity,
                         lattices,
+                        photos,
                         ..
                     } = s
                     else {
                         unreachable!()
                     };
-                    let config =
+                    let mut config =
                         synthetic_config([*width, *height], *textures, *max_disparity, *min_disparity, *lattices);
+                    with_photos(&mut config, photos.as_ref());
                     sources.push(Source::Synthetic { config, count: *count, base_seed: mix64(train.seed ^ i as u64) });
                 }
             }

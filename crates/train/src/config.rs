@@ -195,7 +195,13 @@ impl TrainingDataConfig {
             if !(w.is_finite() && w >= 0.0) {
                 return Err(Error::Config(format!("data.sources[{i}].weight = {w}: must be finite and >= 0")));
             }
-            if let DataSource::Synthetic { width, height, count, max_disparity, min_disparity, lattices, .. } = s {
+            if let DataSource::Synthetic {
+                width, height, count, max_disparity, min_disparity, lattices, photos, ..
+            } = s
+            {
+                if let Some(p) = photos {
+                    p.check(&format!("data.sources[{i}]"))?;
+                }
                 if let Some(p) = lattices.filter(|p| !(0.0..=1.0).contains(p)) {
                     return Err(Error::Config(format!("data.sources[{i}].lattices = {p}: must be a share in [0, 1]")));
                 }
@@ -212,6 +218,9 @@ impl TrainingDataConfig {
         }
         let v = &self.validation;
         check_disparities(v.max_disparity, v.min_disparity, v.width, "data.validation")?;
+        if let Some(p) = &v.photos {
+            p.check("data.validation")?;
+        }
         if self.sources.iter().map(DataSource::weight).sum::<f64>() <= 0.0 {
             return Err(Error::Config("data.sources: the weights sum to 0".into()));
         }
@@ -286,6 +295,10 @@ pub enum DataSource {
         /// pattern, the scene seen through its holes), in [0, 1]; default 0.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         lattices: Option<f64>,
+        /// Surfaces textured with crops of real photographs (`{ dir = "...", share = 0.5 }`);
+        /// default: procedural textures only.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        photos: Option<PhotoTextures>,
     },
     /// SceneFlow (`root` holds `frames_*pass` and `disparity`).
     Sceneflow {
@@ -388,7 +401,30 @@ impl Default for DataSource {
             textures: TexturePreset::Smooth,
             min_disparity: None,
             lattices: None,
+            photos: None,
         }
+    }
+}
+
+/// Photo textures of a synthetic source or the validation set (`photos = { dir, share }`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PhotoTextures {
+    /// The folder of photographs (`scripts/fetch-photo-textures.sh` fills `data/photos`).
+    pub dir: PathBuf,
+    /// Share of the surfaces (and backgrounds) textured with a photograph, in (0, 1].
+    pub share: f64,
+}
+
+impl PhotoTextures {
+    /// Checks the share and that the folder's photographs load; `key` names the table.
+    fn check(&self, key: &str) -> Result<()> {
+        if !(self.share > 0.0 && self.share <= 1.0) {
+            return Err(Error::Config(format!("{key}.photos.share = {}: must be a share in (0, 1]", self.share)));
+        }
+        dgstereo_data::synthetic::PhotoLibrary::of_folder(&self.dir)
+            .map(|_| ())
+            .map_err(|e| Error::Config(format!("{key}.photos.dir: {e}")))
     }
 }
 
@@ -430,6 +466,10 @@ pub struct ValidationConfig {
     /// Range of each scene's smallest disparity, as a synthetic source's `min_disparity`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub min_disparity: Option<[f64; 2]>,
+    /// Photo textures of the pairs, as a synthetic source's `photos` (a held-out set rendered
+    /// with photographs).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub photos: Option<PhotoTextures>,
 }
 
 impl Default for ValidationConfig {
@@ -443,6 +483,7 @@ impl Default for ValidationConfig {
             textures: TexturePreset::Smooth,
             max_disparity: None,
             min_disparity: None,
+            photos: None,
         }
     }
 }
@@ -450,7 +491,10 @@ impl Default for ValidationConfig {
 impl ValidationConfig {
     /// The generator's settings for the validation pairs.
     pub fn synthetic(&self) -> SyntheticConfig {
-        synthetic_config([self.width, self.height], self.textures, self.max_disparity, self.min_disparity, None)
+        let mut config =
+            synthetic_config([self.width, self.height], self.textures, self.max_disparity, self.min_disparity, None);
+        with_photos(&mut config, self.photos.as_ref());
+        config
     }
 }
 
@@ -471,4 +515,12 @@ pub(crate) fn synthetic_config(
     config.min_disparity_range = min_disparity;
     config.lattice_prob = lattices.unwrap_or(0.0);
     config
+}
+
+/// `config` with the photo textures of `photos` (unchanged without).
+pub(crate) fn with_photos(config: &mut SyntheticConfig, photos: Option<&PhotoTextures>) {
+    if let Some(p) = photos {
+        config.photo_dir = Some(p.dir.clone());
+        config.photo_prob = p.share;
+    }
 }

@@ -66,6 +66,7 @@ fn augmented_batches_have_the_crop_size_and_both_targets() {
         textures: Default::default(),
         min_disparity: None,
         lattices: None,
+        photos: None,
     }];
     let data = TrainingData::new(&parts.data, &parts.train).unwrap();
     let pairs = data.batch(3, 2).unwrap();

@@ -47,6 +47,15 @@ pub struct SyntheticConfig {
     /// draws are the same. Default 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub lattice_prob: f64,
+    /// A folder of photographs ([`super::PhotoLibrary`]); with [`Self::photo_prob`], surfaces
+    /// and backgrounds take textures cut from them. Default: unset.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub photo_dir: Option<std::path::PathBuf>,
+    /// Probability that a surface (or the background) is textured with a photograph of
+    /// [`Self::photo_dir`] instead of its procedural kind; drawn after the kind, so with 0 (the
+    /// default) the scenes are those of the procedural generator, bit for bit.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub photo_prob: f64,
 }
 
 fn is_zero(v: &f64) -> bool {
@@ -88,6 +97,8 @@ impl Default for SyntheticConfig {
             shading_prob: 0.0,
             min_disparity_range: None,
             lattice_prob: 0.0,
+            photo_dir: None,
+            photo_prob: 0.0,
         }
     }
 }

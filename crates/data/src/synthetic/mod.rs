@@ -20,7 +20,10 @@
 //!   anti-aliased edges, composited by random depth ([`DeadLeaves`]): the sharp edges of paint,
 //!   print and clutter;
 //! - flat: a uniform colour with value noise of at most 3 grey levels (walls, floors);
-//! - low contrast: the gratings texture at 5-30 % of its amplitude.
+//! - low contrast: the gratings texture at 5-30 % of its amplitude;
+//! - photo: a crop of a real photograph ([`PhotoTexture`], from a folder of
+//!   [`SyntheticConfig::photo_dir`] with probability [`SyntheticConfig::photo_prob`], over any
+//!   of the other kinds).
 //!
 //! The shading is a brightness gain of 0.6-1.2, a linear ramp across the surface or a radial
 //! falloff, a property of the surface point and so identical in both views.
@@ -47,6 +50,7 @@ mod config;
 mod dead_leaves;
 mod generate;
 mod hash;
+mod photo;
 mod random_texture;
 mod scene;
 mod surface;
@@ -55,6 +59,7 @@ mod texture;
 pub use config::{SyntheticConfig, TexturePreset};
 pub use dead_leaves::{DeadLeaves, LeafLevel, MAX_LEAF_LEVELS};
 pub use generate::generate;
+pub use photo::{PhotoLibrary, PhotoTexture};
 pub use scene::{Hit, SyntheticSample, SyntheticScene};
 pub use surface::{DisparityField, Outline, Surface};
 pub use texture::{Grating, Pattern, Shading, SurfaceTexture, Texture, TextureKind};

@@ -13,6 +13,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::config::SyntheticConfig;
 use super::dead_leaves::{DeadLeaves, LeafLevel, MAX_LEAF_LEVELS};
+use super::photo::{PhotoLibrary, PhotoTexture};
 use super::texture::{Grating, Pattern, Shading, SurfaceTexture, Texture, TextureKind};
 
 /// The smooth texture (2-4 gratings and value noise) from the main stream.
@@ -77,11 +78,38 @@ pub(super) fn styled_texture(
             let amp = style.gen_range(0.0..=3.0);
             Pattern::Smooth(Texture::flat(smooth.base, amp, smooth.noise_cell, smooth.noise_seed))
         }
-        TextureKind::DeadLeaves => Pattern::DeadLeaves(dead_leaves(style, cfg, smooth.base, extent)),
+        // `pick_kind` draws only the weighted kinds; a photo replaces one below.
+        TextureKind::DeadLeaves | TextureKind::Photo => {
+            Pattern::DeadLeaves(dead_leaves(style, cfg, smooth.base, extent))
+        }
+    };
+    let (kind, pattern) = match photo(style, cfg) {
+        Some(photo) => (TextureKind::Photo, Pattern::Photo(photo)),
+        None => (kind, pattern),
     };
     let p = cfg.shading_prob;
     let shading = (p > 0.0 && style.gen_bool(p.min(1.0))).then(|| shading(style, extent));
     SurfaceTexture { kind, pattern, shading }
+}
+
+/// With probability `cfg.photo_prob` (drawn only where it is above 0), a photograph of
+/// `cfg.photo_dir` at 0.5-2 photo pixels per view pixel (log-uniform), any rotation, a random
+/// offset. A folder that does not load gives none (training checks it first, naming the key).
+fn photo(style: &mut ChaCha8Rng, cfg: &SyntheticConfig) -> Option<PhotoTexture> {
+    let p = cfg.photo_prob;
+    if !(p > 0.0 && style.gen_bool(p.min(1.0))) {
+        return None;
+    }
+    let library = PhotoLibrary::of_folder(cfg.photo_dir.as_deref()?).ok()?;
+    let index = style.gen_range(0..library.photos.len());
+    let (w, h) = (library.photos[index].width as f64, library.photos[index].height as f64);
+    Some(PhotoTexture {
+        scale: style.gen_range(0.5f64.ln()..=2.0f64.ln()).exp(),
+        angle: style.gen_range(0.0..2.0 * PI),
+        offset: [style.gen_range(0.0..w), style.gen_range(0.0..h)],
+        library,
+        index,
+    })
 }
 
 /// A dead-leaves texture over `ground` for a surface of `extent`: levels from cells of 2-4

@@ -7,6 +7,7 @@
 
 use super::dead_leaves::DeadLeaves;
 use super::hash::hash_cell;
+use super::photo::PhotoTexture;
 
 /// Which random texture kind a surface got (see [`super::SyntheticConfig::texture_weights`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -19,6 +20,9 @@ pub enum TextureKind {
     Flat,
     /// Gratings and noise at 5-30 % of the usual amplitude.
     LowContrast,
+    /// A crop of a real photograph ([`super::SyntheticConfig::photo_prob`]; not among the
+    /// weighted kinds of [`TextureKind::ALL`]).
+    Photo,
 }
 
 impl TextureKind {
@@ -33,6 +37,8 @@ pub enum Pattern {
     Smooth(Texture),
     /// Layered random shapes.
     DeadLeaves(DeadLeaves),
+    /// A photograph.
+    Photo(PhotoTexture),
 }
 
 /// A smooth multiplicative brightness gain over a surface, a property of the surface point (so
@@ -100,6 +106,7 @@ impl SurfaceTexture {
         let c = match &self.pattern {
             Pattern::Smooth(t) => t.at(x, y),
             Pattern::DeadLeaves(t) => t.at(x, y),
+            Pattern::Photo(t) => t.at(x, y),
         };
         match &self.shading {
             None => c,

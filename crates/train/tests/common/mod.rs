@@ -44,6 +44,7 @@ pub fn tiny_parts(steps: usize, iters: usize, lr: f64, count: Option<usize>, bat
             textures: Default::default(),
             min_disparity: None,
             lattices: None,
+            photos: None,
         }],
         augment: false,
         validation: ValidationConfig { count: 0, ..ValidationConfig::default() },
