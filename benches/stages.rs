@@ -19,9 +19,7 @@ use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Distribution, Int, Tensor};
 use criterion::{BenchmarkId, Criterion, criterion_group};
 use dgstereo_core::{Probe, default_device};
-use dgstereo_costvolume::{
-    CorrelationConfig, CorrelationImplementation, CorrelationPyramid, CostVolume, OnTheFlyCorrelation,
-};
+use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CorrelationPyramid, OnTheFlyCorrelation};
 use dgstereo_kernels::{KeptWeights, Path, with_path};
 use dgstereo_model::encoder::{ContextExtractor, FeatureExtractor};
 use dgstereo_model::fusion::{FusionConfig, ImageFusion};

@@ -191,11 +191,7 @@ fn skip_string(chars: &[char], mut i: usize, out: &mut String) -> usize {
 
 /// A `'` that opens a character literal (not a lifetime or a label).
 fn is_char_literal(chars: &[char], i: usize) -> bool {
-    match (chars.get(i + 1), chars.get(i + 2)) {
-        (Some('\\'), _) => true,
-        (Some(_), Some('\'')) => true,
-        _ => false,
-    }
+    matches!((chars.get(i + 1), chars.get(i + 2)), (Some('\\'), _) | (Some(_), Some('\'')))
 }
 
 /// Every path the text names that may be a module path, with the inline modules it is inside.

@@ -60,13 +60,13 @@ impl EncoderConfig {
         if self.trunk_dims.contains(&0) {
             return err("encoder.trunk_dims must be positive".into());
         }
-        if self.context_norm == NormKind::Group {
-            if let Some(c) = self.trunk_dims.iter().find(|&&c| c < 8 || c % (c / 8) != 0) {
-                return err(format!(
-                    "encoder.trunk_dims = {:?}: with context_norm = \"group\" ({c} / 8 groups) every width must be at least 8 and divisible by its group count",
-                    self.trunk_dims
-                ));
-            }
+        if self.context_norm == NormKind::Group
+            && let Some(c) = self.trunk_dims.iter().find(|&&c| c < 8 || c % (c / 8) != 0)
+        {
+            return err(format!(
+                "encoder.trunk_dims = {:?}: with context_norm = \"group\" ({c} / 8 groups) every width must be at least 8 and divisible by its group count",
+                self.trunk_dims
+            ));
         }
         Ok(())
     }

@@ -53,6 +53,8 @@ pub struct SharedBackbone {
 }
 
 /// A built encoder layout, chosen by [`EncoderConfig`](crate::EncoderConfig).
+// One per network, its variants' sizes are the modules' own: boxing them would buy nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Module, Debug)]
 pub enum Encoders {
     /// Separate feature and context encoders.

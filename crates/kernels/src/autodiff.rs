@@ -167,7 +167,9 @@ mod tests {
     #[test]
     fn gradients_agree_with_burns_autodiff() {
         let ad = Device::flex().autodiff();
-        let cases: [(usize, [usize; 2], [usize; 2], usize, [(usize, usize); 2], bool); 8] = [
+        /// Batch, `[C, O]`, kernel, stride, padding, bias.
+        type Case = (usize, [usize; 2], [usize; 2], usize, [(usize, usize); 2], bool);
+        let cases: [Case; 8] = [
             (2, [24, 32], [1, 1], 2, [(0, 0), (0, 0)], true),
             (2, [64, 48], [3, 3], 1, [(1, 1), (1, 1)], true),
             (1, [5, 7], [3, 3], 1, [(1, 1), (1, 1)], true),

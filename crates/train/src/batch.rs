@@ -50,7 +50,7 @@ pub struct TrainingPair {
 }
 
 enum Source {
-    Synthetic { config: SyntheticConfig, count: Option<usize>, base_seed: u64 },
+    Synthetic { config: Box<SyntheticConfig>, count: Option<usize>, base_seed: u64 },
     Files { name: String, dataset: FileDataset, sparse: bool },
 }
 
@@ -152,7 +152,11 @@ impl TrainingData {
                     let mut config =
                         synthetic_config([*width, *height], *textures, *max_disparity, *min_disparity, *lattices);
                     with_photos(&mut config, photos.as_ref());
-                    sources.push(Source::Synthetic { config, count: *count, base_seed: mix64(train.seed ^ i as u64) });
+                    sources.push(Source::Synthetic {
+                        config: Box::new(config),
+                        count: *count,
+                        base_seed: mix64(train.seed ^ i as u64),
+                    });
                 }
             }
         }
