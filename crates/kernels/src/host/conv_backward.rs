@@ -5,8 +5,8 @@
 //! products have a depth of the batch and a few output channels: skinny shapes that ran the `gemm`
 //! crate's narrowest micro-kernels for most of a training step. Here the input gradient of a
 //! stride-1 convolution is the host convolution of the output gradient with the flipped,
-//! transposed weight (im2col tiles, without Winograd: see `conv2d_host_direct_slices`), and the weight gradient
-//! is `G · Colsᵀ`, the output gradient (`O x P`) by the forward's own column matrix, tiles of
+//! transposed weight (Winograd where the layer suits it, as in inference; the forward itself
+//! keeps plain products, see `conv2d_host_direct_slices`), and the weight gradient is `G · Colsᵀ`, the output gradient (`O x P`) by the forward's own column matrix, tiles of
 //! a thousand and more pixels deep, summed over tiles in one accumulator per worker. burn's
 //! backward stays the reference and the path for what these do not take (strided input
 //! gradients, groups).
@@ -15,7 +15,7 @@ use burn::tensor::ops::ConvOptions;
 use dgstereo_core::tensor::reuse_buffer;
 use rayon::prelude::*;
 
-use super::conv::{conv2d_host_direct_slices, image_columns};
+use super::conv::{conv2d_host_direct_slices, conv2d_host_slices, image_columns};
 use crate::geometry::conv_output_size;
 use crate::product::matmul_transposed_accumulate;
 
@@ -57,7 +57,7 @@ pub fn conv2d_input_grad(
     });
     let padding = [(kh - 1 - pt, kh - 1 - pb), (kw - 1 - pl, kw - 1 - pr)];
     let transposed = ConvOptions::new_with_padding([1, 1], padding, [1, 1], 1);
-    let (out, dims) = conv2d_host_direct_slices(g, g_dims, &flipped, [c, o, kh, kw], None, &transposed);
+    let (out, dims) = conv2d_host_slices(g, g_dims, &flipped, [c, o, kh, kw], None, &transposed);
     assert_eq!(dims, x_dims, "conv2d_input_grad: the output gradient does not match the input");
     Some(out)
 }
