@@ -7,7 +7,8 @@
 //! stride-1 convolution is the host convolution of the output gradient with the flipped,
 //! transposed weight (Winograd where the layer suits it, as in inference; the forward itself
 //! keeps plain products, see `conv2d_host_direct_slices`), and the weight gradient is `G · Colsᵀ`, the output gradient (`O x P`) by the forward's own column matrix, tiles of
-//! a thousand and more pixels deep, summed over tiles in one accumulator per worker. burn's
+//! a thousand and more pixels deep, summed over a fixed partition of the tiles (the same sums
+//! on any thread count, so training stays reproducible). burn's
 //! backward stays the reference and the path for what these do not take (strided input
 //! gradients, groups).
 
@@ -22,6 +23,9 @@ use crate::product::matmul_transposed_accumulate;
 /// Column-matrix elements per weight-gradient tile: deep enough (pixels) for a well-shaped
 /// product, small enough for a worker's buffer (16 MiB).
 const WEIGHT_GRAD_COLUMNS: usize = 1 << 22;
+
+/// Groups of tiles whose weight gradients are summed apart (in parallel), then in order.
+const GROUPS: usize = 8;
 
 /// The gradient of `conv2d(x, wt)` (stride 1, dilation 1, one group) with respect to `x`, given
 /// the output gradient `g`: the convolution of `g` with the weight flipped in both axes and its
@@ -82,11 +86,16 @@ pub fn conv2d_weight_grad(
     assert_eq!(g.len(), n * o * plane, "conv2d_weight_grad: the output gradient is not [{n}, {o}, {out_h}, {out_w}]");
     let rows_per_tile = (WEIGHT_GRAD_COLUMNS / k.max(1) / out_w.max(1)).clamp(1, out_h.max(1));
     let tiles = out_h.div_ceil(rows_per_tile);
-    (0..n * tiles)
+    // A fixed partition of the jobs into groups, each summed in order into its own accumulator,
+    // and the groups summed in order: the same sums whatever the thread count or the work
+    // stealing, so training stays reproducible bit for bit.
+    let jobs = n * tiles;
+    let groups = jobs.min(GROUPS);
+    let partials: Vec<Vec<f32>> = (0..groups)
         .into_par_iter()
-        .fold(
-            || vec![0.0f32; o * k],
-            |mut acc, job| {
+        .map(|group| {
+            let mut acc = vec![0.0f32; o * k];
+            for job in group * jobs / groups..(group + 1) * jobs / groups {
                 let (b, tile) = (job / tiles, job % tiles);
                 let (oy0, oy1) = (tile * rows_per_tile, ((tile + 1) * rows_per_tile).min(out_h));
                 let p = (oy1 - oy0) * out_w;
@@ -99,16 +108,15 @@ pub fn conv2d_weight_grad(
                     let g_tile = &g[b * o * plane + oy0 * out_w..];
                     matmul_transposed_accumulate(&mut acc, k, g_tile, plane, col, p, [o, k, p]);
                 });
-                acc
-            },
-        )
-        .reduce(
-            || vec![0.0f32; o * k],
-            |mut a, b| {
-                a.iter_mut().zip(&b).for_each(|(a, b)| *a += b);
-                a
-            },
-        )
+            }
+            acc
+        })
+        .collect();
+    let mut total = vec![0.0f32; o * k];
+    for partial in &partials {
+        total.iter_mut().zip(partial).for_each(|(t, v)| *t += v);
+    }
+    total
 }
 
 thread_local! {
@@ -128,4 +136,42 @@ pub fn conv2d_bias_grad(g: &[f32], [n, o, plane]: [usize; 3]) -> Vec<f32> {
                 as f32
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The weight gradient is the same, bit for bit, on one thread and on three, and equals
+    /// the plain sum `Σ g·x` of its definition.
+    #[test]
+    fn the_weight_gradient_is_reproducible_and_right() {
+        let (n, c, o, h, w) = (2, 5, 4, 33, 29);
+        let value = |i: usize, seed: usize| ((i * 2_654_435_761 + seed * 97) % 1999) as f32 / 999.0 - 1.0;
+        let x: Vec<f32> = (0..n * c * h * w).map(|i| value(i, 1)).collect();
+        let g: Vec<f32> = (0..n * o * h * w).map(|i| value(i, 2)).collect();
+        let options = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
+        let on = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| conv2d_weight_grad(&x, [n, c, h, w], &g, [o, c, 3, 3], &options))
+        };
+        let one = on(1);
+        assert_eq!(one, on(3), "bit-identical on one and three threads");
+        for (oc, ic, ky, kx) in [(0, 0, 0, 0), (3, 4, 2, 1), (1, 2, 1, 1)] {
+            let mut want = 0.0f64;
+            for b in 0..n {
+                for y in 0..h {
+                    for xx in 0..w {
+                        let (iy, ix) = ((y + ky) as isize - 1, (xx + kx) as isize - 1);
+                        if (0..h as isize).contains(&iy) && (0..w as isize).contains(&ix) {
+                            let xv = x[((b * c + ic) * h + iy as usize) * w + ix as usize];
+                            want += f64::from(g[((b * o + oc) * h + y) * w + xx] * xv);
+                        }
+                    }
+                }
+            }
+            let got = one[((oc * c + ic) * 3 + ky) * 3 + kx];
+            assert!((f64::from(got) - want).abs() < 1e-3, "({oc}, {ic}, {ky}, {kx}): {got} vs {want}");
+        }
+    }
 }
