@@ -19,7 +19,8 @@ use crate::errors::{Kind, from_library, guarded, input};
 /// A loaded model (see `dgstereo.Model`).
 #[pyclass(module = "dgstereo._dgstereo", frozen)]
 pub struct Engine {
-    inner: LibEngine,
+    /// Boxed: the engine is aligned to 64 bytes, more than the interpreter aligns its objects.
+    inner: Box<LibEngine>,
 }
 
 /// `prior`: `none`, `file:DIR`, `depth-anything-v2:WEIGHTS` (or `dav2:WEIGHTS`).
@@ -97,7 +98,7 @@ impl Engine {
             slow_fast_gru,
         };
         let inner = py.detach(|| guarded(|| LibEngine::load_with_given_priors(&config)));
-        Ok(Self { inner: from_library(inner, Kind::Error)? })
+        Ok(Self { inner: Box::new(from_library(inner, Kind::Error)?) })
     }
 
     /// The weights file.
