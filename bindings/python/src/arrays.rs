@@ -68,7 +68,8 @@ pub fn mask_to_array<'py>(py: Python<'py>, m: Mask) -> PyResult<Bound<'py, PyArr
 
 /// An image as an `HxWx3` `float32` array (0..255).
 pub fn image_to_array<'py>(py: Python<'py>, img: &RgbImage) -> PyResult<Bound<'py, PyArray3<f32>>> {
-    let a = Array3::from_shape_vec((img.height, img.width, 3), img.to_interleaved()).map_err(|e| input(e.to_string()))?;
+    let a =
+        Array3::from_shape_vec((img.height, img.width, 3), img.to_interleaved()).map_err(|e| input(e.to_string()))?;
     Ok(a.into_pyarray(py))
 }
 

@@ -92,7 +92,9 @@ pub fn write_pfm(path: PathBuf, array: &Bound<'_, PyAny>) -> PyResult<()> {
         Ok(a) => {
             let v = a.as_array();
             match v.shape() {
-                &[h, w] if h > 0 && w > 0 => Pfm { width: w, height: h, channels: 1, data: v.iter().copied().collect() },
+                &[h, w] if h > 0 && w > 0 => {
+                    Pfm { width: w, height: h, channels: 1, data: v.iter().copied().collect() }
+                }
                 &[h, w, 3] if h > 0 && w > 0 => {
                     Pfm { width: w, height: h, channels: 3, data: v.iter().copied().collect() }
                 }

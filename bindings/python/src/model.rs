@@ -45,12 +45,15 @@ fn experiment_configs(path: &Path, run: Option<&str>) -> anyhow::Result<(ModelCo
     let runs = dgstereo_experiment::load(path)?;
     let names = || runs.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ");
     let chosen = match (run, runs.len()) {
-        (Some(name), _) => runs.iter().find(|r| r.name == name).ok_or_else(|| {
-            anyhow::anyhow!("{}: no run named '{name}' (runs: {})", path.display(), names())
-        })?,
+        (Some(name), _) => runs
+            .iter()
+            .find(|r| r.name == name)
+            .ok_or_else(|| anyhow::anyhow!("{}: no run named '{name}' (runs: {})", path.display(), names()))?,
         (None, 1) => &runs[0],
         (None, 0) => anyhow::bail!("{}: the experiment defines no run", path.display()),
-        (None, n) => anyhow::bail!("{}: the experiment has {n} runs; pick one with `run` ({})", path.display(), names()),
+        (None, n) => {
+            anyhow::bail!("{}: the experiment has {n} runs; pick one with `run` ({})", path.display(), names())
+        }
     };
     Ok((chosen.config.model.clone(), chosen.config.prior.clone()))
 }
@@ -161,13 +164,14 @@ impl Engine {
         name: &str,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
         let min_size: MinSize = min_size.parse().map_err(|e: String| input(format!("`min_size` {e}")))?;
-        let options =
-            PredictOptions { iters, max_size, min_size, memory_budget, corr: parse_corr(corr)?, lr_check };
+        let options = PredictOptions { iters, max_size, min_size, memory_budget, corr: parse_corr(corr)?, lr_check };
         from_library(self.inner.check(&options), Kind::Input)?;
         let (l, r) = (arrays::image(left, "left")?, arrays::image(right, "right")?);
         from_library(dgstereo_inference::check_same_size(&l, &r), Kind::Input)?;
         let maps = match &prior {
-            Some((pl, pr)) => Some(PriorMaps { left: arrays::map(pl, "prior[0]")?, right: arrays::map(pr, "prior[1]")? }),
+            Some((pl, pr)) => {
+                Some(PriorMaps { left: arrays::map(pl, "prior[0]")?, right: arrays::map(pr, "prior[1]")? })
+            }
             None => None,
         };
         match (&maps, self.inner.model_config().needs_prior()) {

@@ -410,6 +410,38 @@ mod tests {
     }
 
     #[test]
+    fn a_model_with_a_prior_takes_given_maps_when_none_is_configured() {
+        use crate::working_size::MinSize;
+        let config = EngineConfig {
+            weights: Some(crate::weights::asset(crate::weights::DEFAULT_WITH_PRIOR).unwrap()),
+            ..EngineConfig::default()
+        };
+        let e = Engine::load(&config).err().expect("a prior model without a prior loads only with given maps");
+        assert!(e.to_string().contains("set `prior`"), "{e}");
+        let engine = Engine::load_with_given_priors(&config).unwrap();
+        assert!(engine.takes_given_priors());
+        let left = RgbImage::from_fn(64, 48, |x, y| [(x * 4) as f32, (y * 5) as f32, ((x * y) % 255) as f32]);
+        let right =
+            RgbImage::from_fn(64, 48, |x, y| [((x + 3) * 4) as f32, (y * 5) as f32, (((x + 3) * y) % 255) as f32]);
+        let quick = PredictOptions { iters: 1, min_size: MinSize::Off, ..PredictOptions::default() };
+        let e = engine.predict(&left, &right, "ramp", &quick).unwrap_err();
+        assert!(e.to_string().contains("prior maps"), "{e}");
+        // Maps of half the size, resized by the engine; the left-right check mirrors them.
+        let ramp = |shift: f32| {
+            DisparityMap::from_vec(32, 24, (0..32 * 24).map(|i| 1.0 + ((i % 32) as f32 + shift) / 32.0).collect())
+                .unwrap()
+        };
+        let maps = PriorMaps { left: ramp(0.0), right: ramp(1.5) };
+        let options = PredictOptions { lr_check: Some(2.0), ..quick };
+        let p = engine.predict_with_prior(&left, &right, &maps, &options).unwrap();
+        assert_eq!((p.disparity.width, p.disparity.height), (64, 48));
+        assert!(p.disparity.data.iter().all(|d| d.is_finite()) && p.info.prior_seconds.is_some());
+        let bad = PriorMaps { left: DisparityMap::filled(32, 24, f32::NAN), right: ramp(0.0) };
+        let e = engine.predict_with_prior(&left, &right, &bad, &options).unwrap_err();
+        assert!(e.to_string().contains("non-finite"), "{e}");
+    }
+
+    #[test]
     fn views_of_different_sizes_are_refused_naming_both_sizes() {
         let (a, b) = (RgbImage::new(40, 30), RgbImage::new(41, 30));
         assert!(check_same_size(&a, &a).is_ok());
