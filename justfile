@@ -6,7 +6,7 @@ demo:
 
 # The test suite, as CI runs it.
 test:
-    cargo test --workspace
+    scripts/test
 
 # CI exactly.
 ci:

@@ -26,6 +26,9 @@ use dgstereo_data::{DisparityMap, Mask, RgbImage};
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
+use burn::tensor::{Tensor, TensorData};
+use dgstereo_core::DepthPrior;
+
 use crate::consistency::{fill_rejected, mirror_disparity, mirror_rgb, rejected_pixels};
 use crate::convert::{disparity_map, image_tensor};
 use crate::cost_volume::corr_for;
@@ -64,6 +67,45 @@ pub struct Prediction {
     pub info: RunInfo,
 }
 
+/// A depth prior computed elsewhere for one pair ([`Engine::predict_with_prior`]): the relative
+/// inverse depth (larger = nearer, any scale) of each view, at any size; the engine resizes it
+/// bilinearly to the network's input, as a file prior is.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PriorMaps {
+    /// Prior of the left view.
+    pub left: DisparityMap,
+    /// Prior of the right view.
+    pub right: DisparityMap,
+}
+
+impl PriorMaps {
+    /// The maps of the mirrored, swapped pair (what the left-right check's second pass sees).
+    fn mirrored(&self) -> Self {
+        Self { left: mirror_disparity(&self.right), right: mirror_disparity(&self.left) }
+    }
+
+    /// The prior tensors at the network's input size `[height, width]`.
+    fn at_size(&self, size: [usize; 2], device: &Device) -> DepthPrior {
+        let tensor = |m: &DisparityMap| {
+            let t = Tensor::<4>::from_data(TensorData::new(m.data.clone(), [1, 1, m.height, m.width]), device);
+            dgstereo_kernels::resize_bilinear(t, size, true)
+        };
+        DepthPrior { left: tensor(&self.left), right: tensor(&self.right) }
+    }
+
+    fn check(&self) -> anyhow::Result<()> {
+        for (view, m) in [("left", &self.left), ("right", &self.right)] {
+            if m.width == 0 || m.height == 0 || m.data.len() != m.width * m.height {
+                bail!("`prior`: the {view} map is {}x{} with {} values", m.width, m.height, m.data.len());
+            }
+            if let Some(bad) = m.data.iter().find(|v| !v.is_finite()) {
+                bail!("`prior`: the {view} map holds a non-finite value ({bad})");
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Checks that the two views of a pair have one size.
 pub fn check_same_size(left: &RgbImage, right: &RgbImage) -> anyhow::Result<()> {
     if (left.width, left.height) != (right.width, right.height) {
@@ -93,11 +135,23 @@ pub struct Engine {
     preset_iters: Option<usize>,
     /// Where the model configuration came from.
     source: String,
+    /// Whether a model with a depth prior was loaded without one, its maps given with each call.
+    prior_per_call: bool,
 }
 
 impl Engine {
     /// Loads the weights into the configured model (see [`EngineConfig`]) and builds the prior.
     pub fn load(config: &EngineConfig) -> anyhow::Result<Self> {
+        Self::load_inner(config, false)
+    }
+
+    /// As [`Engine::load`], except that a model with a depth prior may load without `prior`:
+    /// each pair's prior maps then come with [`Engine::predict_with_prior`].
+    pub fn load_with_given_priors(config: &EngineConfig) -> anyhow::Result<Self> {
+        Self::load_inner(config, true)
+    }
+
+    fn load_inner(config: &EngineConfig, priors_given: bool) -> anyhow::Result<Self> {
         let device = config.device.device_with_precision(config.precision)?;
         let prior_config = &config.prior;
         if config.precision != Precision::F32 && prior_config.gives_prior() {
@@ -144,11 +198,12 @@ impl Engine {
         } else {
             None
         };
-        if model.config.needs_prior() && prior.is_none() {
+        let prior_per_call = priors_given && model.config.needs_prior() && prior.is_none();
+        if model.config.needs_prior() && prior.is_none() && !prior_per_call {
             bail!("this model uses a depth prior (fusion or guidance): set `prior` (Depth Anything V2 or files)");
         }
         let file_prior = prior.is_some() && matches!(prior_config, PriorConfig::File { .. });
-        Ok(Self { model, prior, file_prior, weights, device, notes, preset_iters, source })
+        Ok(Self { model, prior, file_prior, weights, device, notes, preset_iters, source, prior_per_call })
     }
 
     /// The weights file.
@@ -189,6 +244,12 @@ impl Engine {
         &self.notes
     }
 
+    /// Whether each pair's prior maps come with the call ([`Engine::load_with_given_priors`] of a
+    /// model with a depth prior and no `prior` configured).
+    pub fn takes_given_priors(&self) -> bool {
+        self.prior_per_call
+    }
+
     /// Checks `options` for this engine: [`PredictOptions::validate`], and that a left-right
     /// check has a prior of mirrored views.
     pub fn check(&self, options: &PredictOptions) -> anyhow::Result<()> {
@@ -221,14 +282,47 @@ impl Engine {
         name: &str,
         options: &PredictOptions,
     ) -> anyhow::Result<Prediction> {
+        if self.prior_per_call {
+            bail!("this model uses a depth prior and none was configured: pass the pair's prior maps (`prior`)");
+        }
+        self.predict_inner(left, right, name, None, options)
+    }
+
+    /// [`Engine::predict`] with the pair's depth prior computed elsewhere, in place of the
+    /// configured provider's (with `lr_check`, the second pass sees the maps mirrored and
+    /// swapped, as it sees the views).
+    pub fn predict_with_prior(
+        &self,
+        left: &RgbImage,
+        right: &RgbImage,
+        prior: &PriorMaps,
+        options: &PredictOptions,
+    ) -> anyhow::Result<Prediction> {
+        if !self.model.config.needs_prior() {
+            bail!("`prior`: this model uses no depth prior; leave the prior maps out");
+        }
+        prior.check()?;
+        self.predict_inner(left, right, "pair", Some(prior), options)
+    }
+
+    fn predict_inner(
+        &self,
+        left: &RgbImage,
+        right: &RgbImage,
+        name: &str,
+        given: Option<&PriorMaps>,
+        options: &PredictOptions,
+    ) -> anyhow::Result<Prediction> {
         self.check(options)?;
         check_same_size(left, right)?;
-        let (disparity, info) = self.network_disparity(left, right, name, options)?;
+        let (disparity, info) = self.network_disparity(left, right, name, given, options)?;
         let Some(threshold) = options.lr_check else {
             return Ok(Prediction { disparity, info });
         };
         // The right view's disparity is the left one of the mirrored, swapped pair.
-        let (mirrored, mirrored_info) = self.network_disparity(&mirror_rgb(right), &mirror_rgb(left), name, options)?;
+        let mirrored_prior = given.map(PriorMaps::mirrored);
+        let (mirrored, mirrored_info) =
+            self.network_disparity(&mirror_rgb(right), &mirror_rgb(left), name, mirrored_prior.as_ref(), options)?;
         let rejected = rejected_pixels(&disparity, &mirror_disparity(&mirrored), threshold);
         let filled = fill_rejected(&disparity, &rejected);
         let prior_seconds = info.prior_seconds.zip(mirrored_info.prior_seconds).map(|(a, b)| a + b);
@@ -241,6 +335,7 @@ impl Engine {
         left: &RgbImage,
         right: &RgbImage,
         name: &str,
+        given: Option<&PriorMaps>,
         options: &PredictOptions,
     ) -> anyhow::Result<(DisparityMap, RunInfo)> {
         let (w, h) = (left.width, left.height);
@@ -256,14 +351,15 @@ impl Engine {
         let corr = self.choose_corr(options, l.width, l.height);
         let (lt, rt) = (image_tensor(&l, &self.device), image_tensor(&r, &self.device));
         let prior_start = Instant::now();
-        let prior = match &self.prior {
-            Some(p) => p.provide(&PriorInput {
+        let prior = match (given, &self.prior) {
+            (Some(maps), _) => Some(maps.at_size([l.height, l.width], &self.device)),
+            (None, Some(p)) => p.provide(&PriorInput {
                 left: lt.clone(),
                 right: rt.clone(),
                 gt_disparity: None,
                 names: vec![name.to_string()],
             })?,
-            None => None,
+            (None, None) => None,
         };
         let prior_seconds = prior.is_some().then(|| prior_start.elapsed().as_secs_f64());
         let pred = self.model.predict(lt, rt, prior.as_ref(), options.iters, false, Some(corr))?;
@@ -311,6 +407,38 @@ mod tests {
         assert_eq!(engine.predict(&left, &right, "ramp", &tight).unwrap().info.corr, CorrelationImplementation::Alt);
         let e = engine.predict(&left, &right, "ramp", &PredictOptions { iters: 0, ..quick }).unwrap_err();
         assert!(e.to_string().contains("`iters`"), "{e}");
+    }
+
+    #[test]
+    fn a_model_with_a_prior_takes_given_maps_when_none_is_configured() {
+        use crate::working_size::MinSize;
+        let config = EngineConfig {
+            weights: Some(crate::weights::asset(crate::weights::DEFAULT_WITH_PRIOR).unwrap()),
+            ..EngineConfig::default()
+        };
+        let e = Engine::load(&config).err().expect("a prior model without a prior loads only with given maps");
+        assert!(e.to_string().contains("set `prior`"), "{e}");
+        let engine = Engine::load_with_given_priors(&config).unwrap();
+        assert!(engine.takes_given_priors());
+        let left = RgbImage::from_fn(64, 48, |x, y| [(x * 4) as f32, (y * 5) as f32, ((x * y) % 255) as f32]);
+        let right =
+            RgbImage::from_fn(64, 48, |x, y| [((x + 3) * 4) as f32, (y * 5) as f32, (((x + 3) * y) % 255) as f32]);
+        let quick = PredictOptions { iters: 1, min_size: MinSize::Off, ..PredictOptions::default() };
+        let e = engine.predict(&left, &right, "ramp", &quick).unwrap_err();
+        assert!(e.to_string().contains("prior maps"), "{e}");
+        // Maps of half the size, resized by the engine; the left-right check mirrors them.
+        let ramp = |shift: f32| {
+            DisparityMap::from_vec(32, 24, (0..32 * 24).map(|i| 1.0 + ((i % 32) as f32 + shift) / 32.0).collect())
+                .unwrap()
+        };
+        let maps = PriorMaps { left: ramp(0.0), right: ramp(1.5) };
+        let options = PredictOptions { lr_check: Some(2.0), ..quick };
+        let p = engine.predict_with_prior(&left, &right, &maps, &options).unwrap();
+        assert_eq!((p.disparity.width, p.disparity.height), (64, 48));
+        assert!(p.disparity.data.iter().all(|d| d.is_finite()) && p.info.prior_seconds.is_some());
+        let bad = PriorMaps { left: DisparityMap::filled(32, 24, f32::NAN), right: ramp(0.0) };
+        let e = engine.predict_with_prior(&left, &right, &bad, &options).unwrap_err();
+        assert!(e.to_string().contains("non-finite"), "{e}");
     }
 
     #[test]

@@ -39,7 +39,7 @@ pub mod working_size;
 pub use calibration::Calibration;
 pub use cost_volume::{CorrChoice, DEFAULT_MEMORY_BUDGET, corr_for};
 pub use dgstereo_data::{DisparityMap, Mask, RgbImage};
-pub use engine::{Engine, Prediction, RunInfo, check_same_size};
+pub use engine::{Engine, Prediction, PriorMaps, RunInfo, check_same_size};
 pub use options::{EngineConfig, PredictOptions};
 pub use pointcloud::{PlyEncoding, PointCloud};
 pub use working_size::MinSize;

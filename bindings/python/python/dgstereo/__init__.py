@@ -1,0 +1,250 @@
+"""dgstereo: RAFT-Stereo stereo matching with a monocular depth prior, in Rust.
+
+>>> import dgstereo
+>>> model = dgstereo.Model()                    # the bundled default weights
+>>> disp = model.predict(left, right, iters=32)  # HxW float32, positive disparity (px)
+>>> dgstereo.metrics(disp, gt)["epe"]
+
+Images are ``HxWx3`` (RGB) or ``HxW`` (grey) arrays, ``uint8`` or float in 0..255, of any
+strides. Errors are :class:`dgstereo.Error`; bad arguments also are ``ValueError``
+(:class:`InputError`), files also ``OSError`` (:class:`FileError`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from typing import Any, Optional, Tuple, Union
+
+import numpy as np
+
+from . import _dgstereo
+from .errors import Error, FileError, InputError
+
+__all__ = [
+    "Model",
+    "metrics",
+    "depth",
+    "read_pfm",
+    "write_pfm",
+    "read_image",
+    "Error",
+    "InputError",
+    "FileError",
+]
+
+#: Bytes the materialised cost volume may take with ``corr="auto"`` (4 GiB).
+DEFAULT_MEMORY_BUDGET: int = _dgstereo.DEFAULT_MEMORY_BUDGET
+
+#: Update iterations when neither ``iters`` nor a checkpoint's preset gives them.
+DEFAULT_ITERS = 32
+
+#: The threshold (px) of ``lr_check=True``.
+DEFAULT_LR_CHECK = 2.0
+
+_NATIVE = (np.dtype(np.uint8), np.dtype(np.float32), np.dtype(np.float64))
+_UNITS = {"": 1, "b": 1, "k": 10**3, "kb": 10**3, "kib": 2**10, "m": 10**6, "mb": 10**6,
+          "mib": 2**20, "g": 10**9, "gb": 10**9, "gib": 2**30, "t": 10**12, "tb": 10**12, "tib": 2**40}
+
+
+def _array(x: Any, what: str) -> np.ndarray:
+    """``x`` as an array the native module reads: uint8, float32 or float64 in native byte
+    order (other numeric dtypes become float32); views and strides are kept."""
+    a = np.asarray(x)
+    if a.dtype in _NATIVE and a.dtype.isnative:
+        return a
+    if a.dtype.kind in "uif":
+        return a.astype(np.float32)
+    raise InputError(f"`{what}`: expected a numeric array, got dtype {a.dtype}")
+
+
+def _bytes(budget: Union[int, str]) -> int:
+    if isinstance(budget, (int, np.integer)) and not isinstance(budget, bool):
+        if budget < 0:
+            raise InputError(f"`memory_budget` {budget}: must not be negative")
+        return int(budget)
+    m = re.fullmatch(r"\s*([0-9]+(?:\.[0-9]*)?)\s*([A-Za-z]*)\s*", str(budget))
+    if not m or m.group(2).lower() not in _UNITS:
+        raise InputError(f"`memory_budget` {budget!r}: not a size like 4GiB or a number of bytes")
+    return int(float(m.group(1)) * _UNITS[m.group(2).lower()])
+
+
+class Model:
+    """A stereo model loaded once, predicting the disparity of rectified pairs.
+
+    Args:
+        weights: a dgstereo ``.safetensors`` file or an official RAFT-Stereo ``.pth``
+            checkpoint (its architecture read from its tensors); ``None`` for the bundled
+            default.
+        experiment: an experiment ``.toml`` whose model (and prior) configuration the weights
+            were trained with; ``run`` picks one run of a sweep.
+        prior: the depth prior, replacing the experiment's: ``"none"``, ``"file:DIR"`` or
+            ``"depth-anything-v2:WEIGHTS"``. A model with a prior and none configured takes
+            the prior maps with each :meth:`predict` call (``prior=(left, right)``).
+        device: ``"cpu"`` or ``"gpu"`` (a build with the GPU backend).
+        precision: ``"f32"``, ``"f16"`` or ``"bf16"``.
+        slow_fast_gru: replaces the configuration's slow-fast GRU schedule.
+
+    A model may be shared by threads: :meth:`predict` releases the GIL for the whole
+    prediction, so calls run at once (sharing the CPU's thread pool) without a lock.
+    """
+
+    def __init__(
+        self,
+        weights: Optional[Union[str, os.PathLike]] = None,
+        *,
+        experiment: Optional[Union[str, os.PathLike]] = None,
+        run: Optional[str] = None,
+        prior: Optional[str] = None,
+        device: str = "cpu",
+        precision: str = "f32",
+        slow_fast_gru: Optional[bool] = None,
+    ) -> None:
+        path = lambda p: None if p is None else os.fspath(p)  # noqa: E731
+        self._engine = _dgstereo.Engine(
+            path(weights), path(experiment), run, prior, device, precision, slow_fast_gru
+        )
+        self._config = json.loads(self._engine.config_json)
+
+    @property
+    def config(self) -> dict:
+        """The model configuration (the serde form of the library's ``ModelConfig``)."""
+        return json.loads(json.dumps(self._config))
+
+    @property
+    def weights(self) -> str:
+        """The weights file."""
+        return os.fspath(self._engine.weights)
+
+    @property
+    def summary(self) -> str:
+        """The configuration on one line, with where it came from."""
+        return self._engine.summary
+
+    @property
+    def notes(self) -> list:
+        """What loading chose on the caller's behalf (a fallback, an ignored prior)."""
+        return self._engine.notes
+
+    @property
+    def default_iters(self) -> int:
+        """Iterations :meth:`predict` runs by default: an official checkpoint's preset, else 32."""
+        return self._engine.preset_iters or DEFAULT_ITERS
+
+    @property
+    def uses_prior(self) -> bool:
+        """Whether the model uses a depth prior."""
+        return self._engine.uses_prior
+
+    def __repr__(self) -> str:
+        return f"dgstereo.Model({self.weights!r}, {self.summary})"
+
+    def predict(
+        self,
+        left: Any,
+        right: Any,
+        *,
+        iters: Optional[int] = None,
+        prior: Optional[Tuple[Any, Any]] = None,
+        max_size: Optional[int] = None,
+        min_size: Union[str, int, None] = "auto",
+        memory_budget: Union[int, str] = DEFAULT_MEMORY_BUDGET,
+        corr: str = "auto",
+        lr_check: Union[bool, float] = False,
+        name: str = "pair",
+        return_info: bool = False,
+    ):
+        """The disparity of a rectified pair: ``HxW`` float32, in pixels, positive
+        (``x_right = x_left - d``), at the left image's size. The same as ``dgstereo infer``
+        with the same options.
+
+        Args:
+            left, right: ``HxWx3`` or ``HxW`` arrays, uint8 or float in 0..255, one size.
+            iters: update iterations (default :attr:`default_iters`).
+            prior: ``(left, right)`` ``HxW`` relative inverse depth maps (larger = nearer) of a
+                model with a depth prior, computed elsewhere (any size; resized bilinearly).
+            max_size: downscale pairs whose longer side exceeds this.
+            min_size: ``"auto"`` (900 for 1/8-resolution models), ``None``/``"off"``, or pixels.
+            memory_budget: bytes (or ``"4GiB"``) for the materialised cost volume.
+            corr: ``"auto"``, ``"reg"`` (materialised) or ``"alt"`` (on the fly).
+            lr_check: left-right check (``True``: 2 px, or a threshold in pixels).
+            name: the pair's name, by which a ``file:`` prior finds its maps.
+            return_info: also return a dict (``network_size``, ``corr``, ``rejected`` mask of
+                the pixels the check replaced, ``prior_seconds``).
+        """
+        if iters is None:
+            iters = self.default_iters
+        if isinstance(iters, bool) or not isinstance(iters, (int, np.integer)) or iters < 1:
+            raise InputError(f"`iters` {iters!r}: must be an integer of at least 1")
+        if min_size is None:
+            min_size = "off"
+        if lr_check is True:
+            threshold: Optional[float] = DEFAULT_LR_CHECK
+        elif lr_check is False or lr_check is None:
+            threshold = None
+        else:
+            threshold = float(lr_check)
+        if max_size is not None and (isinstance(max_size, bool) or int(max_size) < 0):
+            raise InputError(f"`max_size` {max_size!r}: must be a number of pixels")
+        if prior is not None:
+            if not (isinstance(prior, (tuple, list)) and len(prior) == 2):
+                raise InputError("`prior`: expected a pair (left, right) of HxW arrays")
+            prior = (_array(prior[0], "prior[0]"), _array(prior[1], "prior[1]"))
+        disp, info = self._engine.predict(
+            _array(left, "left"),
+            _array(right, "right"),
+            int(iters),
+            None if max_size is None else int(max_size),
+            str(min_size),
+            _bytes(memory_budget),
+            corr,
+            threshold,
+            prior,
+            name,
+        )
+        return (disp, info) if return_info else disp
+
+
+def metrics(pred: Any, gt: Any, mask: Any = None, *, max_disp: Optional[float] = None) -> dict:
+    """The disparity metrics of the eval crate over the valid pixels (ground truth finite and
+    > 0, ``mask`` set, below ``max_disp``): ``epe`` (px), ``bad-0.5`` ... ``bad-4`` and
+    ``d1-all`` (percentages), ``valid_pixels``. A non-finite prediction counts as 0; with no
+    valid pixel the metrics are NaN."""
+    m = None if mask is None else np.asarray(mask).astype(bool, copy=False)
+    return _dgstereo.metrics(_array(pred, "pred"), _array(gt, "gt"), m, max_disp)
+
+
+def depth(
+    disparity: Any,
+    fx: Optional[float] = None,
+    baseline: Optional[float] = None,
+    *,
+    doffs: float = 0.0,
+    calib: Optional[Union[str, os.PathLike]] = None,
+) -> np.ndarray:
+    """Depth in metres, ``fx * baseline / (d + doffs)`` (``fx`` in pixels, ``baseline`` in
+    metres), ``inf`` where the disparity is unknown; or from a calibration file ``calib``
+    (Middlebury ``calib.txt``, JSON or ``K.txt``, rescaled to the map's size)."""
+    return _dgstereo.depth(
+        _array(disparity, "disparity"), fx, baseline, float(doffs), None if calib is None else os.fspath(calib)
+    )
+
+
+def read_pfm(path: Union[str, os.PathLike]) -> np.ndarray:
+    """A PFM file as ``HxW`` (``Pf``) or ``HxWx3`` (``PF``) float32, top row first."""
+    return _dgstereo.read_pfm(os.fspath(path))
+
+
+def write_pfm(path: Union[str, os.PathLike], array: Any) -> None:
+    """Writes an ``HxW`` or ``HxWx3`` array as a little-endian PFM (as ``dgstereo infer``)."""
+    a = np.asarray(array)
+    if a.dtype.kind not in "uif":
+        raise InputError(f"`array`: expected a numeric array, got dtype {a.dtype}")
+    _dgstereo.write_pfm(os.fspath(path), a.astype(np.float32, copy=False))
+
+
+def read_image(path: Union[str, os.PathLike]) -> np.ndarray:
+    """A PNG, JPEG, BMP or TIFF picture as ``HxWx3`` float32 in 0..255 (as ``dgstereo infer``
+    reads it)."""
+    return _dgstereo.read_image(os.fspath(path))

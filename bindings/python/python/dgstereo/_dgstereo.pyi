@@ -1,0 +1,64 @@
+"""Type stubs of the native module (the Rust half); use the `dgstereo` package's wrappers."""
+
+import os
+from typing import Optional, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+_Path = Union[str, os.PathLike]
+
+DEFAULT_MEMORY_BUDGET: int
+
+class Engine:
+    def __init__(
+        self,
+        weights: Optional[_Path] = None,
+        experiment: Optional[_Path] = None,
+        run: Optional[str] = None,
+        prior: Optional[str] = None,
+        device: str = "cpu",
+        precision: str = "f32",
+        slow_fast_gru: Optional[bool] = None,
+    ) -> None: ...
+    @property
+    def weights(self) -> str: ...
+    @property
+    def config_json(self) -> str: ...
+    @property
+    def summary(self) -> str: ...
+    @property
+    def preset_iters(self) -> Optional[int]: ...
+    @property
+    def notes(self) -> list[str]: ...
+    @property
+    def uses_prior(self) -> bool: ...
+    @property
+    def takes_given_priors(self) -> bool: ...
+    def predict(
+        self,
+        left: npt.NDArray,
+        right: npt.NDArray,
+        iters: int,
+        max_size: Optional[int] = None,
+        min_size: str = "auto",
+        memory_budget: int = ...,
+        corr: str = "auto",
+        lr_check: Optional[float] = None,
+        prior: Optional[Tuple[npt.NDArray, npt.NDArray]] = None,
+        name: str = "pair",
+    ) -> Tuple[npt.NDArray[np.float32], dict]: ...
+
+def metrics(
+    pred: npt.NDArray, gt: npt.NDArray, mask: Optional[npt.NDArray[np.bool_]] = None, max_disp: Optional[float] = None
+) -> dict[str, float]: ...
+def depth(
+    disparity: npt.NDArray,
+    fx: Optional[float] = None,
+    baseline: Optional[float] = None,
+    doffs: float = 0.0,
+    calib: Optional[_Path] = None,
+) -> npt.NDArray[np.float32]: ...
+def read_pfm(path: _Path) -> npt.NDArray[np.float32]: ...
+def write_pfm(path: _Path, array: npt.NDArray[np.float32]) -> None: ...
+def read_image(path: _Path) -> npt.NDArray[np.float32]: ...

@@ -1,0 +1,111 @@
+//! The library's errors as the package's exception classes, and panics kept on the Rust side.
+//!
+//! The classes live in the pure-Python layer (`dgstereo/errors.py`): [`Error`] derives from
+//! `Exception`, `InputError` also from `ValueError` (bad arrays and options) and `FileError`
+//! also from `OSError` (files that cannot be read, written or parsed). Which one an error
+//! becomes follows its cause chain: a [`dgstereo_core::Error`] of a file or a `std::io::Error`
+//! makes a `FileError`; the caller names the kind of the rest.
+
+use std::panic::{AssertUnwindSafe, catch_unwind};
+
+use pyo3::prelude::*;
+
+/// The exception class an error becomes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// `dgstereo.Error`.
+    Error,
+    /// `dgstereo.InputError` (a `ValueError`).
+    Input,
+    /// `dgstereo.FileError` (an `OSError`).
+    File,
+}
+
+impl Kind {
+    fn class_name(self) -> &'static str {
+        match self {
+            Kind::Error => "Error",
+            Kind::Input => "InputError",
+            Kind::File => "FileError",
+        }
+    }
+}
+
+/// The exception of class `kind` with `message`.
+pub fn raise(kind: Kind, message: impl Into<String>) -> PyErr {
+    let message = message.into();
+    Python::attach(|py| {
+        let made = py
+            .import("dgstereo.errors")
+            .and_then(|m| m.getattr(kind.class_name()))
+            .and_then(|class| class.call1((message.clone(),)));
+        match made {
+            Ok(value) => PyErr::from_value(value),
+            // The pure-Python layer is missing (the module imported on its own).
+            Err(_) => pyo3::exceptions::PyRuntimeError::new_err(message),
+        }
+    })
+}
+
+/// A bad array or option.
+pub fn input(message: impl Into<String>) -> PyErr {
+    raise(Kind::Input, message)
+}
+
+/// An error and its causes on one line, without repeating a cause its parent already quotes.
+pub fn error_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
+}
+
+/// Whether a cause of `e` is a file that could not be read, written or parsed.
+fn is_file_error(e: &anyhow::Error) -> bool {
+    e.chain().any(|cause| {
+        cause.downcast_ref::<std::io::Error>().is_some()
+            || matches!(
+                cause.downcast_ref::<dgstereo_core::Error>(),
+                Some(
+                    dgstereo_core::Error::Io { .. }
+                        | dgstereo_core::Error::Format { .. }
+                        | dgstereo_core::Error::Checkpoint { .. }
+                )
+            )
+    })
+}
+
+/// `e` as an exception: a `FileError` when a file is at fault, else of class `kind`.
+pub fn convert(e: anyhow::Error, kind: Kind) -> PyErr {
+    let kind = if is_file_error(&e) { Kind::File } else { kind };
+    raise(kind, error_line(&e))
+}
+
+/// A library result as a Python one (see [`convert`]).
+pub fn from_library<T>(result: anyhow::Result<T>, kind: Kind) -> PyResult<T> {
+    result.map_err(|e| convert(e, kind))
+}
+
+/// Runs `f`, turning a panic into a `dgstereo.Error` ("internal error: ...") instead of letting
+/// it cross into the interpreter.
+pub fn guarded<T>(f: impl FnOnce() -> anyhow::Result<T>) -> anyhow::Result<T> {
+    match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(result) => result,
+        Err(panic) => {
+            let message = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(anyhow::anyhow!("internal error: {message}"))
+        }
+    }
+}

@@ -1,0 +1,211 @@
+//! `dgstereo._dgstereo.Engine`: the inference library's [`Engine`] as a Python class, which the
+//! pure-Python `dgstereo.Model` wraps.
+//!
+//! One engine serves every thread: `predict` converts the arrays while it holds the
+//! interpreter's lock, then releases it for the whole prediction ([`Python::detach`]), so calls
+//! from several threads run at once (they share burn's thread pool, so each takes longer).
+
+use std::path::{Path, PathBuf};
+
+use dgstereo_inference::{CorrChoice, Engine as LibEngine, EngineConfig, MinSize, PredictOptions, PriorMaps};
+use dgstereo_model::ModelConfig;
+use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::arrays;
+use crate::errors::{Kind, from_library, guarded, input};
+
+/// A loaded model (see `dgstereo.Model`).
+#[pyclass(module = "dgstereo._dgstereo", frozen)]
+pub struct Engine {
+    /// Boxed: the engine is aligned to 64 bytes, more than the interpreter aligns its objects.
+    inner: Box<LibEngine>,
+}
+
+/// `prior`: `none`, `file:DIR`, `depth-anything-v2:WEIGHTS` (or `dav2:WEIGHTS`).
+fn parse_prior(spec: &str) -> PyResult<PriorConfig> {
+    let (kind, arg) = spec.split_once(':').unwrap_or((spec, ""));
+    Ok(match (kind.to_ascii_lowercase().as_str(), arg) {
+        ("none", _) => PriorConfig::None,
+        ("file", dir) if !dir.is_empty() => PriorConfig::File {
+            dir: dir.into(),
+            left: dgstereo_prior::file::DEFAULT_LEFT_PATTERN.into(),
+            right: dgstereo_prior::file::DEFAULT_RIGHT_PATTERN.into(),
+        },
+        ("depth-anything-v2" | "dav2", w) if !w.is_empty() => {
+            PriorConfig::DepthAnythingV2 { weights: w.into(), encoder: None, input_size: DEFAULT_INPUT_SIZE }
+        }
+        _ => return Err(input(format!("`prior` '{spec}': expected none, file:DIR or depth-anything-v2:WEIGHTS"))),
+    })
+}
+
+/// The model and prior configurations of an experiment file's run (the only one, or `run`).
+fn experiment_configs(path: &Path, run: Option<&str>) -> anyhow::Result<(ModelConfig, PriorConfig)> {
+    let runs = dgstereo_experiment::load(path)?;
+    let names = || runs.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ");
+    let chosen = match (run, runs.len()) {
+        (Some(name), _) => runs
+            .iter()
+            .find(|r| r.name == name)
+            .ok_or_else(|| anyhow::anyhow!("{}: no run named '{name}' (runs: {})", path.display(), names()))?,
+        (None, 1) => &runs[0],
+        (None, 0) => anyhow::bail!("{}: the experiment defines no run", path.display()),
+        (None, n) => {
+            anyhow::bail!("{}: the experiment has {n} runs; pick one with `run` ({})", path.display(), names())
+        }
+    };
+    Ok((chosen.config.model.clone(), chosen.config.prior.clone()))
+}
+
+fn parse_corr(s: &str) -> PyResult<CorrChoice> {
+    match s.to_ascii_lowercase().as_str() {
+        "auto" => Ok(CorrChoice::Auto),
+        "reg" => Ok(CorrChoice::Reg),
+        "alt" => Ok(CorrChoice::Alt),
+        _ => Err(input(format!("`corr` '{s}': expected auto, reg or alt"))),
+    }
+}
+
+#[pymethods]
+impl Engine {
+    #[new]
+    #[pyo3(signature = (weights=None, experiment=None, run=None, prior=None, device="cpu", precision="f32", slow_fast_gru=None))]
+    fn new(
+        py: Python<'_>,
+        weights: Option<PathBuf>,
+        experiment: Option<PathBuf>,
+        run: Option<String>,
+        prior: Option<String>,
+        device: &str,
+        precision: &str,
+        slow_fast_gru: Option<bool>,
+    ) -> PyResult<Self> {
+        let device = device.parse().map_err(|e: dgstereo_core::Error| input(format!("`device`: {e}")))?;
+        let precision = precision.parse().map_err(|e| input(format!("`precision`: {e}")))?;
+        let explicit_prior = prior.as_deref().map(parse_prior).transpose()?;
+        let (model, experiment_prior) = match &experiment {
+            Some(path) => {
+                let (m, p) = from_library(experiment_configs(path, run.as_deref()), Kind::Input)?;
+                (Some(m), p)
+            }
+            None if run.is_some() => return Err(input("`run` names a run of an experiment: give `experiment` too")),
+            None => (None, PriorConfig::None),
+        };
+        let config = EngineConfig {
+            weights,
+            model,
+            prior: explicit_prior.unwrap_or(experiment_prior),
+            device,
+            precision,
+            slow_fast_gru,
+        };
+        let inner = py.detach(|| guarded(|| LibEngine::load_with_given_priors(&config)));
+        Ok(Self { inner: Box::new(from_library(inner, Kind::Error)?) })
+    }
+
+    /// The weights file.
+    #[getter]
+    fn weights(&self) -> PathBuf {
+        self.inner.weights().to_path_buf()
+    }
+
+    /// The model configuration as JSON (its serde form).
+    #[getter]
+    fn config_json(&self) -> PyResult<String> {
+        serde_json::to_string(self.inner.model_config()).map_err(|e| input(e.to_string()))
+    }
+
+    /// The configuration on one line, with where it came from.
+    #[getter]
+    fn summary(&self) -> String {
+        format!("{} ({})", self.inner.configuration_summary(), self.inner.configuration_source())
+    }
+
+    /// The iterations of an official checkpoint's preset, else `None`.
+    #[getter]
+    fn preset_iters(&self) -> Option<usize> {
+        self.inner.preset_iters()
+    }
+
+    /// What loading chose on the caller's behalf.
+    #[getter]
+    fn notes(&self) -> Vec<String> {
+        self.inner.notes().to_vec()
+    }
+
+    /// Whether the model uses a depth prior.
+    #[getter]
+    fn uses_prior(&self) -> bool {
+        self.inner.model_config().needs_prior()
+    }
+
+    /// Whether each call must pass the prior maps.
+    #[getter]
+    fn takes_given_priors(&self) -> bool {
+        self.inner.takes_given_priors()
+    }
+
+    /// The disparity of a pair and what happened (a dict).
+    #[pyo3(signature = (left, right, iters, max_size=None, min_size="auto", memory_budget=dgstereo_inference::DEFAULT_MEMORY_BUDGET, corr="auto", lr_check=None, prior=None, name="pair"))]
+    #[allow(clippy::too_many_arguments)]
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        left: &Bound<'py, PyAny>,
+        right: &Bound<'py, PyAny>,
+        iters: usize,
+        max_size: Option<usize>,
+        min_size: &str,
+        memory_budget: u64,
+        corr: &str,
+        lr_check: Option<f32>,
+        prior: Option<(Bound<'py, PyAny>, Bound<'py, PyAny>)>,
+        name: &str,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
+        let min_size: MinSize = min_size.parse().map_err(|e: String| input(format!("`min_size` {e}")))?;
+        let options = PredictOptions { iters, max_size, min_size, memory_budget, corr: parse_corr(corr)?, lr_check };
+        from_library(self.inner.check(&options), Kind::Input)?;
+        let (l, r) = (arrays::image(left, "left")?, arrays::image(right, "right")?);
+        from_library(dgstereo_inference::check_same_size(&l, &r), Kind::Input)?;
+        let maps = match &prior {
+            Some((pl, pr)) => {
+                Some(PriorMaps { left: arrays::map(pl, "prior[0]")?, right: arrays::map(pr, "prior[1]")? })
+            }
+            None => None,
+        };
+        match (&maps, self.inner.model_config().needs_prior()) {
+            (Some(_), false) => return Err(input("`prior`: this model uses no depth prior; leave the prior maps out")),
+            (None, true) if self.inner.takes_given_priors() => {
+                return Err(input(
+                    "this model uses a depth prior and none was configured: pass the pair's prior maps (`prior`)",
+                ));
+            }
+            _ => {}
+        }
+        if let Some(m) = &maps {
+            for (what, map) in [("prior[0]", &m.left), ("prior[1]", &m.right)] {
+                if let Some(bad) = map.data.iter().find(|v| !v.is_finite()) {
+                    return Err(input(format!("`{what}` holds a non-finite value ({bad})")));
+                }
+            }
+        }
+        let engine = &self.inner;
+        let result = py.detach(|| {
+            guarded(|| match &maps {
+                Some(m) => engine.predict_with_prior(&l, &r, m, &options),
+                None => engine.predict(&l, &r, name, &options),
+            })
+        });
+        let prediction = from_library(result, Kind::Error)?;
+        let info = PyDict::new(py);
+        info.set_item("network_size", prediction.info.network_size)?;
+        info.set_item("corr", format!("{:?}", prediction.info.corr).to_ascii_lowercase())?;
+        info.set_item("prior_seconds", prediction.info.prior_seconds)?;
+        match prediction.info.rejected {
+            Some(mask) => info.set_item("rejected", arrays::mask_to_array(py, mask)?)?,
+            None => info.set_item("rejected", py.None())?,
+        }
+        Ok((arrays::map_to_array(py, prediction.disparity)?.into_any(), info))
+    }
+}

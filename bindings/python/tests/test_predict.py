@@ -1,0 +1,110 @@
+"""Model.predict against the command line, over every input kind, from several threads."""
+
+import subprocess
+import threading
+
+import numpy as np
+import pytest
+
+import dgstereo
+from conftest import CONES, cli_binary
+
+QUICK = dict(iters=4, min_size=None)
+
+
+def test_equals_the_command_lines_disparity_on_cones(cones, model, tmp_path):
+    exe = cli_binary()
+    if exe is None:
+        pytest.skip("no dgstereo binary (build it with cargo, or set DGSTEREO_CLI)")
+    subprocess.run(
+        [exe, "infer", "-l", str(CONES / "left_rgb.png"), "-r", str(CONES / "right_rgb.png"),
+         "--iters", "4", "--min-size", "off", "--save", "pfm", "-o", str(tmp_path)],
+        check=True, capture_output=True,
+    )
+    (pfm,) = tmp_path.glob("*_disparity.pfm")
+    expected = dgstereo.read_pfm(pfm)
+    disp = model.predict(*cones, **QUICK)
+    assert disp.shape == (375, 450) and disp.dtype == np.float32
+    np.testing.assert_array_equal(disp, expected)
+    assert np.nanmedian(disp) > 0
+
+
+def test_every_input_kind_gives_the_same_disparity(small, model):
+    left, right = small
+    ref = model.predict(left, right, **QUICK)
+    variants = {
+        "float32": (left.astype(np.float32), right.astype(np.float32)),
+        "float64": (left.astype(np.float64), right.astype(np.float64)),
+        "int64": (left.astype(np.int64), right.astype(np.int64)),
+        "fortran": (np.asfortranarray(left), np.asfortranarray(right)),
+        "view": (np.pad(left, ((2, 2), (5, 5), (0, 0)))[2:-2, 5:-5], np.pad(right, ((2, 2), (5, 5), (0, 0)))[2:-2, 5:-5]),
+        "strided": (np.repeat(left, 2, axis=1)[:, ::2], np.repeat(right, 2, axis=1)[:, ::2]),
+        "big-endian": (left.astype(">f4"), right.astype(">f4")),
+        "list": (left.tolist(), right.tolist()),
+    }
+    for kind, (l, r) in variants.items():
+        np.testing.assert_array_equal(model.predict(l, r, **QUICK), ref, err_msg=kind)
+    # Grey images repeat into the three channels.
+    grey_l, grey_r = left[..., 1], right[..., 1]
+    np.testing.assert_array_equal(
+        model.predict(grey_l, grey_r, **QUICK),
+        model.predict(np.repeat(grey_l[..., None], 3, -1), np.repeat(grey_r[..., None], 3, -1), **QUICK),
+    )
+
+
+def test_options_and_info(small, model):
+    left, right = small
+    disp, info = model.predict(left, right, iters=1, max_size=32, lr_check=True, return_info=True)
+    assert disp.shape == (48, 64)
+    assert info["network_size"] == (32, 24)
+    assert info["rejected"].shape == (48, 64) and info["rejected"].dtype == bool
+    _, info = model.predict(left, right, iters=1, min_size=None, memory_budget=1, return_info=True)
+    assert info["corr"] == "alt"
+    _, info = model.predict(left, right, iters=1, min_size=None, memory_budget="4GiB", return_info=True)
+    assert info["corr"] == "reg" and info["rejected"] is None
+
+
+def test_a_model_serves_several_threads(small, model):
+    left, right = small
+    ref = model.predict(left, right, **QUICK)
+    results, errors = [None] * 4, []
+
+    def work(i):
+        try:
+            results[i] = model.predict(left, right, **QUICK)
+        except Exception as e:  # pragma: no cover - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    for r in results:
+        np.testing.assert_array_equal(r, ref)
+
+
+def test_config_and_properties(model):
+    config = model.config
+    assert isinstance(config, dict) and "encoder" in config and "updater" in config
+    assert model.weights.endswith("raft-stereo-default.safetensors")
+    assert model.default_iters == 32 and not model.uses_prior
+    assert "n_downsample" in model.summary
+
+
+def test_given_prior_maps(root, small):
+    paper = dgstereo.Model(root / "assets" / "weights" / "paper-default.safetensors")
+    assert paper.uses_prior
+    left, right = small
+    y, x = np.mgrid[0:48, 0:64]
+    prior = (1.0 + x / 64.0, 1.0 + (x + 3) / 64.0)
+    disp = paper.predict(left, right, prior=prior, iters=1, min_size=None)
+    assert disp.shape == (48, 64) and np.isfinite(disp).all()
+    # Maps of another size are resized; the left-right check mirrors them.
+    half = tuple(p[::2, ::2] for p in prior)
+    assert paper.predict(left, right, prior=half, iters=1, min_size=None, lr_check=True).shape == (48, 64)
+    with pytest.raises(dgstereo.InputError, match="prior"):
+        paper.predict(left, right, iters=1)
+    with pytest.raises(dgstereo.InputError, match="non-finite"):
+        paper.predict(left, right, prior=(np.full((48, 64), np.nan), prior[1]), iters=1)
