@@ -19,7 +19,7 @@ const DTYPES: &str = "uint8, float32 or float64";
 /// An `HxWx3` (or `HxW`) array as an image; `what` names the argument in errors.
 pub fn image(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<RgbImage> {
     if let Ok(a) = obj.extract::<PyReadonlyArrayDyn<'_, u8>>() {
-        return image_from_view(a.as_array(), |v| f32::from(v), what);
+        return image_from_view(a.as_array(), f32::from, what);
     }
     if let Ok(a) = obj.extract::<PyReadonlyArrayDyn<'_, f32>>() {
         return image_from_view(a.as_array(), |v| v, what);

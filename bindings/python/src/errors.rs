@@ -52,22 +52,6 @@ pub fn input(message: impl Into<String>) -> PyErr {
     raise(Kind::Input, message)
 }
 
-/// An error and its causes on one line, without repeating a cause its parent already quotes.
-pub fn error_line(e: &anyhow::Error) -> String {
-    let mut line = String::new();
-    for cause in e.chain() {
-        let text = cause.to_string();
-        if line.contains(&text) {
-            continue;
-        }
-        if !line.is_empty() {
-            line.push_str(": ");
-        }
-        line.push_str(&text);
-    }
-    line
-}
-
 /// Whether a cause of `e` is a file that could not be read, written or parsed.
 fn is_file_error(e: &anyhow::Error) -> bool {
     e.chain().any(|cause| {
@@ -86,7 +70,7 @@ fn is_file_error(e: &anyhow::Error) -> bool {
 /// `e` as an exception: a `FileError` when a file is at fault, else of class `kind`.
 pub fn convert(e: anyhow::Error, kind: Kind) -> PyErr {
     let kind = if is_file_error(&e) { Kind::File } else { kind };
-    raise(kind, error_line(&e))
+    raise(kind, dgstereo_inference::error_chain(&e))
 }
 
 /// A library result as a Python one (see [`convert`]).

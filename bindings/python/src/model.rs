@@ -5,11 +5,12 @@
 //! interpreter's lock, then releases it for the whole prediction ([`Python::detach`]), so calls
 //! from several threads run at once (they share burn's thread pool, so each takes longer).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use dgstereo_inference::{CorrChoice, Engine as LibEngine, EngineConfig, MinSize, PredictOptions, PriorMaps};
-use dgstereo_model::ModelConfig;
-use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig};
+use dgstereo_inference::{
+    CorrChoice, Engine as LibEngine, EngineConfig, MinSize, PredictOptions, PriorMaps, experiment_configs, parse_prior,
+};
+use dgstereo_prior::PriorConfig;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -21,41 +22,6 @@ use crate::errors::{Kind, from_library, guarded, input};
 pub struct Engine {
     /// Boxed: the engine is aligned to 64 bytes, more than the interpreter aligns its objects.
     inner: Box<LibEngine>,
-}
-
-/// `prior`: `none`, `file:DIR`, `depth-anything-v2:WEIGHTS` (or `dav2:WEIGHTS`).
-fn parse_prior(spec: &str) -> PyResult<PriorConfig> {
-    let (kind, arg) = spec.split_once(':').unwrap_or((spec, ""));
-    Ok(match (kind.to_ascii_lowercase().as_str(), arg) {
-        ("none", _) => PriorConfig::None,
-        ("file", dir) if !dir.is_empty() => PriorConfig::File {
-            dir: dir.into(),
-            left: dgstereo_prior::file::DEFAULT_LEFT_PATTERN.into(),
-            right: dgstereo_prior::file::DEFAULT_RIGHT_PATTERN.into(),
-        },
-        ("depth-anything-v2" | "dav2", w) if !w.is_empty() => {
-            PriorConfig::DepthAnythingV2 { weights: w.into(), encoder: None, input_size: DEFAULT_INPUT_SIZE }
-        }
-        _ => return Err(input(format!("`prior` '{spec}': expected none, file:DIR or depth-anything-v2:WEIGHTS"))),
-    })
-}
-
-/// The model and prior configurations of an experiment file's run (the only one, or `run`).
-fn experiment_configs(path: &Path, run: Option<&str>) -> anyhow::Result<(ModelConfig, PriorConfig)> {
-    let runs = dgstereo_experiment::load(path)?;
-    let names = || runs.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ");
-    let chosen = match (run, runs.len()) {
-        (Some(name), _) => runs
-            .iter()
-            .find(|r| r.name == name)
-            .ok_or_else(|| anyhow::anyhow!("{}: no run named '{name}' (runs: {})", path.display(), names()))?,
-        (None, 1) => &runs[0],
-        (None, 0) => anyhow::bail!("{}: the experiment defines no run", path.display()),
-        (None, n) => {
-            anyhow::bail!("{}: the experiment has {n} runs; pick one with `run` ({})", path.display(), names())
-        }
-    };
-    Ok((chosen.config.model.clone(), chosen.config.prior.clone()))
 }
 
 fn parse_corr(s: &str) -> PyResult<CorrChoice> {
@@ -70,6 +36,8 @@ fn parse_corr(s: &str) -> PyResult<CorrChoice> {
 #[pymethods]
 impl Engine {
     #[new]
+    // One argument per keyword of the Python constructor.
+    #[allow(clippy::too_many_arguments)]
     #[pyo3(signature = (weights=None, experiment=None, run=None, prior=None, device="cpu", precision="f32", slow_fast_gru=None))]
     fn new(
         py: Python<'_>,
@@ -83,7 +51,7 @@ impl Engine {
     ) -> PyResult<Self> {
         let device = device.parse().map_err(|e: dgstereo_core::Error| input(format!("`device`: {e}")))?;
         let precision = precision.parse().map_err(|e| input(format!("`precision`: {e}")))?;
-        let explicit_prior = prior.as_deref().map(parse_prior).transpose()?;
+        let explicit_prior = prior.as_deref().map(|p| parse_prior(p).map_err(|e| input(e.to_string()))).transpose()?;
         let (model, experiment_prior) = match &experiment {
             Some(path) => {
                 let (m, p) = from_library(experiment_configs(path, run.as_deref()), Kind::Input)?;

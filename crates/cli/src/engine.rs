@@ -10,15 +10,14 @@
 //! experiment, a prior that cannot be built, a device that does not exist) is found here, once,
 //! before any pair is read, so `infer` can fail fast on those and keep going on per-pair ones.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
 use dgstereo_core::DeviceChoice;
 use dgstereo_core::device::Precision;
 use dgstereo_data::{DisparityMap, RgbImage};
-use dgstereo_inference::{CorrChoice, EngineConfig, MinSize, PredictOptions, RunInfo};
-use dgstereo_model::ModelConfig;
+use dgstereo_inference::{CorrChoice, EngineConfig, MinSize, PredictOptions, RunInfo, experiment_configs, parse_prior};
 use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig};
 
 /// The threshold of `--lr-check` given without a value, in pixels
@@ -101,21 +100,10 @@ impl ModelArgs {
     }
 }
 
-/// An error and its causes on one line, without repeating a cause its parent already quotes
-/// (the library errors embed their I/O cause in their own message).
+/// An error and its causes on one line ([`dgstereo_inference::error_chain`]), line breaks
+/// included.
 pub fn error_line(e: &anyhow::Error) -> String {
-    let mut line = String::new();
-    for cause in e.chain() {
-        let text = cause.to_string();
-        if line.contains(&text) {
-            continue;
-        }
-        if !line.is_empty() {
-            line.push_str(": ");
-        }
-        line.push_str(&text);
-    }
-    line.replace(['\n', '\r'], " ")
+    dgstereo_inference::error_chain(e).replace(['\n', '\r'], " ")
 }
 
 /// Parses a byte size: a number with an optional `B`, `KB`/`KiB`, `MB`/`MiB`, `GB`/`GiB`, `TB`/`TiB`.
@@ -139,23 +127,6 @@ pub fn parse_bytes(s: &str) -> anyhow::Result<u64> {
     Ok((value * mult) as u64)
 }
 
-/// Parses `--prior`: `none`, `file:DIR`, `depth-anything-v2:WEIGHTS` (also `dav2:WEIGHTS`).
-pub fn parse_prior(spec: &str) -> anyhow::Result<PriorConfig> {
-    let (kind, arg) = spec.split_once(':').unwrap_or((spec, ""));
-    Ok(match (kind.to_ascii_lowercase().as_str(), arg) {
-        ("none", _) => PriorConfig::None,
-        ("file", dir) if !dir.is_empty() => PriorConfig::File {
-            dir: dir.into(),
-            left: dgstereo_prior::file::DEFAULT_LEFT_PATTERN.into(),
-            right: dgstereo_prior::file::DEFAULT_RIGHT_PATTERN.into(),
-        },
-        ("depth-anything-v2" | "dav2", w) if !w.is_empty() => {
-            PriorConfig::DepthAnythingV2 { weights: w.into(), encoder: None, input_size: DEFAULT_INPUT_SIZE }
-        }
-        _ => bail!("--prior '{spec}': expected none, file:DIR or depth-anything-v2:WEIGHTS"),
-    })
-}
-
 /// `--prior-weights`: the experiment's Depth Anything V2 prior (kept inside a cache) with these
 /// weights, or a plain Depth Anything V2 prior when the experiment names none.
 fn with_prior_weights(config: PriorConfig, weights: &std::path::Path) -> PriorConfig {
@@ -174,28 +145,10 @@ fn with_prior_weights(config: PriorConfig, weights: &std::path::Path) -> PriorCo
     }
 }
 
-/// The model and prior configurations of an experiment file's run: the only run, or the one
-/// named `run` when the file resolves to several (a sweep).
-fn experiment_configs(path: &Path, run: Option<&str>) -> anyhow::Result<(ModelConfig, PriorConfig)> {
-    let runs = dgstereo_experiment::load(path)?;
-    let names = || runs.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ");
-    let chosen = match (run, runs.len()) {
-        (Some(name), _) => runs
-            .iter()
-            .find(|r| r.name == name)
-            .with_context(|| format!("{}: no run named '{name}' (runs: {})", path.display(), names()))?,
-        (None, 1) => &runs[0],
-        (None, 0) => bail!("{}: the experiment defines no run", path.display()),
-        (None, _) => {
-            bail!("{}: the experiment has {} runs; pick one with --run NAME ({})", path.display(), runs.len(), names())
-        }
-    };
-    Ok((chosen.config.model.clone(), chosen.config.prior.clone()))
-}
-
 /// The option fields the library's errors name, and the flags that set them.
-const FLAGS: [(&str, &str); 10] = [
+const FLAGS: [(&str, &str); 11] = [
     ("iters", "--iters"),
+    ("run", "--run NAME"),
     ("max_size", "--max-size"),
     ("min_size", "--min-size"),
     ("memory_budget", "--memory-budget"),
@@ -249,13 +202,13 @@ impl Engine {
         let device: DeviceChoice = a.device.parse()?;
         let (model, experiment_prior) = match &a.experiment {
             Some(p) => {
-                let (m, pr) = experiment_configs(p, a.run.as_deref())?;
+                let (m, pr) = experiment_configs(p, a.run.as_deref()).map_err(with_flags)?;
                 (Some(m), pr)
             }
             None => (None, PriorConfig::None),
         };
         let prior = match (&a.prior, &a.prior_weights) {
-            (Some(spec), _) => parse_prior(spec)?,
+            (Some(spec), _) => parse_prior(spec).map_err(with_flags)?,
             (None, Some(w)) => with_prior_weights(experiment_prior, w),
             (None, None) => experiment_prior,
         };
@@ -323,9 +276,7 @@ mod tests {
 
     #[test]
     fn prior_specs_parse() {
-        assert_eq!(parse_prior("none").unwrap(), PriorConfig::None);
-        assert!(matches!(parse_prior("file:/tmp/p").unwrap(), PriorConfig::File { .. }));
-        assert!(matches!(parse_prior("dav2:w.pth").unwrap(), PriorConfig::DepthAnythingV2 { .. }));
-        assert!(parse_prior("file:").is_err() && parse_prior("magic").is_err());
+        let e = with_flags(parse_prior("magic").unwrap_err()).to_string();
+        assert!(e.starts_with("--prior 'magic': expected none"), "{e}");
     }
 }

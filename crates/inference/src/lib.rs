@@ -33,6 +33,7 @@ pub mod cost_volume;
 mod engine;
 pub mod options;
 pub mod pointcloud;
+pub mod specs;
 pub mod weights;
 pub mod working_size;
 
@@ -42,4 +43,5 @@ pub use dgstereo_data::{DisparityMap, Mask, RgbImage};
 pub use engine::{Engine, Prediction, PriorMaps, RunInfo, check_same_size};
 pub use options::{EngineConfig, PredictOptions};
 pub use pointcloud::{PlyEncoding, PointCloud};
+pub use specs::{error_chain, experiment_configs, parse_prior};
 pub use working_size::MinSize;

@@ -16,7 +16,7 @@ use burn::tensor::ops::ConvOptions;
 use dgstereo_core::tensor::reuse_buffer;
 use rayon::prelude::*;
 
-use super::conv::{conv2d_host_direct_slices, conv2d_host_slices, image_columns};
+use super::conv::{conv2d_host_slices, image_columns};
 use crate::geometry::conv_output_size;
 use crate::product::matmul_transposed_accumulate;
 
