@@ -11,7 +11,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use dgstereo_core::DeviceChoice;
+use dgstereo_core::{DeviceChoice, InputPadder};
 use dgstereo_kernels::{Op, Path, Settings, path};
 use dgstereo_model::flops::StageMacs;
 use dgstereo_train::step_timing::{StepSeconds, random_batch};
@@ -69,8 +69,8 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     let (forward, backward, optimizer) = (part(|s| s.forward), part(|s| s.backward), part(|s| s.optimizer));
     let min = times.iter().copied().fold(f64::INFINITY, f64::min);
     let med = median(&mut times);
-    let macs = StageMacs::new(&trainer.parts.model, [h.next_multiple_of(32), w.next_multiple_of(32)])
-        .forward(a.iters, a.batch);
+    let padded = InputPadder::new(h, w, trainer.parts.model.pad_divisor()).padded();
+    let macs = StageMacs::new(&trainer.parts.model, padded).forward(a.iters, a.batch);
     println!(
         "training step: batch {} of {h}x{w}, {} iterations, loss {:?}, device {}, {kernels}, {} threads",
         a.batch,
