@@ -3,10 +3,9 @@
 use burn::module::{Module, Param};
 use burn::nn::Identity;
 use burn::nn::conv::Conv2d;
-use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::tensor::{instance_norm, to_vec};
-use dgstereo_kernels::{PlaneNorm, conv2d_affine_or, conv2d_forward, normalize_planes_or};
+use dgstereo_kernels::{PlaneNorm, conv2d_affine_or, conv2d_forward, normalize_planes_or, rectify};
 use serde::{Deserialize, Serialize};
 
 const EPS: f64 = 1e-5;
@@ -86,7 +85,7 @@ impl Norm {
     pub fn forward_relu(&self, x: Tensor<4>, relu_after: bool) -> Tensor<4> {
         let stock = |x| {
             let y = self.forward(x);
-            if relu_after { relu(y) } else { y }
+            if relu_after { rectify(y) } else { y }
         };
         match self {
             Self::Batch(n) => {

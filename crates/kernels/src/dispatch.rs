@@ -66,7 +66,7 @@ impl Op {
     /// Whether the host kernel has a backward of its own ([`crate::autodiff`]), so that training
     /// takes it too.
     fn has_host_backward(self) -> bool {
-        matches!(self, Self::Conv)
+        matches!(self, Self::Conv | Self::Norm | Self::GruStep)
     }
 
     /// The GPU formulation's route, where the operation has one.
@@ -138,7 +138,8 @@ mod tests {
         let ad = cpu.clone().autodiff();
         assert_eq!(path(&cpu, Op::Conv), Path::Host);
         assert_eq!(path(&ad, Op::Conv), Path::Host, "the convolution's backward is ours");
-        assert_eq!(path(&ad, Op::Norm), Path::Stock, "a norm's is burn's");
+        assert_eq!(path(&ad, Op::Norm), Path::Host, "the instance norm's backward is ours");
+        assert_eq!(path(&ad, Op::Resize), Path::Stock, "a resize's is burn's");
         with_path(Path::Stock, || assert_eq!(path(&ad, Op::Conv), Path::Stock));
         with_path(Path::Gpu, || {
             assert_eq!(path(&cpu, Op::Conv), Path::Gpu);

@@ -19,6 +19,7 @@ pub mod inference;
 pub mod network;
 pub mod official_keys;
 pub mod profile;
+pub mod stage_backward;
 pub mod verify;
 
 pub use config::{EncoderConfig, ModelConfig};

@@ -201,7 +201,7 @@ impl RaftStereo {
 
     /// The images each encoder sees: the fused left view for the context, and for the features
     /// the fused views or the raw ones ([`FusionTarget`]).
-    fn fuse(
+    pub(crate) fn fuse(
         &self,
         left: Tensor<4>,
         right: Tensor<4>,
@@ -223,7 +223,11 @@ impl RaftStereo {
 
     /// The GRUs' initial hidden states (tanh of the first heads) and their gate context terms
     /// (the `context_zqr_convs` of the ReLU of the second heads), finest level first.
-    fn gru_context(&self, context: ContextFeatures, probe: &mut Probe<'_>) -> (Vec<Tensor<4>>, Vec<GateContext>) {
+    pub(crate) fn gru_context(
+        &self,
+        context: ContextFeatures,
+        probe: &mut Probe<'_>,
+    ) -> (Vec<Tensor<4>>, Vec<GateContext>) {
         let levels = context.levels.len();
         let mut hidden: Vec<Tensor<4>> = Vec::with_capacity(levels);
         let mut gates: Vec<GateContext> = Vec::with_capacity(levels);

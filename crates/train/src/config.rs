@@ -410,7 +410,8 @@ impl Default for DataSource {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PhotoTextures {
-    /// The folder of photographs (`scripts/fetch-photo-textures.sh` fills `data/photos`).
+    /// The folder of photographs (`scripts/fetch-photo-textures.sh` fills `data/photos/train` and
+    /// `data/photos/held-out`).
     pub dir: PathBuf,
     /// Share of the surfaces (and backgrounds) textured with a photograph, in (0, 1].
     pub share: f64,

@@ -9,13 +9,12 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::ops::ConvOptions;
-use burn::tensor::{
-    Device, Tensor,
-    activation::{sigmoid, tanh},
-};
+use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_kernels::gpu::matmul_conv::{SharedColumns, shared_columns_apply};
-use dgstereo_kernels::{conv_gru_step_or, conv_options, conv2d_forward_then, conv2d_op_then, flat_pixels};
+use dgstereo_kernels::{
+    conv_gru_step_or, conv_options, conv2d_forward_then, conv2d_op_then, flat_pixels, gru_blend, gru_gates,
+};
 
 /// A ConvGRU whose gates also receive precomputed context terms.
 ///
@@ -88,7 +87,7 @@ impl ConvGru {
         // for both convolutions (`SharedColumns`).
         let shared = self.shared_columns(inputs);
         let zr_context = flat_pixels(ctx.zr.clone());
-        let gates = |zr: Tensor<3>| sigmoid(zr + zr_context);
+        let gates = |zr: Tensor<3>| gru_gates(zr, zr_context);
         let zr = match &shared {
             Some(shared) => {
                 let (weight, bias) = self.gate_weights();
@@ -99,10 +98,7 @@ impl ConvGru {
         let z = flat_pixels(zr.clone().narrow(1, 0, hidden));
         let r = zr.narrow(1, hidden, hidden);
         let (h_flat, q_context) = (flat_pixels(h.clone()), flat_pixels(ctx.q.clone()));
-        let blend = |q: Tensor<3>| {
-            let q = tanh(q + q_context);
-            (z.clone().neg().add_scalar(1.0)) * h_flat + z * q
-        };
+        let blend = |q: Tensor<3>| gru_blend(q, q_context, z, h_flat);
         match shared {
             Some(shared) => {
                 let bias = self.convq.bias.as_ref().map(|b| b.val());
@@ -163,6 +159,8 @@ impl ConvGru {
 
 #[cfg(test)]
 mod tests {
+    use burn::tensor::activation::{sigmoid, tanh};
+
     use super::*;
     use burn::tensor::Distribution;
     use dgstereo_core::default_device;

@@ -54,7 +54,7 @@ pub struct BenchArgs {
     /// Model configuration (a TOML file of `ModelConfig`; default RAFT-Stereo's).
     #[arg(long)]
     pub config: Option<std::path::PathBuf>,
-    /// Also time each stage of one forward pass.
+    /// Also time each stage of one forward pass (with `--train`: each stage's forward and backward, run alone).
     #[arg(long)]
     pub stages: bool,
     /// The machine's peak GFLOP/s, for the share-of-peak column (2 cores here: ~200).

@@ -5,7 +5,9 @@
 //! one-cycle schedule), on a batch of random pairs of the requested size, so the figure is what a
 //! training run pays per step without its data loading; the split comes from the trainer's own
 //! clock ([`Trainer::last_step_seconds`]). The operation count is three times the forward's
-//! (the backward's products are twice the forward's), an estimate.
+//! (the backward's products are twice the forward's), an estimate. `--stages` runs each stage
+//! alone as well ([`dgstereo_model::stage_backward`]), since one backward pass cannot be split by
+//! stage.
 
 use std::process::ExitCode;
 use std::time::Instant;
@@ -14,7 +16,8 @@ use anyhow::{Context, bail};
 use dgstereo_core::{DeviceChoice, InputPadder};
 use dgstereo_kernels::{Op, Path, Settings, path};
 use dgstereo_model::flops::StageMacs;
-use dgstereo_train::step_timing::{StepSeconds, random_batch};
+use dgstereo_train::batch::TensorBatch;
+use dgstereo_train::step_timing::{StageBackward, StepSeconds, random_batch};
 use dgstereo_train::{TrainParts, Trainer};
 
 use super::bench::{BenchArgs, machine_line, median, parse_size, peak_memory_bytes};
@@ -96,5 +99,37 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         Some(b) => println!("peak memory (VmHWM, whole process) {:.0} MiB", b as f64 / (1024.0 * 1024.0)),
         None => println!("peak memory: not reported by this OS"),
     }
+    if a.stages {
+        print_stages(&trainer, &batch, backward)?;
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The `--stages` table: each stage run alone ([`Trainer::stage_backward_seconds`]), the median of
+/// `runs` passes, beside the whole step's median backward.
+fn print_stages(trainer: &Trainer, batch: &TensorBatch, step_backward: f64) -> anyhow::Result<()> {
+    let runs = 3;
+    let passes = (0..runs).map(|_| trainer.stage_backward_seconds(batch)).collect::<Result<Vec<_>, _>>()?;
+    println!("stages run alone, median of {runs} passes (the step's graph without its loss):");
+    println!("| stage | calls | forward (s) | backward (s) | share of the stages' backward | cores busy in backward |");
+    println!("|---|---:|---:|---:|---:|---:|");
+    let stage =
+        |i: usize, f: fn(&StageBackward) -> f64| median(&mut passes.iter().map(|p| f(&p[i])).collect::<Vec<_>>());
+    let backward: Vec<f64> = (0..passes[0].len()).map(|i| stage(i, |s| s.backward_seconds)).collect();
+    let total: f64 = backward.iter().sum();
+    for (i, s) in passes[0].iter().enumerate() {
+        let busy = stage(i, |s| s.backward_cpu_seconds / s.backward_seconds);
+        let busy = if busy.is_finite() { format!("{busy:.2}") } else { "-".into() };
+        println!(
+            "| {} | {} | {:.3} | {:.3} | {:.0} % | {busy} |",
+            s.name,
+            s.calls,
+            stage(i, |s| s.forward_seconds),
+            backward[i],
+            100.0 * backward[i] / total
+        );
+    }
+    println!("| all stages | | | {total:.3} | 100 % |");
+    println!("the whole step's backward (median above): {step_backward:.3} s");
+    Ok(())
 }

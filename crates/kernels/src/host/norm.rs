@@ -85,7 +85,7 @@ const LANES: usize = 8;
 /// `Σ f(v as f64)` over `values`, in [`LANES`] independent partial sums (added in order at the
 /// end) so the additions overlap and vectorise.
 #[inline(always)]
-fn lane_sum(values: &[f32], f: impl Fn(f64) -> f64) -> f64 {
+pub(crate) fn lane_sum(values: &[f32], f: impl Fn(f64) -> f64) -> f64 {
     let mut lanes = [0.0f64; LANES];
     let (chunks, tail) = values.as_chunks::<LANES>();
     for chunk in chunks {

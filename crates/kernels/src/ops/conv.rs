@@ -39,7 +39,7 @@ pub fn conv2d_relu_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
         Some(options) if host_inference(&x.device()) => {
             conv2d_host_rectified(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options, true)
         }
-        _ => conv2d_forward_then(conv, x, burn::tensor::activation::relu),
+        _ => conv2d_forward_then(conv, x, crate::ops::norm::rectify),
     }
 }
 

@@ -1,16 +1,21 @@
 //! Per-channel norms with an optional ReLU, and the residual `relu(a + b)`: one parallel host
-//! pass per plane for CPU inference ([`crate::host::norm`]), burn's operations elsewhere.
+//! pass per plane for CPU inference ([`crate::host::norm`]); in training the instance norm and
+//! `relu(a + b)` are nodes with our backward ([`crate::autodiff::norm`]); burn's operations
+//! elsewhere.
 
 use burn::tensor::Tensor;
 use burn::tensor::activation::relu;
 
+use crate::autodiff;
 use crate::dispatch::{Op, Path, path};
 use crate::host::norm;
 pub use crate::host::norm::PlaneNorm;
 
 /// `norm()` applied to every `(n, c)` plane of `x`, then `max(0, ·)` when `relu`, where the
 /// dispatch takes the host pass (`norm` is called only there); `stock(x)` (burn's norm module and
-/// ReLU, the reference) elsewhere.
+/// ReLU, the reference) elsewhere. Under autodiff the host path takes the instance norm only: an
+/// affine norm's `scale` and `shift` come as plain values, without the gradient their
+/// parameters need, so it keeps `stock`.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output: the same
@@ -20,9 +25,25 @@ pub fn normalize_planes_or(
     relu: bool,
     stock: impl FnOnce(Tensor<4>) -> Tensor<4>,
 ) -> Tensor<4> {
-    match path(&x.device(), Op::Norm) {
+    let device = x.device();
+    match path(&device, Op::Norm) {
+        Path::Host if device.is_autodiff() => match norm() {
+            PlaneNorm::Instance { epsilon } => autodiff::norm::instance_norm(x, epsilon, relu),
+            PlaneNorm::Identity if relu => autodiff::norm::relu(x),
+            PlaneNorm::Affine { .. } | PlaneNorm::Identity => stock(x),
+        },
         Path::Host => norm::normalize_planes(x, &norm(), relu),
         Path::Gpu | Path::Stock => stock(x),
+    }
+}
+
+/// `max(0, x)`: in training on the host path one node with our backward, burn's ReLU elsewhere
+/// (CPU inference folds its ReLUs into the kernels before).
+pub fn rectify<const D: usize>(x: Tensor<D>) -> Tensor<D> {
+    let device = x.device();
+    match path(&device, Op::Norm) {
+        Path::Host if device.is_autodiff() => autodiff::norm::relu(x),
+        _ => relu(x),
     }
 }
 
@@ -31,7 +52,9 @@ pub fn normalize_planes_or(
 /// # Shapes
 /// - `a`, `b`: `[N, C, H, W]`, equal; output: the same
 pub fn add_relu(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
-    match path(&a.device(), Op::Norm) {
+    let device = a.device();
+    match path(&device, Op::Norm) {
+        Path::Host if device.is_autodiff() => autodiff::norm::add_relu(a, b),
         Path::Host => norm::add_relu(a, b),
         Path::Gpu | Path::Stock => relu(a + b),
     }
@@ -40,7 +63,7 @@ pub fn add_relu(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
 #[cfg(test)]
 mod tests {
     use burn::tensor::{Device, Distribution};
-    use dgstereo_core::tensor::{instance_norm, max_abs_diff};
+    use dgstereo_core::tensor::{instance_norm, max_abs_diff, to_vec};
 
     use super::*;
     use crate::dispatch::with_path;
@@ -64,14 +87,46 @@ mod tests {
         }
     );
 
-    /// Under autodiff burn's operations run even where the host path is pinned.
+    /// Under autodiff the instance norm (with and without its ReLU), the ReLU and `relu(a + b)` give burn's
+    /// values and gradients: the loss `Σ y·r` with a random `r`, the gradients of every input.
     #[test]
-    fn autodiff_keeps_the_tensor_operations() {
-        let [x, b] = operands();
-        let expected = relu(x.clone() + b.clone());
+    fn training_nodes_agree_with_burns_autodiff() {
         let ad = Device::flex().autodiff();
-        let [xa, ba] = [x, b].map(|t| Tensor::<4>::from_data(t.into_data(), &ad));
-        let stock = with_path(Path::Host, || add_relu(xa, ba));
-        assert!(max_abs_diff(expected, Tensor::from_data(stock.into_data(), &Device::flex())) == 0.0);
+        let [x, b] = operands().map(|t| Tensor::<4>::from_data(t.into_data(), &ad));
+        let r = Tensor::<4>::random(x.dims(), Distribution::Normal(0.0, 1.0), &ad);
+        let plain = |t: Tensor<4>| Tensor::<4>::from_data(t.into_data(), &Device::flex());
+        let run = |pinned: Path, relu_after: bool| {
+            let (x, b) = (x.clone().detach().require_grad(), b.clone().detach().require_grad());
+            let norm = with_path(pinned, || {
+                normalize_planes_or(
+                    x.clone(),
+                    || PlaneNorm::Instance { epsilon: 1e-5 },
+                    relu_after,
+                    |x| {
+                        let y = instance_norm(x, 1e-5);
+                        if relu_after { relu(y) } else { y }
+                    },
+                )
+            });
+            let sum = with_path(pinned, || add_relu(norm.clone(), b.clone()));
+            let rectified = with_path(pinned, || rectify(b.clone().add_scalar(0.3)));
+            let grads = ((norm.clone() * r.clone()).sum()
+                + (sum.clone() * r.clone()).sum()
+                + (rectified.clone() * r.clone()).sum())
+            .backward();
+            let gx = x.grad(&grads).expect("the input's gradient");
+            let gb = b.grad(&grads).expect("the residual's gradient");
+            [norm, sum, rectified, gx, gb].map(|t| plain(t.detach()))
+        };
+        for relu_after in [true, false] {
+            let [norm0, sum0, rect0, gx0, gb0] = run(Path::Stock, relu_after);
+            let [norm1, sum1, rect1, gx1, gb1] = run(Path::Host, relu_after);
+            assert!(max_abs_diff(norm0, norm1) < 1e-5, "relu {relu_after}: norm");
+            assert!(max_abs_diff(sum0, sum1) < 1e-5, "relu {relu_after}: add_relu");
+            assert!(max_abs_diff(rect0, rect1) == 0.0, "relu {relu_after}: rectify");
+            let scale = to_vec(gx0.clone()).iter().fold(1e-6f32, |m, v| m.max(v.abs()));
+            assert!(max_abs_diff(gx0, gx1) < 1e-4 * scale, "relu {relu_after}: input gradient");
+            assert!(max_abs_diff(gb0, gb1) == 0.0, "relu {relu_after}: residual gradient");
+        }
     }
 }

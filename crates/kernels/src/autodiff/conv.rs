@@ -1,12 +1,6 @@
-//! Operations whose backward pass is ours: burn's autodiff records them as one node each, and
-//! their gradients come from the host kernels ([`crate::host::conv_backward`]).
-//!
-//! Design decision: burn lets an operation define its own backward through a backend extension
-//! (`#[backend_extension]`) implemented for `Autodiff<Flex>`: the forward runs the host
-//! convolution on the inner Flex tensors and registers a node whose backward computes the
-//! gradients of the input, the weight and the bias on host buffers. burn's own autodiff of
-//! `conv2d` stays the reference the tests compare with, and the path the settings' `stock-training`
-//! restores.
+//! The convolution with our backward: the forward runs the host convolution on the inner Flex
+//! tensors and registers a node whose backward computes the gradients of the input, the weight
+//! and the bias on host buffers ([`crate::host::conv_backward`]).
 
 use burn::backend::autodiff::NodeId;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
@@ -18,7 +12,9 @@ use burn::backend::ops::ModuleOps;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Flex, backend_extension};
 use burn::tensor::ops::ConvOptions;
-use burn::tensor::{DType, Tensor, TensorData};
+use burn::tensor::{DType, Tensor};
+
+use super::{dims4, flex, values};
 
 use crate::host::conv::conv2d_host_direct_slices;
 use crate::host::conv_backward::{conv2d_bias_grad, conv2d_input_grad, conv2d_weight_grad};
@@ -40,23 +36,6 @@ pub trait HostConvBackend: Backend {
         bias: FloatTensor<Self>,
         options: ConvOptions<2>,
     ) -> FloatTensor<Self>;
-}
-
-/// A float32 Flex tensor's values, row-major (a copy only where it is not contiguous).
-fn values(t: &FlexTensor) -> std::borrow::Cow<'_, [f32]> {
-    match t.as_slice::<f32>() {
-        Some(v) if t.is_contiguous() => std::borrow::Cow::Borrowed(v),
-        _ => std::borrow::Cow::Owned(t.to_contiguous().as_slice::<f32>().expect("a float32 tensor").to_vec()),
-    }
-}
-
-fn dims4(t: &FlexTensor) -> [usize; 4] {
-    let shape = t.layout().shape();
-    [shape[0], shape[1], shape[2], shape[3]]
-}
-
-fn flex(values: Vec<f32>, dims: &[usize]) -> FlexTensor {
-    FlexTensor::from_data(TensorData::new(values, dims.to_vec()))
 }
 
 /// The host convolution of Flex tensors.

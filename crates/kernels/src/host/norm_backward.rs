@@ -1,0 +1,102 @@
+//! The instance norm's and the ReLU's forward and backward on host buffers, for training
+//! ([`crate::autodiff::norm`]).
+//!
+//! Design decision: burn's autodiff of an instance norm records six element-wise operations and
+//! its ReLU a seventh, each a serial pass over the activation on burn Flex's calling thread, and
+//! as many again in the backward, while the worker threads wait. Here each `(image, channel)`
+//! plane is one rayon task in both directions: the forward keeps the normalised plane and its
+//! inverse deviation, and the backward is the closed form
+//! `dx = inv · (g − mean(g) − x̂ · mean(g · x̂))` (with `g` masked by the ReLU), its means in
+//! `f64` over independent lanes as the inference kernel's statistics are.
+
+use rayon::prelude::*;
+
+use crate::host::norm::lane_sum;
+
+/// What the forward of [`instance_norm_forward`] keeps for the backward.
+#[derive(Debug, Clone)]
+pub struct InstanceNormSaved {
+    /// The normalised planes before the ReLU (`x̂`), row-major `[N, C, H, W]`.
+    pub normalized: Vec<f32>,
+    /// Per plane, `1 / sqrt(var + epsilon)`.
+    pub inv_std: Vec<f32>,
+}
+
+/// Instance norm of every plane of `x` (planes of `plane` values; biased variance), then
+/// `max(0, ·)` when `relu`. Returns the output and what the backward needs; without the ReLU
+/// the output is `normalized` itself, so the caller may keep one copy.
+pub fn instance_norm_forward(x: &[f32], plane: usize, epsilon: f64, relu: bool) -> (Vec<f32>, InstanceNormSaved) {
+    let plane = plane.max(1);
+    let mut normalized = x.to_vec();
+    let inv_std: Vec<f32> = normalized
+        .par_chunks_mut(plane)
+        .map(|p| {
+            let mean = lane_sum(p, |v| v) / plane as f64;
+            let var = lane_sum(p, |v| (v - mean) * (v - mean)) / plane as f64;
+            let inv = 1.0 / (var + epsilon).sqrt();
+            let (a, b) = (inv as f32, (-mean * inv) as f32);
+            p.iter_mut().for_each(|v| *v = *v * a + b);
+            inv as f32
+        })
+        .collect();
+    let out = if relu { relu_of(&normalized) } else { normalized.clone() };
+    (out, InstanceNormSaved { normalized, inv_std })
+}
+
+/// The gradient of [`instance_norm_forward`] with respect to its input, given the output
+/// gradient `g`.
+pub fn instance_norm_backward(g: &[f32], saved: &InstanceNormSaved, relu: bool) -> Vec<f32> {
+    let planes = saved.inv_std.len().max(1);
+    let plane = g.len() / planes;
+    let mut dx = vec![0.0f32; g.len()];
+    dx.par_chunks_mut(plane.max(1))
+        .zip(g.par_chunks(plane.max(1)))
+        .zip(saved.normalized.par_chunks(plane.max(1)))
+        .zip(saved.inv_std.par_iter())
+        .for_each(|(((dx, g), xh), &inv)| {
+            let masked = |i: usize| if relu && xh[i] <= 0.0 { 0.0 } else { g[i] };
+            let gm: Vec<f32> = (0..g.len()).map(masked).collect();
+            let mean_g = lane_sum(&gm, |v| v) / plane as f64;
+            let gx: Vec<f32> = gm.iter().zip(xh).map(|(g, x)| g * x).collect();
+            let mean_gx = lane_sum(&gx, |v| v) / plane as f64;
+            let (mean_g, mean_gx) = (mean_g as f32, mean_gx as f32);
+            for ((d, &g), &x) in dx.iter_mut().zip(&gm).zip(xh) {
+                *d = inv * (g - mean_g - x * mean_gx);
+            }
+        });
+    dx
+}
+
+/// Chunk of the element-wise passes (16 Ki values: large enough to amortise a task).
+const CHUNK: usize = 1 << 14;
+
+/// `max(0, v)` of every value, in parallel chunks.
+pub fn relu_of(x: &[f32]) -> Vec<f32> {
+    let mut out = x.to_vec();
+    out.par_chunks_mut(CHUNK).for_each(|c| c.iter_mut().for_each(|v| *v = v.max(0.0)));
+    out
+}
+
+/// `max(0, a + b)`, in parallel chunks.
+pub fn add_relu_of(a: &[f32], b: &[f32]) -> Vec<f32> {
+    assert_eq!(a.len(), b.len(), "add_relu: shapes differ");
+    let mut out = a.to_vec();
+    out.par_chunks_mut(CHUNK).zip(b.par_chunks(CHUNK)).for_each(|(o, b)| {
+        o.iter_mut().zip(b).for_each(|(o, b)| *o = (*o + b).max(0.0));
+    });
+    out
+}
+
+/// The gradient through a ReLU whose output was `y`: `g` where `y > 0`, else 0.
+pub fn relu_backward(g: &[f32], y: &[f32]) -> Vec<f32> {
+    assert_eq!(g.len(), y.len(), "relu_backward: shapes differ");
+    let mut out = g.to_vec();
+    out.par_chunks_mut(CHUNK).zip(y.par_chunks(CHUNK)).for_each(|(o, y)| {
+        o.iter_mut().zip(y).for_each(|(o, &y)| {
+            if y <= 0.0 {
+                *o = 0.0;
+            }
+        });
+    });
+    out
+}
