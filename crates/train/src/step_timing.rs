@@ -1,7 +1,6 @@
 //! What the parts of a training step took, and random pairs to time steps on.
 
 use burn::tensor::{Device, Distribution, Tensor};
-use dgstereo_core::{DepthPrior, InputPadder};
 use dgstereo_loss::LossTarget;
 pub use dgstereo_model::stage_backward::{StageBackward, profile_backward};
 
@@ -40,18 +39,5 @@ pub fn random_batch(n: usize, [h, w]: [usize; 2], max_disparity: f32, device: &D
             valid: Tensor::ones([n, 1, h, w], device),
         },
         names: (0..n).map(|i| format!("random-{i}")).collect(),
-    }
-}
-
-impl crate::Trainer {
-    /// Each stage's forward and backward seconds on `batch`, run alone with the step's prior and
-    /// iterations ([`profile_backward`]; `dgstereo bench --train --stages`).
-    pub fn stage_backward_seconds(&self, batch: &TensorBatch) -> dgstereo_core::Result<Vec<StageBackward>> {
-        let prior = crate::trainer::batch_prior(self.prior(), self.parts.model.needs_prior(), batch)?;
-        let [_, _, h, w] = batch.left.dims();
-        let padder = InputPadder::new(h, w, self.parts.model.pad_divisor());
-        let prior = prior.map(|p| DepthPrior { left: padder.pad(p.left), right: padder.pad(p.right) });
-        let (left, right) = (padder.pad(batch.left.clone()), padder.pad(batch.right.clone()));
-        Ok(profile_backward(&self.model, left, right, prior.as_ref(), self.parts.train.iters))
     }
 }

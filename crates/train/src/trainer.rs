@@ -357,3 +357,24 @@ impl Trainer {
         }
     }
 }
+impl Trainer {
+    /// Each stage's forward and backward seconds on `batch`, run alone with the step's prior and
+    /// iterations ([`dgstereo_model::stage_backward::profile_backward`]; `dgstereo bench --train --stages`).
+    pub fn stage_backward_seconds(
+        &self,
+        batch: &TensorBatch,
+    ) -> dgstereo_core::Result<Vec<dgstereo_model::stage_backward::StageBackward>> {
+        let prior = batch_prior(self.prior(), self.parts.model.needs_prior(), batch)?;
+        let [_, _, h, w] = batch.left.dims();
+        let padder = dgstereo_core::InputPadder::new(h, w, self.parts.model.pad_divisor());
+        let prior = prior.map(|p| dgstereo_core::DepthPrior { left: padder.pad(p.left), right: padder.pad(p.right) });
+        let (left, right) = (padder.pad(batch.left.clone()), padder.pad(batch.right.clone()));
+        Ok(dgstereo_model::stage_backward::profile_backward(
+            &self.model,
+            left,
+            right,
+            prior.as_ref(),
+            self.parts.train.iters,
+        ))
+    }
+}
