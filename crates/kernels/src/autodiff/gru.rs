@@ -11,7 +11,7 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Flex, backend_extension};
 use burn::tensor::{DType, Tensor};
 
-use super::values;
+use super::{flex, shape, values};
 use crate::host::gru_backward::{blend_backward, blend_forward, gates_backward, gates_forward};
 
 /// The GRU step's element-wise parts whose backward is the host kernels'.
@@ -26,14 +26,6 @@ pub trait HostGruBackend: Backend {
         z: FloatTensor<Self>,
         h: FloatTensor<Self>,
     ) -> FloatTensor<Self>;
-}
-
-fn shape(t: &FlexTensor) -> Vec<usize> {
-    t.layout().shape().to_vec()
-}
-
-fn flex(values: Vec<f32>, dims: &[usize]) -> FlexTensor {
-    super::flex(values, dims)
 }
 
 fn same_shapes(tensors: &[&FlexTensor]) -> Vec<usize> {

@@ -11,7 +11,7 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Flex, backend_extension};
 use burn::tensor::{DType, Tensor};
 
-use super::{dims4, flex, values};
+use super::{dims4, flex, shape, values};
 use crate::host::norm_backward::{
     InstanceNormSaved, add_relu_of, instance_norm_backward, instance_norm_forward, relu_backward, relu_of,
 };
@@ -67,8 +67,7 @@ impl Backward<Flex, 1> for Relu {
         let [node_x] = ops.parents;
         let grad = grads.consume::<Flex>(&ops.node);
         if let Some(node) = node_x {
-            let shape = grad.layout().shape().to_vec();
-            grads.register::<Flex>(node.id, flex(relu_backward(&values(&grad), &values(&ops.state)), &shape));
+            grads.register::<Flex>(node.id, flex(relu_backward(&values(&grad), &values(&ops.state)), &shape(&grad)));
         }
     }
 }
@@ -104,14 +103,8 @@ impl Backward<Flex, 2> for AddRelu {
         let grad = grads.consume::<Flex>(&ops.node);
         let dims = dims4(&grad);
         let masked = flex(relu_backward(&values(&grad), &values(&ops.state)), &dims);
-        match (node_a, node_b) {
-            (Some(a), Some(b)) => {
-                grads.register::<Flex>(a.id, masked.clone());
-                grads.register::<Flex>(b.id, masked);
-            }
-            (Some(a), None) => grads.register::<Flex>(a.id, masked),
-            (None, Some(b)) => grads.register::<Flex>(b.id, masked),
-            (None, None) => {}
+        for node in [node_a, node_b].into_iter().flatten() {
+            grads.register::<Flex>(node.id, masked.clone());
         }
     }
 }
