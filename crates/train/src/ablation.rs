@@ -170,7 +170,7 @@ impl FinishedRun {
 
 /// Scores the final model of a finished run on the run's held-out synthetic set.
 pub fn evaluate_finished_run(parts: &TrainParts, run: &FinishedRun, device: &Device) -> Result<Metrics> {
-    let set = ValidationSet::new(&parts.data.validation);
+    let set = ValidationSet::new(&parts.data.validation)?;
     if set.is_empty() {
         return Err(Error::Config(format!("run '{}': data.validation.count is 0, nothing to evaluate on", parts.name)));
     }

@@ -130,6 +130,7 @@ impl TrainingData {
     /// Lists the sources (datasets are only listed here, read on demand).
     pub fn new(data: &TrainingDataConfig, train: &TrainingConfig) -> Result<Self> {
         data.validate()?;
+        data.check_files()?;
         let mut sources = Vec::new();
         for (i, s) in data.sources.iter().enumerate() {
             match dataset(s, i)? {

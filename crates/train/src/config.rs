@@ -185,7 +185,22 @@ impl Default for TrainingDataConfig {
 }
 
 impl TrainingDataConfig {
-    /// Checks the values; the message names the key.
+    /// Checks that the files the keys name are there: the photo folders of the synthetic sources
+    /// and of the validation set. [`validate`](Self::validate) reads no files, so an experiment
+    /// file checks on a machine that has not fetched the data; this runs where the data is opened.
+    pub fn check_files(&self) -> Result<()> {
+        for (i, s) in self.sources.iter().enumerate() {
+            if let DataSource::Synthetic { photos: Some(p), .. } = s {
+                p.check_folder(&format!("data.sources[{i}]"))?;
+            }
+        }
+        if let Some(p) = &self.validation.photos {
+            p.check_folder("data.validation")?;
+        }
+        Ok(())
+    }
+
+    /// Checks the values without reading files; the message names the key.
     pub fn validate(&self) -> Result<()> {
         if self.sources.is_empty() {
             return Err(Error::Config("data.sources is empty: give at least one training source".into()));
@@ -418,11 +433,17 @@ pub struct PhotoTextures {
 }
 
 impl PhotoTextures {
-    /// Checks the share and that the folder's photographs load; `key` names the table.
+    /// Checks the share; `key` names the table.
     fn check(&self, key: &str) -> Result<()> {
         if !(self.share > 0.0 && self.share <= 1.0) {
             return Err(Error::Config(format!("{key}.photos.share = {}: must be a share in (0, 1]", self.share)));
         }
+        Ok(())
+    }
+
+    /// Checks that the folder's photographs load (they are decoded once per process, so the
+    /// generator later finds them cached); `key` names the table.
+    pub(crate) fn check_folder(&self, key: &str) -> Result<()> {
         dgstereo_data::synthetic::PhotoLibrary::of_folder(&self.dir)
             .map(|_| ())
             .map_err(|e| Error::Config(format!("{key}.photos.dir: {e}")))

@@ -146,7 +146,7 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
     let log_path = out.join("log.jsonl");
     let plot_path = out.join("curves.png");
     let mut curves = truncate_log(&log_path, trainer.step)?;
-    let validation = ValidationSet::new(&trainer.parts.data.validation);
+    let validation = ValidationSet::new(&trainer.parts.data.validation)?;
 
     let t = trainer.parts.train.clone();
     let end = options.stop_after.map_or(t.steps, |s| s.min(t.steps));

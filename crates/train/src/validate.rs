@@ -19,8 +19,12 @@ pub struct ValidationSet {
 }
 
 impl ValidationSet {
-    /// Renders `config.count` synthetic pairs (scene seeds `seed .. seed + count`).
-    pub fn new(config: &ValidationConfig) -> Self {
+    /// Renders `config.count` synthetic pairs (scene seeds `seed .. seed + count`); fails when
+    /// the photo folder the keys name does not load.
+    pub fn new(config: &ValidationConfig) -> Result<Self> {
+        if let Some(p) = &config.photos {
+            p.check_folder("data.validation")?;
+        }
         let synth = config.synthetic();
         let pairs = (0..config.count as u64)
             .map(|i| {
@@ -36,7 +40,7 @@ impl ValidationSet {
                 }
             })
             .collect();
-        Self { pairs, iters: config.iters.max(1) }
+        Ok(Self { pairs, iters: config.iters.max(1) })
     }
 
     /// Whether there is nothing to validate on.

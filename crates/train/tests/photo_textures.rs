@@ -1,5 +1,5 @@
 //! The `photos` key of a synthetic source and of the validation set: parsed, checked (the share
-//! and the folder, named by key) and handed to the generator.
+//! and, where the data is opened, the folder, named by key) and handed to the generator.
 
 use dgstereo_train::{DataSource, TrainingDataConfig};
 
@@ -34,7 +34,14 @@ fn photo_textures_are_checked_and_reach_the_generator() {
 
     let e = data(&dir, 1.5).validate().unwrap_err().to_string();
     assert!(e.contains("data.sources[0].photos.share = 1.5"), "{e}");
-    let e = data(&dir.join("absent"), 0.5).validate().unwrap_err().to_string();
+    config.check_files().unwrap();
+    // A missing folder passes `validate` (an experiment file checks on a machine without the
+    // data) and is named where the data is opened.
+    let absent = data(&dir.join("absent"), 0.5);
+    absent.validate().unwrap();
+    let e = absent.check_files().unwrap_err().to_string();
+    assert!(e.contains("data.sources[0].photos.dir") && e.contains("absent"), "{e}");
+    let e = dgstereo_train::batch::TrainingData::new(&absent, &Default::default()).err().unwrap().to_string();
     assert!(e.contains("data.sources[0].photos.dir") && e.contains("absent"), "{e}");
     let e = toml::from_str::<TrainingDataConfig>(
         "[[sources]]\nkind = \"synthetic\"\nphotos = { dir = \"x\", share = 0.5, mix = 1 }\n",
