@@ -24,8 +24,14 @@ use crate::product::matmul_transposed_accumulate;
 /// product, small enough for a worker's buffer (16 MiB).
 const WEIGHT_GRAD_COLUMNS: usize = 1 << 22;
 
-/// Groups of tiles whose weight gradients are summed apart (in parallel), then in order.
+/// Groups of tiles whose weight gradients are summed apart (in parallel), then in order; a
+/// layer is cut into at least this many tiles where [`MIN_TILE_PIXELS`] allows, so that a batch
+/// of one image still keeps every thread busy.
 const GROUPS: usize = 8;
+
+/// The fewest pixels a weight-gradient tile holds (the depth of its product), where the layer
+/// has them: shallower products than this run below the `gemm` crate's good shapes.
+const MIN_TILE_PIXELS: usize = 512;
 
 /// The gradient of `conv2d(x, wt)` (stride 1, dilation 1, one group) with respect to `x`, given
 /// the output gradient `g`: the convolution of `g` with the weight flipped in both axes and its
@@ -84,7 +90,7 @@ pub fn conv2d_weight_grad(
     let [out_h, out_w] = conv_output_size("conv2d_weight_grad", [h, w], [kh, kw], options);
     let (k, plane) = (c * kh * kw, out_h * out_w);
     assert_eq!(g.len(), n * o * plane, "conv2d_weight_grad: the output gradient is not [{n}, {o}, {out_h}, {out_w}]");
-    let rows_per_tile = (WEIGHT_GRAD_COLUMNS / k.max(1) / out_w.max(1)).clamp(1, out_h.max(1));
+    let rows_per_tile = tile_rows([n, out_h, out_w], k);
     let tiles = out_h.div_ceil(rows_per_tile);
     // A fixed partition of the jobs into groups, each summed in order into its own accumulator,
     // and the groups summed in order: the same sums whatever the thread count or the work
@@ -112,11 +118,28 @@ pub fn conv2d_weight_grad(
             acc
         })
         .collect();
+    // Each element sums the groups in order, chunks of elements in parallel.
     let mut total = vec![0.0f32; o * k];
-    for partial in &partials {
-        total.iter_mut().zip(partial).for_each(|(t, v)| *t += v);
-    }
+    const CHUNK: usize = 1 << 14;
+    total.par_chunks_mut(CHUNK).enumerate().for_each(|(i, chunk)| {
+        for partial in &partials {
+            chunk.iter_mut().zip(&partial[i * CHUNK..]).for_each(|(t, v)| *t += v);
+        }
+    });
     total
+}
+
+/// Output rows per weight-gradient tile of `n` images of `out_h x out_w` pixels with `k`
+/// column-matrix rows: at most a worker buffer's worth ([`WEIGHT_GRAD_COLUMNS`]), and few enough
+/// that the images give [`GROUPS`] tiles, unless a tile would then hold fewer than
+/// [`MIN_TILE_PIXELS`] pixels. A function of the shapes only, so the partition, and with it
+/// the sums, do not depend on the thread count.
+fn tile_rows([n, out_h, out_w]: [usize; 3], k: usize) -> usize {
+    let out_h = out_h.max(1);
+    let by_memory = (WEIGHT_GRAD_COLUMNS / k.max(1) / out_w.max(1)).max(1);
+    let by_groups = out_h.div_ceil(GROUPS.div_ceil(n.max(1)));
+    let by_depth = MIN_TILE_PIXELS.div_ceil(out_w.max(1));
+    by_memory.min(by_groups.max(by_depth)).clamp(1, out_h)
 }
 
 thread_local! {
@@ -141,6 +164,18 @@ pub fn conv2d_bias_grad(g: &[f32], [n, o, plane]: [usize; 3]) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One image at a quarter of 192x320 (48x80) is cut into 7 tiles of 560 pixels (8 of 480
+    /// would be shallower than `MIN_TILE_PIXELS`); a small plane stays one tile, eight images
+    /// one tile each, and a deep column matrix is cut by the buffer's size.
+    #[test]
+    fn weight_gradient_tiles_keep_threads_busy_and_products_deep() {
+        assert_eq!(tile_rows([1, 48, 80], 1152), 7);
+        assert_eq!(tile_rows([1, 96, 160], 64), 12, "8 tiles of 1920 pixels");
+        assert_eq!(tile_rows([1, 12, 20], 1152), 12);
+        assert_eq!(tile_rows([8, 48, 80], 64), 48);
+        assert_eq!(tile_rows([1, 480, 640], 1152), 5, "5 rows of 640 pixels fill the buffer");
+    }
 
     /// The weight gradient is the same, bit for bit, on one thread and on three, and equals
     /// the plain sum `Σ g·x` of its definition.
