@@ -31,7 +31,7 @@ const GROUPS: usize = 8;
 
 /// The fewest pixels a weight-gradient tile holds (the depth of its product), where the layer
 /// has them: shallower products than this run below the `gemm` crate's good shapes.
-const MIN_TILE_PIXELS: usize = 512;
+const MIN_TILE_PIXELS: usize = 384;
 
 /// The gradient of `conv2d(x, wt)` (stride 1, dilation 1, one group) with respect to `x`, given
 /// the output gradient `g`: the convolution of `g` with the weight flipped in both axes and its
@@ -131,15 +131,17 @@ pub fn conv2d_weight_grad(
 
 /// Output rows per weight-gradient tile of `n` images of `out_h x out_w` pixels with `k`
 /// column-matrix rows: at most a worker buffer's worth ([`WEIGHT_GRAD_COLUMNS`]), and few enough
-/// that the images give [`GROUPS`] tiles, unless a tile would then hold fewer than
-/// [`MIN_TILE_PIXELS`] pixels. A function of the shapes only, so the partition, and with it
-/// the sums, do not depend on the thread count.
+/// that the images give [`GROUPS`] tiles, halving that count (an even split over two or four
+/// threads) while a tile would hold fewer than [`MIN_TILE_PIXELS`] pixels. A function of the
+/// shapes only, so the partition, and with it the sums, do not depend on the thread count.
 fn tile_rows([n, out_h, out_w]: [usize; 3], k: usize) -> usize {
     let out_h = out_h.max(1);
+    let mut per_image = GROUPS.div_ceil(n.max(1));
+    while per_image > 1 && out_h * out_w < per_image * MIN_TILE_PIXELS {
+        per_image /= 2;
+    }
     let by_memory = (WEIGHT_GRAD_COLUMNS / k.max(1) / out_w.max(1)).max(1);
-    let by_groups = out_h.div_ceil(GROUPS.div_ceil(n.max(1)));
-    let by_depth = MIN_TILE_PIXELS.div_ceil(out_w.max(1));
-    by_memory.min(by_groups.max(by_depth)).clamp(1, out_h)
+    out_h.div_ceil(per_image).min(by_memory).clamp(1, out_h)
 }
 
 thread_local! {
@@ -165,14 +167,16 @@ pub fn conv2d_bias_grad(g: &[f32], [n, o, plane]: [usize; 3]) -> Vec<f32> {
 mod tests {
     use super::*;
 
-    /// One image at a quarter of 192x320 (48x80) is cut into 7 tiles of 560 pixels (8 of 480
-    /// would be shallower than `MIN_TILE_PIXELS`); a small plane stays one tile, eight images
-    /// one tile each, and a deep column matrix is cut by the buffer's size.
+    /// One image at a quarter of 192x320 (48x80) is cut into 8 tiles of 480 pixels, at an
+    /// eighth (24x40) into 2 of 480 (4 of 240 would be shallower than `MIN_TILE_PIXELS`); a
+    /// small plane stays one tile, eight images one tile each, and a deep column matrix is cut
+    /// by the buffer's size.
     #[test]
     fn weight_gradient_tiles_keep_threads_busy_and_products_deep() {
-        assert_eq!(tile_rows([1, 48, 80], 1152), 7);
-        assert_eq!(tile_rows([1, 96, 160], 64), 12, "8 tiles of 1920 pixels");
+        assert_eq!(tile_rows([1, 48, 80], 1152), 6);
+        assert_eq!(tile_rows([1, 24, 40], 1152), 12);
         assert_eq!(tile_rows([1, 12, 20], 1152), 12);
+        assert_eq!(tile_rows([2, 48, 80], 1152), 12, "two images, 4 tiles each");
         assert_eq!(tile_rows([8, 48, 80], 64), 48);
         assert_eq!(tile_rows([1, 480, 640], 1152), 5, "5 rows of 640 pixels fill the buffer");
     }
