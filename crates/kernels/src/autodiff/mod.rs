@@ -6,13 +6,15 @@
 //! the inner Flex tensors and registers a node whose backward computes the gradients on host
 //! buffers, in parallel where burn's element-wise operations run on one thread. burn's own
 //! autodiff of the same operations stays the reference the tests compare with, and the path the
-//! settings' `stock-training` restores. [`conv`]: the convolution; [`norm`]: the instance norm
+//! settings' `stock-training` restores. [`conv`]: the convolution; [`deform`]: DGIA's deformable
+//! convolution; [`norm`]: the instance norm
 //! with its ReLU and the residual `relu(a + b)`; [`gru`]: the ConvGRU step's gates and blend.
 
 use burn::backend::flex::FlexTensor;
 use burn::tensor::TensorData;
 
 pub mod conv;
+pub mod deform;
 pub mod gru;
 pub mod norm;
 

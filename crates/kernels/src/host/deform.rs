@@ -20,20 +20,39 @@ use burn::tensor::{Tensor, TensorData};
 use dgstereo_core::tensor::host_values;
 use rayon::prelude::*;
 
-/// The geometry of one deformable convolution.
-#[derive(Clone, Copy)]
-struct Geometry {
-    c: usize,
-    o: usize,
-    h: usize,
-    w: usize,
-    kh: usize,
-    kw: usize,
-    stride: [usize; 2],
-    padding: [usize; 2],
-    dilation: [usize; 2],
-    out_h: usize,
-    out_w: usize,
+/// The geometry of one deformable convolution: input channels and size, output channels,
+/// kernel, stride, padding, dilation, output size.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Geometry {
+    pub(crate) c: usize,
+    pub(crate) o: usize,
+    pub(crate) h: usize,
+    pub(crate) w: usize,
+    pub(crate) kh: usize,
+    pub(crate) kw: usize,
+    pub(crate) stride: [usize; 2],
+    pub(crate) padding: [usize; 2],
+    pub(crate) dilation: [usize; 2],
+    pub(crate) out_h: usize,
+    pub(crate) out_w: usize,
+}
+
+impl Geometry {
+    /// The geometry of an input `[_, C, H, W]` and a weight `[O, C, kh, kw]`, or `None` where
+    /// the kernel does not fit the padded input.
+    pub(crate) fn new(
+        [_, c, h, w]: [usize; 4],
+        [o, _, kh, kw]: [usize; 4],
+        stride: [usize; 2],
+        padding: [usize; 2],
+        dilation: [usize; 2],
+    ) -> Option<Self> {
+        let extent = |size: usize, axis: usize, k: usize| {
+            (size + 2 * padding[axis]).checked_sub(dilation[axis] * (k - 1) + 1).map(|span| span / stride[axis] + 1)
+        };
+        let (out_h, out_w) = (extent(h, 0, kh)?, extent(w, 1, kw)?);
+        Some(Self { c, o, h, w, kh, kw, stride, padding, dilation, out_h, out_w })
+    }
 }
 
 /// `conv`'s output for `input` sampled at `offset`, or `None` where this kernel does not apply
@@ -49,28 +68,39 @@ pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<
     }
     let device = input.device();
     let [n, c, h, w] = input.dims();
-    let [o, wc, kh, kw] = conv.weight.dims();
+    let w_dims = conv.weight.dims();
     let padding = match conv.padding {
         PaddingConfig2d::Valid => [0, 0],
         PaddingConfig2d::Explicit(top, left, bottom, right) if top == bottom && left == right => [top, left],
         _ => return None,
     };
-    let (stride, dilation) = (conv.stride, conv.dilation);
-    let extent = |size: usize, axis: usize, k: usize| {
-        (size + 2 * padding[axis]).checked_sub(dilation[axis] * (k - 1) + 1).map(|span| span / stride[axis] + 1)
-    };
-    let (out_h, out_w) = (extent(h, 0, kh)?, extent(w, 1, kw)?);
-    let offset_dims = offset.dims();
-    assert_eq!(wc, c, "deformable convolution: the weight takes {wc} input channels, the input has {c}");
+    let g = Geometry::new([n, c, h, w], w_dims, conv.stride, padding, conv.dilation)?;
     assert_eq!(
-        offset_dims,
-        [n, 2 * kh * kw, out_h, out_w],
+        w_dims[1], c,
+        "deformable convolution: the weight takes {} input channels, the input has {c}",
+        w_dims[1]
+    );
+    assert_eq!(
+        offset.dims(),
+        [n, 2 * g.kh * g.kw, g.out_h, g.out_w],
         "deformable convolution: offsets must be [N, 2·kh·kw, H_out, W_out]"
     );
-    let g = Geometry { c, o, h, w, kh, kw, stride, padding, dilation, out_h, out_w };
-    let (x, offset) = (host_values(input), host_values(offset));
-    // The input with its channels innermost, [N][H·W][C], so that a sample of all channels at one
-    // position is one contiguous run.
+    let bias = conv.bias.as_ref().map(|b| host_values(b.val()));
+    let out = deform_slices(
+        &host_values(input),
+        n,
+        &host_values(offset),
+        &host_values(conv.weight.val()),
+        bias.as_deref(),
+        g,
+    );
+    Some(Tensor::from_data(TensorData::new(out, [n, g.o, g.out_h, g.out_w]), &device))
+}
+
+/// The input with its channels innermost, `[N][H·W][C]`, so that a sample of all channels at
+/// one position is one contiguous run.
+pub(crate) fn channels_innermost(x: &[f32], n: usize, g: Geometry) -> Vec<f32> {
+    let (c, h, w) = (g.c, g.h, g.w);
     let plane_in = h * w;
     let mut pixels = vec![0f32; n * plane_in * c];
     pixels.par_chunks_mut(w * c).enumerate().for_each(|(row, dst)| {
@@ -81,17 +111,39 @@ pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<
             }
         }
     });
-    // Weights per tap and output channel, the input channels innermost: [k][o][c].
-    let weight = host_values(conv.weight.val());
-    let mut taps = vec![0f32; kh * kw * o * c];
-    for (oc, per_out) in weight.chunks_exact(c * kh * kw).enumerate() {
-        for (ic, per_in) in per_out.chunks_exact(kh * kw).enumerate() {
+    pixels
+}
+
+/// The weight `[O, C, kh, kw]` per tap and output channel, the input channels innermost:
+/// `[k][O][C]`.
+pub(crate) fn weight_per_tap(weight: &[f32], g: Geometry) -> Vec<f32> {
+    let (o, c, taps_n) = (g.o, g.c, g.kh * g.kw);
+    let mut taps = vec![0f32; taps_n * o * c];
+    for (oc, per_out) in weight.chunks_exact(c * taps_n).enumerate() {
+        for (ic, per_in) in per_out.chunks_exact(taps_n).enumerate() {
             for (k, &value) in per_in.iter().enumerate() {
                 taps[(k * o + oc) * c + ic] = value;
             }
         }
     }
-    let bias = conv.bias.as_ref().map(|b| host_values(b.val()));
+    taps
+}
+
+/// The deformable convolution of `n` images `x` (`[N, C, H, W]`) sampled at `offset` (`[N,
+/// 2·kh·kw, H_out, W_out]`) with `weight` (`[O, C, kh, kw]`) and `bias` (`[O]`): `[N, O, H_out,
+/// W_out]`, rows of output pixels in parallel.
+pub(crate) fn deform_slices(
+    x: &[f32],
+    n: usize,
+    offset: &[f32],
+    weight: &[f32],
+    bias: Option<&[f32]>,
+    g: Geometry,
+) -> Vec<f32> {
+    let (c, o, kh, kw, out_h, out_w) = (g.c, g.o, g.kh, g.kw, g.out_h, g.out_w);
+    let plane_in = g.h * g.w;
+    let pixels = channels_innermost(x, n, g);
+    let taps = weight_per_tap(weight, g);
     let plane = out_h * out_w;
     let rows: Vec<Vec<f32>> = (0..n * out_h)
         .into_par_iter()
@@ -100,9 +152,9 @@ pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<
             let image = &pixels[b * plane_in * c..][..plane_in * c];
             let offsets = &offset[b * 2 * kh * kw * plane..][..2 * kh * kw * plane];
             match (c, o) {
-                (16, 3) => output_row_fixed::<16, 3>(g, image, offsets, &taps, bias.as_deref(), oy),
-                (8, 3) => output_row_fixed::<8, 3>(g, image, offsets, &taps, bias.as_deref(), oy),
-                _ => output_row(g, image, offsets, &taps, bias.as_deref(), oy),
+                (16, 3) => output_row_fixed::<16, 3>(g, image, offsets, &taps, bias, oy),
+                (8, 3) => output_row_fixed::<8, 3>(g, image, offsets, &taps, bias, oy),
+                _ => output_row(g, image, offsets, &taps, bias, oy),
             }
         })
         .collect();
@@ -113,7 +165,7 @@ pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<
             out[(b * o + oc) * plane + oy * out_w..][..out_w].copy_from_slice(values);
         }
     }
-    Some(Tensor::from_data(TensorData::new(out, [n, o, out_h, out_w]), &device))
+    out
 }
 
 /// Output row `oy` of one image (`image` as `[H·W][C]`), `[O][W_out]`: bias plus, per output

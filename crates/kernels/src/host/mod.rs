@@ -3,6 +3,7 @@
 pub mod conv;
 pub mod conv_backward;
 pub mod deform;
+pub mod deform_backward;
 pub mod few_outputs;
 pub mod gru;
 pub mod gru_backward;
