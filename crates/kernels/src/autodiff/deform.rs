@@ -12,20 +12,9 @@ use burn::backend::{Autodiff, Backend, Flex, backend_extension};
 use burn::tensor::{DType, Tensor};
 
 use super::{dims4, flex, values};
+pub use crate::host::deform::DeformOptions;
 use crate::host::deform::{Geometry, deform_slices};
 use crate::host::deform_backward::deform_backward;
-
-/// Stride, symmetric padding and dilation of a deformable convolution (one weight and one
-/// offset group, no modulation mask).
-#[derive(Clone, Copy, Debug)]
-pub struct DeformOptions {
-    /// Stride `[rows, columns]`.
-    pub stride: [usize; 2],
-    /// Padding on each side `[rows, columns]`.
-    pub padding: [usize; 2],
-    /// Dilation `[rows, columns]`.
-    pub dilation: [usize; 2],
-}
 
 /// The deformable convolution whose backward is the host kernels'.
 #[backend_extension(Flex, Autodiff)]
@@ -41,7 +30,7 @@ pub trait HostDeformBackend: Backend {
 }
 
 fn geometry(x: &FlexTensor, weight: &FlexTensor, options: DeformOptions) -> Geometry {
-    Geometry::new(dims4(x), dims4(weight), options.stride, options.padding, options.dilation)
+    Geometry::new(dims4(x), dims4(weight), options)
         .expect("deformable convolution: the kernel does not fit the padded input")
 }
 

@@ -37,15 +37,41 @@ pub(crate) struct Geometry {
     pub(crate) out_w: usize,
 }
 
+/// Stride, symmetric padding and dilation of a deformable convolution with one weight and one
+/// offset group and no modulation mask: the convolutions the host kernels take.
+#[derive(Clone, Copy, Debug)]
+pub struct DeformOptions {
+    /// Stride `[rows, columns]`.
+    pub stride: [usize; 2],
+    /// Padding on each side `[rows, columns]`.
+    pub padding: [usize; 2],
+    /// Dilation `[rows, columns]`.
+    pub dilation: [usize; 2],
+}
+
+impl DeformOptions {
+    /// `conv`'s options, or `None` where the host kernels do not take it (several weight or
+    /// offset groups, padding other than explicit and symmetric or none).
+    pub fn of(conv: &DeformConv2d) -> Option<Self> {
+        if conv.weight_groups != 1 || conv.offset_groups != 1 {
+            return None;
+        }
+        let padding = match conv.padding {
+            PaddingConfig2d::Valid => [0, 0],
+            PaddingConfig2d::Explicit(top, left, bottom, right) if top == bottom && left == right => [top, left],
+            _ => return None,
+        };
+        Some(Self { stride: conv.stride, padding, dilation: conv.dilation })
+    }
+}
+
 impl Geometry {
-    /// The geometry of an input `[_, C, H, W]` and a weight `[O, C, kh, kw]`, or `None` where
-    /// the kernel does not fit the padded input.
+    /// The geometry of an input `[_, C, H, W]` and a weight `[O, C, kh, kw]` under `options`, or
+    /// `None` where the kernel does not fit the padded input.
     pub(crate) fn new(
         [_, c, h, w]: [usize; 4],
         [o, _, kh, kw]: [usize; 4],
-        stride: [usize; 2],
-        padding: [usize; 2],
-        dilation: [usize; 2],
+        DeformOptions { stride, padding, dilation }: DeformOptions,
     ) -> Option<Self> {
         let extent = |size: usize, axis: usize, k: usize| {
             (size + 2 * padding[axis]).checked_sub(dilation[axis] * (k - 1) + 1).map(|span| span / stride[axis] + 1)
@@ -63,18 +89,11 @@ impl Geometry {
 ///   kh_i·kw + kw_i`, channel `2k` the row offset, `2k + 1` the column offset, as torchvision)
 /// - output: `[N, O, H_out, W_out]`
 pub fn deform_conv2d_host(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<4>) -> Option<Tensor<4>> {
-    if conv.weight_groups != 1 || conv.offset_groups != 1 {
-        return None;
-    }
+    let options = DeformOptions::of(conv)?;
     let device = input.device();
     let [n, c, h, w] = input.dims();
     let w_dims = conv.weight.dims();
-    let padding = match conv.padding {
-        PaddingConfig2d::Valid => [0, 0],
-        PaddingConfig2d::Explicit(top, left, bottom, right) if top == bottom && left == right => [top, left],
-        _ => return None,
-    };
-    let g = Geometry::new([n, c, h, w], w_dims, conv.stride, padding, conv.dilation)?;
+    let g = Geometry::new([n, c, h, w], w_dims, options)?;
     assert_eq!(
         w_dims[1], c,
         "deformable convolution: the weight takes {} input channels, the input has {c}",
@@ -230,7 +249,7 @@ fn output_row_fixed<const C: usize, const O: usize>(
 /// position (the tap's place moved by its offset) is less than a pixel outside the input; the
 /// other taps sample zero.
 #[inline(always)]
-fn for_each_tap(g: Geometry, offsets: &[f32], oy: usize, ox: usize, mut visit: impl FnMut(usize, &Corners)) {
+pub(crate) fn for_each_tap(g: Geometry, offsets: &[f32], oy: usize, ox: usize, mut visit: impl FnMut(usize, &Corners)) {
     let (plane_out, at) = (g.out_h * g.out_w, oy * g.out_w + ox);
     for k in 0..g.kh * g.kw {
         let (ki, kj) = (k / g.kw, k % g.kw);
@@ -245,10 +264,16 @@ fn for_each_tap(g: Geometry, offsets: &[f32], oy: usize, ox: usize, mut visit: i
 }
 
 /// The four neighbours of a sampling position and their bilinear weights, a neighbour outside
-/// the input with weight zero.
-struct Corners {
-    index: [usize; 4],
-    weight: [f32; 4],
+/// the input with weight zero; with the position's fractional parts and which neighbours lie in
+/// the input, which the backward's slopes need.
+pub(crate) struct Corners {
+    pub(crate) index: [usize; 4],
+    pub(crate) weight: [f32; 4],
+    /// Whether each neighbour lies in the input (one outside reads zero, takes no gradient).
+    pub(crate) valid: [bool; 4],
+    /// The fractional parts of the position: row `ly`, column `lx`.
+    pub(crate) ly: f32,
+    pub(crate) lx: f32,
 }
 
 impl Corners {
@@ -265,21 +290,23 @@ impl Corners {
         let (hy, hx) = (1.0 - ly, 1.0 - lx);
         let mut index = [0; 4];
         let mut weight = [hy * hx, hy * lx, ly * hx, ly * lx];
+        let mut valid = [false; 4];
         for (i, (dy, dx)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate() {
             let (yy, xx) = (y0 + dy, x0 + dx);
             if yy >= 0 && (yy as usize) < h && xx >= 0 && (xx as usize) < w {
                 index[i] = yy as usize * w + xx as usize;
+                valid[i] = true;
             } else {
                 weight[i] = 0.0;
             }
         }
-        Some(Self { index, weight })
+        Some(Self { index, weight, valid, ly, lx })
     }
 
     /// The bilinear samples of all channels of `image` (`[H·W][C]`) into `out` (`C` long), each
     /// summed in burn's order.
     #[inline(always)]
-    fn sample(&self, image: &[f32], out: &mut [f32]) {
+    pub(crate) fn sample(&self, image: &[f32], out: &mut [f32]) {
         let c = out.len();
         let (i, k) = (&self.index, &self.weight);
         let [a, b, cc, d] =

@@ -2,7 +2,7 @@
 //!
 //! Design decision: burn Flex's backward of `deform_conv2d` runs on one thread per image and
 //! took about a sixth of a training step of the paper's model. Here every output pixel walks its
-//! kernel taps as the forward does ([`crate::host::deform`]): per tap the bilinear sample of all
+//! kernel taps with the forward's own walk and corners ([`crate::host::deform`]): per tap the bilinear sample of all
 //! channels gives the weight's gradient, the sample's gradient (the output gradient through the
 //! tap's weights) is scattered to the four corners and gives the offset's gradient through the
 //! bilinear weights' derivatives. The scatter writes anywhere in the image (the offsets are
@@ -11,7 +11,7 @@
 
 use rayon::prelude::*;
 
-use super::deform::{Geometry, channels_innermost, weight_per_tap};
+use super::deform::{Corners, Geometry, channels_innermost, for_each_tap, weight_per_tap};
 
 /// Row groups of one image whose input and weight gradients are summed apart, then in order.
 const GROUPS: usize = 4;
@@ -60,17 +60,19 @@ pub(crate) fn deform_backward(
         let offsets = &offset[b * 2 * taps_n * plane..][..2 * taps_n * plane];
         let g_image = &grad[b * o * plane..][..o * plane];
         let groups = GROUPS.min(out_h.max(1));
+        let group_rows = |group: usize| group * out_h / groups..(group + 1) * out_h / groups;
         // Each group owns its rows of the offsets' gradient, written once per pixel.
         let partials: Vec<(Partial, Vec<f32>)> = (0..groups)
             .into_par_iter()
             .map(|group| {
-                let rows = group * out_h / groups..(group + 1) * out_h / groups;
+                let rows = group_rows(group);
+                let per_channel = rows.len() * out_w;
                 let mut partial = Partial {
                     input: vec![0f32; plane_in * c],
                     weight: vec![0f32; taps_n * o * c],
                     bias: vec![0f64; o],
                 };
-                let mut d_off = vec![0f32; 2 * taps_n * rows.len() * out_w];
+                let mut d_off = vec![0f32; 2 * taps_n * per_channel];
                 let (mut sample, mut d_sample, mut dy, mut dx) =
                     (vec![0f32; c], vec![0f32; c], vec![0f32; c], vec![0f32; c]);
                 let mut g_pixel = vec![0f32; o];
@@ -81,14 +83,10 @@ pub(crate) fn deform_backward(
                             *v = g_image[oc * plane + at];
                             partial.bias[oc] += f64::from(*v);
                         }
-                        for k in 0..taps_n {
-                            let (ki, kj) = (k / g.kw, k % g.kw);
-                            let y = (oy * g.stride[0] + ki * g.dilation[0]) as f32 - g.padding[0] as f32
-                                + offsets[2 * k * plane + at];
-                            let x = (ox * g.stride[1] + kj * g.dilation[1]) as f32 - g.padding[1] as f32
-                                + offsets[(2 * k + 1) * plane + at];
-                            let Some(corners) = Corners::new(y, x, g.h, g.w) else { continue };
-                            corners.sample(image, c, &mut sample, &mut dy, &mut dx);
+                        let local = (oy - rows.start) * out_w + ox;
+                        for_each_tap(g, offsets, oy, ox, |k, corners| {
+                            corners.sample(image, &mut sample);
+                            slopes(corners, image, &mut dy, &mut dx);
                             let w_tap = &taps[k * o * c..][..o * c];
                             let dw_tap = &mut partial.weight[k * o * c..][..o * c];
                             d_sample.fill(0.0);
@@ -100,20 +98,18 @@ pub(crate) fn deform_backward(
                                     d_sample[j] += go * w_row[j];
                                 }
                             }
-                            corners.scatter(&mut partial.input, c, &d_sample);
-                            let local = (oy - rows.start) * out_w + ox;
-                            let per_channel = rows.len() * out_w;
+                            scatter(corners, &mut partial.input, &d_sample);
                             d_off[2 * k * per_channel + local] = d_sample.iter().zip(&dy).map(|(a, b)| a * b).sum();
                             d_off[(2 * k + 1) * per_channel + local] =
                                 d_sample.iter().zip(&dx).map(|(a, b)| a * b).sum();
-                        }
+                        });
                     }
                 }
                 (partial, d_off)
             })
             .collect();
         for (group, (partial, d_off)) in partials.into_iter().enumerate() {
-            let rows = group * out_h / groups..(group + 1) * out_h / groups;
+            let rows = group_rows(group);
             let per_channel = rows.len() * out_w;
             for ch in 0..2 * taps_n {
                 d_offset[(b * 2 * taps_n + ch) * plane + rows.start * out_w..][..per_channel]
@@ -147,69 +143,30 @@ pub(crate) fn deform_backward(
     }
 }
 
-/// The four neighbours of a sampling position, their bilinear weights and whether each lies in
-/// the input (a neighbour outside reads zero and takes no gradient).
-struct Corners {
-    index: [usize; 4],
-    valid: [bool; 4],
-    /// The fractional parts of the position: row `ly`, column `lx`.
-    ly: f32,
-    lx: f32,
+/// The derivatives of the bilinear sample of every channel of `image` (`[H·W][C]`) along the
+/// row (`dy`) and the column (`dx`) of the position, a neighbour outside the input reading zero.
+fn slopes(corners: &Corners, image: &[f32], dy: &mut [f32], dx: &mut [f32]) {
+    let c = dy.len();
+    let at = |i: usize| if corners.valid[i] { &image[corners.index[i] * c..][..c] } else { &image[..0] };
+    let corner = [at(0), at(1), at(2), at(3)];
+    let (ly, lx) = (corners.ly, corners.lx);
+    let (hy, hx) = (1.0 - ly, 1.0 - lx);
+    for j in 0..c {
+        let v: [f32; 4] = std::array::from_fn(|i| corner[i].get(j).copied().unwrap_or(0.0));
+        dy[j] = hx * (v[2] - v[0]) + lx * (v[3] - v[1]);
+        dx[j] = hy * (v[1] - v[0]) + ly * (v[3] - v[2]);
+    }
 }
 
-impl Corners {
-    /// `None` where the position lies a whole pixel or more outside the input (the sample is 0,
-    /// and so are its gradients), as in the forward.
-    fn new(y: f32, x: f32, h: usize, w: usize) -> Option<Self> {
-        if y <= -1.0 || y >= h as f32 || x <= -1.0 || x >= w as f32 {
-            return None;
-        }
-        let floor = |v: f32| if v < 0.0 { -1 } else { v as isize };
-        let (y0, x0) = (floor(y), floor(x));
-        let mut index = [0; 4];
-        let mut valid = [false; 4];
-        for (i, (dy, dx)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate() {
-            let (yy, xx) = (y0 + dy, x0 + dx);
-            if yy >= 0 && (yy as usize) < h && xx >= 0 && (xx as usize) < w {
-                index[i] = yy as usize * w + xx as usize;
-                valid[i] = true;
-            }
-        }
-        Some(Self { index, valid, ly: y - y0 as f32, lx: x - x0 as f32 })
-    }
-
-    /// The corners' bilinear weights, zero outside the input.
-    fn weights(&self) -> [f32; 4] {
-        let (hy, hx) = (1.0 - self.ly, 1.0 - self.lx);
-        let w = [hy * hx, hy * self.lx, self.ly * hx, self.ly * self.lx];
-        std::array::from_fn(|i| if self.valid[i] { w[i] } else { 0.0 })
-    }
-
-    /// The sample of every channel of `image` (`[H·W][C]`) and its derivatives along the row
-    /// (`dy`) and the column (`dx`) of the position.
-    fn sample(&self, image: &[f32], c: usize, sample: &mut [f32], dy: &mut [f32], dx: &mut [f32]) {
-        let at = |i: usize| if self.valid[i] { &image[self.index[i] * c..][..c] } else { &image[..0] };
-        let corner = [at(0), at(1), at(2), at(3)];
-        let weights = self.weights();
-        let (hy, hx, ly, lx) = (1.0 - self.ly, 1.0 - self.lx, self.ly, self.lx);
-        for j in 0..c {
-            let v: [f32; 4] = std::array::from_fn(|i| corner[i].get(j).copied().unwrap_or(0.0));
-            sample[j] = weights[0] * v[0] + weights[1] * v[1] + weights[2] * v[2] + weights[3] * v[3];
-            dy[j] = hx * (v[2] - v[0]) + lx * (v[3] - v[1]);
-            dx[j] = hy * (v[1] - v[0]) + ly * (v[3] - v[2]);
-        }
-    }
-
-    /// Adds `d_sample` (one value per channel) times each corner's weight to the corners of
-    /// `d_image` (`[H·W][C]`).
-    fn scatter(&self, d_image: &mut [f32], c: usize, d_sample: &[f32]) {
-        let weights = self.weights();
-        for i in 0..4 {
-            if self.valid[i] {
-                let dst = &mut d_image[self.index[i] * c..][..c];
-                for j in 0..c {
-                    dst[j] += weights[i] * d_sample[j];
-                }
+/// Adds `d_sample` (one value per channel) times each corner's weight to the corners of
+/// `d_image` (`[H·W][C]`) that lie in the input.
+fn scatter(corners: &Corners, d_image: &mut [f32], d_sample: &[f32]) {
+    let c = d_sample.len();
+    for i in 0..4 {
+        if corners.valid[i] {
+            let dst = &mut d_image[corners.index[i] * c..][..c];
+            for j in 0..c {
+                dst[j] += corners.weight[i] * d_sample[j];
             }
         }
     }

@@ -2,7 +2,6 @@
 //! node with our backward in training ([`crate::autodiff::deform`]) where the convolution suits
 //! them, burn's `DeformConv2d` (the reference) everywhere else.
 
-use burn::nn::PaddingConfig2d;
 use burn::nn::conv::DeformConv2d;
 use burn::tensor::Tensor;
 
@@ -17,7 +16,7 @@ use crate::host::deform::deform_conv2d_host;
 pub fn deform_conv2d_forward(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<4>) -> Tensor<4> {
     let device = input.device();
     let host = match path(&device, Op::Deform) {
-        Path::Host if device.is_autodiff() => training_options(conv).map(|options| {
+        Path::Host if device.is_autodiff() => DeformOptions::of(conv).map(|options| {
             let bias = conv.bias.as_ref().map(|b| b.val());
             deform_conv2d(input.clone(), offset.clone(), conv.weight.val(), bias, options)
         }),
@@ -25,21 +24,6 @@ pub fn deform_conv2d_forward(conv: &DeformConv2d, input: Tensor<4>, offset: Tens
         Path::Gpu | Path::Stock => None,
     };
     host.unwrap_or_else(|| conv.forward(input, offset, None))
-}
-
-/// The node's options, where the convolution has one weight and one offset group and symmetric
-/// padding (DGIA's); `None` sends it to burn's.
-fn training_options(conv: &DeformConv2d) -> Option<DeformOptions> {
-    let padding = match conv.padding {
-        PaddingConfig2d::Valid => [0, 0],
-        PaddingConfig2d::Explicit(top, left, bottom, right) if top == bottom && left == right => [top, left],
-        _ => return None,
-    };
-    (conv.weight_groups == 1 && conv.offset_groups == 1).then_some(DeformOptions {
-        stride: conv.stride,
-        padding,
-        dilation: conv.dilation,
-    })
 }
 
 #[cfg(test)]
