@@ -16,7 +16,7 @@ use burn::tensor::{DType, Tensor};
 
 use super::{dims4, flex, values};
 
-use crate::host::conv::conv2d_host_direct_slices;
+use crate::host::conv::{conv2d_host_direct_slices, conv2d_host_slices};
 use crate::host::conv_backward::{conv2d_bias_grad, conv2d_input_grad, conv2d_weight_grad};
 
 /// Fewest input channels for which training takes [`conv2d`]. The stems (3 input channels, a 7x7
@@ -38,10 +38,19 @@ pub trait HostConvBackend: Backend {
     ) -> FloatTensor<Self>;
 }
 
+/// Fewest input channels for which the training forward may take Winograd: the ConvGRUs' gate
+/// and candidate convolutions (256 or 384 input channels, most of an update iteration's
+/// products). The encoders' layers (at most 128 input channels) keep plain products, whose sums
+/// the feature encoder's instance norms would otherwise magnify past the official training
+/// step's check (see `conv2d_host_direct_slices`).
+pub const WINOGRAD_FORWARD_MIN_CHANNELS: usize = 256;
+
 /// The host convolution of Flex tensors.
 fn forward(x: &FlexTensor, weight: &FlexTensor, bias: &FlexTensor, options: &ConvOptions<2>) -> FlexTensor {
     let (xv, wv, bv) = (values(x), values(weight), values(bias));
-    let (out, dims) = conv2d_host_direct_slices(&xv, dims4(x), &wv, dims4(weight), Some(&bv), options);
+    let (x_dims, w_dims) = (dims4(x), dims4(weight));
+    let conv = if x_dims[1] >= WINOGRAD_FORWARD_MIN_CHANNELS { conv2d_host_slices } else { conv2d_host_direct_slices };
+    let (out, dims) = conv(&xv, x_dims, &wv, w_dims, Some(&bv), options);
     flex(out, &dims)
 }
 
@@ -141,15 +150,17 @@ mod tests {
 
     /// The gradients of the input, the weight and the bias against burn's own autodiff of
     /// `conv2d`, with a random output gradient (the loss `Σ conv·r`): 3x3 stride 1 with enough
-    /// channels for Winograd, few channels, asymmetric and no padding, a 1x1, a strided 7x7
-    /// stem and a strided 3x3 (burn's input gradient), without a bias.
+    /// channels for Winograd in the input gradient (and, at 256 input channels, in the forward
+    /// too), few channels, asymmetric and no padding, a 1x1, a strided 7x7 stem and a strided
+    /// 3x3 (burn's input gradient), without a bias.
     #[test]
     fn gradients_agree_with_burns_autodiff() {
         let ad = Device::flex().autodiff();
         /// Batch, `[C, O]`, kernel, stride, padding, bias.
         type Case = (usize, [usize; 2], [usize; 2], usize, [(usize, usize); 2], bool);
-        let cases: [Case; 8] = [
+        let cases: [Case; 9] = [
             (2, [24, 32], [1, 1], 2, [(0, 0), (0, 0)], true),
+            (1, [WINOGRAD_FORWARD_MIN_CHANNELS, 16], [3, 3], 1, [(1, 1), (1, 1)], true),
             (2, [64, 48], [3, 3], 1, [(1, 1), (1, 1)], true),
             (1, [5, 7], [3, 3], 1, [(1, 1), (1, 1)], true),
             (2, [4, 6], [3, 3], 1, [(0, 2), (1, 0)], true),

@@ -187,9 +187,10 @@ fn host_conv_slices(
 }
 
 /// [`conv2d_host_slices`] without Winograd: the few-output kernel or im2col tiles, whose sums
-/// are the plain products' (the training forward takes these: Winograd's transforms round
-/// differently, and the feature encoder's instance norms magnify a different rounding of their
-/// inputs past the official training step's check; the input gradient may take Winograd).
+/// are the plain products' (the training forward takes these below 256 input channels:
+/// Winograd's transforms round differently, and the feature encoder's instance norms magnify a
+/// different rounding of their inputs past the official training step's check; the GRUs' wider
+/// convolutions and the input gradient may take Winograd).
 ///
 /// # Shapes
 /// - as [`conv2d_host_slices`]
