@@ -3,10 +3,7 @@
 //! `(1 − z)·h + z·tanh(q + c)`, each one parallel pass where burn's autodiff records four to
 //! six serial operations and as many again backward.
 
-use rayon::prelude::*;
-
-/// Chunk of the passes (16 Ki values).
-const CHUNK: usize = 1 << 14;
+use super::fresh::{map2, map3};
 
 fn sigmoid(v: f32) -> f32 {
     1.0 / (1.0 + (-v).exp())
@@ -15,38 +12,22 @@ fn sigmoid(v: f32) -> f32 {
 /// `σ(a + b)`.
 pub fn gates_forward(a: &[f32], b: &[f32]) -> Vec<f32> {
     assert_eq!(a.len(), b.len(), "gates: shapes differ");
-    let mut out = a.to_vec();
-    out.par_chunks_mut(CHUNK).zip(b.par_chunks(CHUNK)).for_each(|(o, b)| {
-        o.iter_mut().zip(b).for_each(|(o, b)| *o = sigmoid(*o + b));
-    });
-    out
+    map2(a, b, |a, b| sigmoid(a + b))
 }
 
 /// The gradient of [`gates_forward`] with respect to `a` (and `b`, the same) from its output `s`:
 /// `g · s · (1 − s)`.
 pub fn gates_backward(g: &[f32], s: &[f32]) -> Vec<f32> {
     assert_eq!(g.len(), s.len(), "gates backward: shapes differ");
-    let mut out = g.to_vec();
-    out.par_chunks_mut(CHUNK).zip(s.par_chunks(CHUNK)).for_each(|(o, s)| {
-        o.iter_mut().zip(s).for_each(|(o, &s)| *o *= s * (1.0 - s));
-    });
-    out
+    map2(g, s, |g, s| g * (s * (1.0 - s)))
 }
 
 /// `(1 − z)·h + z·t` with `t = tanh(q + c)`; returns the output and `t` (for the backward).
 pub fn blend_forward(q: &[f32], c: &[f32], z: &[f32], h: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let n = q.len();
     assert!(c.len() == n && z.len() == n && h.len() == n, "blend: shapes differ");
-    let mut t = q.to_vec();
-    let mut out = vec![0.0f32; n];
-    out.par_chunks_mut(CHUNK).zip(t.par_chunks_mut(CHUNK)).enumerate().for_each(|(k, (o, t))| {
-        let at = k * CHUNK;
-        for i in 0..o.len() {
-            let j = at + i;
-            t[i] = (t[i] + c[j]).tanh();
-            o[i] = (1.0 - z[j]) * h[j] + z[j] * t[i];
-        }
-    });
+    let t = map2(q, c, |q, c| (q + c).tanh());
+    let out = map3(&t, z, h, |t, z, h| (1.0 - z) * h + z * t);
     (out, t)
 }
 
@@ -55,17 +36,9 @@ pub fn blend_forward(q: &[f32], c: &[f32], z: &[f32], h: &[f32]) -> (Vec<f32>, V
 pub fn blend_backward(g: &[f32], t: &[f32], z: &[f32], h: &[f32]) -> [Vec<f32>; 3] {
     let n = g.len();
     assert!(t.len() == n && z.len() == n && h.len() == n, "blend backward: shapes differ");
-    let (mut dq, mut dz, mut dh) = (vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]);
-    dq.par_chunks_mut(CHUNK).zip(dz.par_chunks_mut(CHUNK)).zip(dh.par_chunks_mut(CHUNK)).enumerate().for_each(
-        |(k, ((dq, dz), dh))| {
-            let at = k * CHUNK;
-            for i in 0..dq.len() {
-                let j = at + i;
-                dq[i] = g[j] * z[j] * (1.0 - t[j] * t[j]);
-                dz[i] = g[j] * (t[j] - h[j]);
-                dh[i] = g[j] * (1.0 - z[j]);
-            }
-        },
-    );
-    [dq, dz, dh]
+    [
+        map3(g, z, t, |g, z, t| g * z * (1.0 - t * t)),
+        map3(g, t, h, |g, t, h| g * (t - h)),
+        map2(g, z, |g, z| g * (1.0 - z)),
+    ]
 }

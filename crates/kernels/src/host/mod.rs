@@ -5,6 +5,7 @@ pub mod conv_backward;
 pub mod deform;
 pub mod deform_backward;
 pub mod few_outputs;
+pub mod fresh;
 pub mod gru;
 pub mod gru_backward;
 pub mod norm;

@@ -11,6 +11,7 @@
 
 use rayon::prelude::*;
 
+use super::fresh::{chunk_of, collect_chunks, map1, map2};
 use crate::host::norm::lane_sum;
 
 /// What the forward of [`instance_norm_forward`] keeps for the backward.
@@ -27,18 +28,21 @@ pub struct InstanceNormSaved {
 /// the output is `normalized` itself, so the caller may keep one copy.
 pub fn instance_norm_forward(x: &[f32], plane: usize, epsilon: f64, relu: bool) -> (Vec<f32>, InstanceNormSaved) {
     let plane = plane.max(1);
-    let mut normalized = x.to_vec();
-    let inv_std: Vec<f32> = normalized
-        .par_chunks_mut(plane)
+    // Per plane `1 / σ` and the affine map `v · a + b` that normalises it.
+    let stats: Vec<(f64, f32, f32)> = x
+        .par_chunks(plane)
         .map(|p| {
             let mean = lane_sum(p, |v| v) / plane as f64;
             let var = lane_sum(p, |v| (v - mean) * (v - mean)) / plane as f64;
             let inv = 1.0 / (var + epsilon).sqrt();
-            let (a, b) = (inv as f32, (-mean * inv) as f32);
-            p.iter_mut().for_each(|v| *v = *v * a + b);
-            inv as f32
+            (inv, inv as f32, (-mean * inv) as f32)
         })
         .collect();
+    let normalized = collect_chunks(x.len(), plane, |k| {
+        let (_, a, b) = stats[k];
+        chunk_of(x, plane, k).iter().map(move |&v| v * a + b)
+    });
+    let inv_std = stats.iter().map(|&(inv, _, _)| inv as f32).collect();
     let out = if relu { relu_of(&normalized) } else { normalized.clone() };
     (out, InstanceNormSaved { normalized, inv_std })
 }
@@ -47,56 +51,32 @@ pub fn instance_norm_forward(x: &[f32], plane: usize, epsilon: f64, relu: bool) 
 /// gradient `g`.
 pub fn instance_norm_backward(g: &[f32], saved: &InstanceNormSaved, relu: bool) -> Vec<f32> {
     let planes = saved.inv_std.len().max(1);
-    let plane = g.len() / planes;
-    let mut dx = vec![0.0f32; g.len()];
-    dx.par_chunks_mut(plane.max(1))
-        .zip(g.par_chunks(plane.max(1)))
-        .zip(saved.normalized.par_chunks(plane.max(1)))
-        .zip(saved.inv_std.par_iter())
-        .for_each(|(((dx, g), xh), &inv)| {
-            let masked = |i: usize| if relu && xh[i] <= 0.0 { 0.0 } else { g[i] };
-            let gm: Vec<f32> = (0..g.len()).map(masked).collect();
-            let mean_g = lane_sum(&gm, |v| v) / plane as f64;
-            let gx: Vec<f32> = gm.iter().zip(xh).map(|(g, x)| g * x).collect();
-            let mean_gx = lane_sum(&gx, |v| v) / plane as f64;
-            let (mean_g, mean_gx) = (mean_g as f32, mean_gx as f32);
-            for ((d, &g), &x) in dx.iter_mut().zip(&gm).zip(xh) {
-                *d = inv * (g - mean_g - x * mean_gx);
-            }
-        });
-    dx
+    let plane = (g.len() / planes).max(1);
+    collect_chunks(g.len(), plane, |k| {
+        let (g, xh, inv) = (chunk_of(g, plane, k), chunk_of(&saved.normalized, plane, k), saved.inv_std[k]);
+        let masked = |i: usize| if relu && xh[i] <= 0.0 { 0.0 } else { g[i] };
+        let gm: Vec<f32> = (0..g.len()).map(masked).collect();
+        let mean_g = lane_sum(&gm, |v| v) / plane as f64;
+        let gx: Vec<f32> = gm.iter().zip(xh).map(|(g, x)| g * x).collect();
+        let mean_gx = lane_sum(&gx, |v| v) / plane as f64;
+        let (mean_g, mean_gx) = (mean_g as f32, mean_gx as f32);
+        gm.into_iter().zip(xh).map(move |(g, &x)| inv * (g - mean_g - x * mean_gx))
+    })
 }
-
-/// Chunk of the element-wise passes (16 Ki values: large enough to amortise a task).
-const CHUNK: usize = 1 << 14;
 
 /// `max(0, v)` of every value, in parallel chunks.
 pub fn relu_of(x: &[f32]) -> Vec<f32> {
-    let mut out = x.to_vec();
-    out.par_chunks_mut(CHUNK).for_each(|c| c.iter_mut().for_each(|v| *v = v.max(0.0)));
-    out
+    map1(x, |v| v.max(0.0))
 }
 
 /// `max(0, a + b)`, in parallel chunks.
 pub fn add_relu_of(a: &[f32], b: &[f32]) -> Vec<f32> {
     assert_eq!(a.len(), b.len(), "add_relu: shapes differ");
-    let mut out = a.to_vec();
-    out.par_chunks_mut(CHUNK).zip(b.par_chunks(CHUNK)).for_each(|(o, b)| {
-        o.iter_mut().zip(b).for_each(|(o, b)| *o = (*o + b).max(0.0));
-    });
-    out
+    map2(a, b, |a, b| (a + b).max(0.0))
 }
 
 /// The gradient through a ReLU whose output was `y`: `g` where `y > 0`, else 0.
 pub fn relu_backward(g: &[f32], y: &[f32]) -> Vec<f32> {
     assert_eq!(g.len(), y.len(), "relu_backward: shapes differ");
-    let mut out = g.to_vec();
-    out.par_chunks_mut(CHUNK).zip(y.par_chunks(CHUNK)).for_each(|(o, y)| {
-        o.iter_mut().zip(y).for_each(|(o, &y)| {
-            if y <= 0.0 {
-                *o = 0.0;
-            }
-        });
-    });
-    out
+    map2(g, y, |g, y| if y <= 0.0 { 0.0 } else { g })
 }
