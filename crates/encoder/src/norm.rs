@@ -4,8 +4,8 @@ use burn::module::{Module, Param};
 use burn::nn::Identity;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::tensor::{instance_norm, to_vec};
-use dgstereo_kernels::{PlaneNorm, conv2d_affine_or, conv2d_forward, normalize_planes_or, rectify};
+use dgstereo_core::tensor::instance_norm;
+use dgstereo_kernels::{PlaneNorm, affine_planes_or, conv2d_affine_or, conv2d_forward, normalize_planes_or, rectify};
 use serde::{Deserialize, Serialize};
 
 const EPS: f64 = 1e-5;
@@ -88,13 +88,7 @@ impl Norm {
             if relu_after { rectify(y) } else { y }
         };
         match self {
-            Self::Batch(n) => {
-                let affine = || {
-                    let (scale, shift) = n.scale_shift();
-                    PlaneNorm::Affine { scale: to_vec(scale), shift: to_vec(shift) }
-                };
-                normalize_planes_or(x, affine, relu_after, stock)
-            }
+            Self::Batch(n) => affine_planes_or(x, || n.scale_shift(), relu_after, stock),
             Self::Instance(n) => {
                 normalize_planes_or(x, || PlaneNorm::Instance { epsilon: n.epsilon }, relu_after, stock)
             }

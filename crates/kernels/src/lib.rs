@@ -29,7 +29,7 @@ pub use ops::conv::{
 };
 pub use ops::deform::deform_conv2d_forward;
 pub use ops::gru::{conv_gru_step_or, gru_blend, gru_gates};
-pub use ops::norm::{PlaneNorm, add_relu, normalize_planes_or, rectify};
+pub use ops::norm::{PlaneNorm, add_relu, affine_planes_or, normalize_planes_or, rectify};
 pub use ops::resample::{average_pool_half, resize_bilinear};
 pub use ops::upsample::convex_upsample;
 pub use settings::{GpuRoute, Settings, configure};

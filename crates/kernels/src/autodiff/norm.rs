@@ -1,6 +1,7 @@
-//! The instance norm (with its ReLU), the ReLU and the residual `relu(a + b)` with our backward: one node
-//! each in burn's autodiff where burn records a chain of element-wise operations, forward and
-//! backward in parallel host passes ([`crate::host::norm_backward`]).
+//! The instance norm (with its ReLU), the frozen batch norm's per-channel affine (with its ReLU),
+//! the ReLU and the residual `relu(a + b)` with our backward: one node each in burn's autodiff
+//! where burn records a chain of element-wise operations, forward and backward in parallel host
+//! passes ([`crate::host::norm_backward`]).
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
@@ -13,7 +14,8 @@ use burn::tensor::{DType, Tensor};
 
 use super::{dims4, flex, shape, values};
 use crate::host::norm_backward::{
-    InstanceNormSaved, add_relu_of, instance_norm_backward, instance_norm_forward, relu_backward, relu_of,
+    InstanceNormSaved, add_relu_of, channel_affine_backward, channel_affine_forward, instance_norm_backward,
+    instance_norm_forward, relu_backward, relu_of,
 };
 
 /// The norms whose backward is the host kernels'.
@@ -25,6 +27,19 @@ pub trait HostNormBackend: Backend {
     fn host_add_relu(a: FloatTensor<Self>, b: FloatTensor<Self>) -> FloatTensor<Self>;
     /// `max(0, x)`.
     fn host_relu(x: FloatTensor<Self>) -> FloatTensor<Self>;
+    /// `x · scale[c] + shift[c]` per channel `c` (a frozen batch norm), then a ReLU when `relu`.
+    fn host_channel_affine(
+        x: FloatTensor<Self>,
+        scale: FloatTensor<Self>,
+        shift: FloatTensor<Self>,
+        relu: bool,
+    ) -> FloatTensor<Self>;
+}
+
+fn channel_affine_flex(x: &FlexTensor, scale: &FlexTensor, shift: &FlexTensor, relu: bool) -> FlexTensor {
+    let dims = dims4(x);
+    assert_eq!(shape(scale), [dims[1]], "channel affine: scale does not match the input's channels");
+    flex(channel_affine_forward(&values(x), dims[2] * dims[3], &values(scale), &values(shift), relu), &dims)
 }
 
 fn instance_norm_forward_flex(x: &FlexTensor, epsilon: f64, relu: bool) -> (FlexTensor, InstanceNormSaved) {
@@ -53,6 +68,10 @@ impl HostNormBackend for Flex {
 
     fn host_relu(x: FlexTensor) -> FlexTensor {
         relu_flex(&x)
+    }
+
+    fn host_channel_affine(x: FlexTensor, scale: FlexTensor, shift: FlexTensor, relu: bool) -> FlexTensor {
+        channel_affine_flex(&x, &scale, &shift, relu)
     }
 }
 
@@ -109,6 +128,34 @@ impl Backward<Flex, 2> for AddRelu {
     }
 }
 
+/// The backward node of [`HostNormBackend::host_channel_affine`]; its state is the input, the
+/// scale and, with the ReLU, the output (its mask).
+#[derive(Debug)]
+struct ChannelAffine;
+
+impl Backward<Flex, 3> for ChannelAffine {
+    type State = (FlexTensor, FlexTensor, Option<FlexTensor>);
+
+    fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [node_x, node_scale, node_shift] = ops.parents;
+        let grad = grads.consume::<Flex>(&ops.node);
+        let dims = dims4(&grad);
+        let (x, scale, y) = &ops.state;
+        let y = y.as_ref().map(values);
+        let (dx, dscale, dshift) =
+            channel_affine_backward(&values(&grad), &values(x), y.as_deref(), dims[2] * dims[3], &values(scale));
+        if let Some(node) = node_x {
+            grads.register::<Flex>(node.id, flex(dx, &dims));
+        }
+        if let Some(node) = node_scale {
+            grads.register::<Flex>(node.id, flex(dscale, &[dims[1]]));
+        }
+        if let Some(node) = node_shift {
+            grads.register::<Flex>(node.id, flex(dshift, &[dims[1]]));
+        }
+    }
+}
+
 impl<C: CheckpointStrategy> HostNormBackend for Autodiff<Flex, C> {
     fn host_instance_norm(x: FloatTensor<Self>, epsilon: f64, relu: bool) -> FloatTensor<Self> {
         match InstanceNorm.prepare::<C>([x.node()]).compute_bound().stateful() {
@@ -127,6 +174,22 @@ impl<C: CheckpointStrategy> HostNormBackend for Autodiff<Flex, C> {
                 prep.finish(out.clone(), out)
             }
             OpsKind::UnTracked(prep) => prep.finish(add_relu_flex(a.primitive(), b.primitive())),
+        }
+    }
+
+    fn host_channel_affine(
+        x: FloatTensor<Self>,
+        scale: FloatTensor<Self>,
+        shift: FloatTensor<Self>,
+        relu: bool,
+    ) -> FloatTensor<Self> {
+        let (xp, ap, bp) = (x.primitive(), scale.primitive(), shift.primitive());
+        match ChannelAffine.prepare::<C>([x.node(), scale.node(), shift.node()]).compute_bound().stateful() {
+            OpsKind::Tracked(prep) => {
+                let out = channel_affine_flex(xp, ap, bp, relu);
+                prep.finish((xp.clone(), ap.clone(), relu.then(|| out.clone())), out)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(channel_affine_flex(xp, ap, bp, relu)),
         }
     }
 
@@ -166,4 +229,21 @@ pub fn add_relu(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
 pub fn relu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
     debug_assert_eq!(x.dtype(), DType::F32);
     Tensor::from_dispatch(<burn::backend::Dispatch as HostNormBackend>::host_relu(x.into_dispatch()))
+}
+
+/// `x · scale[c] + shift[c]` per channel `c` on the Flex autodiff device, float32 (a frozen batch
+/// norm's affine), then a ReLU when `relu`; the gradients of `x`, `scale` and `shift` from the
+/// host kernels.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; `scale`, `shift`: `[C]`; output: as `x`
+pub fn channel_affine(x: Tensor<4>, scale: Tensor<1>, shift: Tensor<1>, relu: bool) -> Tensor<4> {
+    debug_assert_eq!(x.dtype(), DType::F32);
+    let out = <burn::backend::Dispatch as HostNormBackend>::host_channel_affine(
+        x.into_dispatch(),
+        scale.into_dispatch(),
+        shift.into_dispatch(),
+        relu,
+    );
+    Tensor::from_dispatch(out)
 }

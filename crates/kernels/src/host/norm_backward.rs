@@ -80,3 +80,62 @@ pub fn relu_backward(g: &[f32], y: &[f32]) -> Vec<f32> {
     assert_eq!(g.len(), y.len(), "relu_backward: shapes differ");
     map2(g, y, |g, y| if y <= 0.0 { 0.0 } else { g })
 }
+
+/// `x · scale[c] + shift[c]` on every plane of channel `c` (`x` row-major `[N, C, plane]` with
+/// `scale.len()` channels), then `max(0, ·)` when `relu`: a frozen batch norm in training.
+pub fn channel_affine_forward(x: &[f32], plane: usize, scale: &[f32], shift: &[f32], relu: bool) -> Vec<f32> {
+    let channels = scale.len().max(1);
+    assert_eq!(shift.len(), scale.len(), "channel affine: scale and shift differ in length");
+    let plane = checked_plane(x.len(), plane, channels);
+    collect_chunks(x.len(), plane, |k| {
+        let (a, b) = (scale[k % channels], shift[k % channels]);
+        chunk_of(x, plane, k).iter().map(move |&v| if relu { (v * a + b).max(0.0) } else { v * a + b })
+    })
+}
+
+/// The gradients of [`channel_affine_forward`] from the output gradient `g`: `(dx, dscale,
+/// dshift)`, with `g` masked where the output `y` is not positive when `y` is given (the ReLU's
+/// output): `dx = g·scale[c]`, `dscale[c] = Σ g·x`, `dshift[c] = Σ g` over the channel's planes
+/// (sums in `f64`).
+pub fn channel_affine_backward(
+    g: &[f32],
+    x: &[f32],
+    y: Option<&[f32]>,
+    plane: usize,
+    scale: &[f32],
+) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let channels = scale.len().max(1);
+    assert!(g.len() == x.len() && y.is_none_or(|y| y.len() == g.len()), "channel affine backward: shapes differ");
+    let plane = checked_plane(g.len(), plane, channels);
+    let masked = |k: usize| {
+        let (g, y) = (chunk_of(g, plane, k), y.map(|y| chunk_of(y, plane, k)));
+        g.iter().enumerate().map(move |(i, &g)| if y.is_some_and(|y| y[i] <= 0.0) { 0.0 } else { g })
+    };
+    let dx = collect_chunks(g.len(), plane, |k| masked(k).map(move |g| g * scale[k % channels]));
+    let sums: Vec<(f64, f64)> = (0..g.len() / plane)
+        .into_par_iter()
+        .map(|k| {
+            let gm: Vec<f32> = masked(k).collect();
+            let gx: Vec<f32> = gm.iter().zip(chunk_of(x, plane, k)).map(|(g, x)| g * x).collect();
+            (lane_sum(&gx, |v| v), lane_sum(&gm, |v| v))
+        })
+        .collect();
+    let (mut dscale, mut dshift) = (vec![0.0f64; channels], vec![0.0f64; channels]);
+    for (k, (gx, gs)) in sums.into_iter().enumerate() {
+        dscale[k % channels] += gx;
+        dshift[k % channels] += gs;
+    }
+    let narrow = |v: Vec<f64>| v.into_iter().map(|v| v as f32).collect();
+    (dx, narrow(dscale), narrow(dshift))
+}
+
+/// `plane` (at least 1), checked to divide `len` values into whole images of `channels` planes.
+fn checked_plane(len: usize, plane: usize, channels: usize) -> usize {
+    let plane = plane.max(1);
+    assert_eq!(
+        len % (plane * channels),
+        0,
+        "channel affine: {len} values are not images of {channels} planes of {plane}"
+    );
+    plane
+}

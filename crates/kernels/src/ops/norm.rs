@@ -1,21 +1,24 @@
 //! Per-channel norms with an optional ReLU, and the residual `relu(a + b)`: one parallel host
-//! pass per plane for CPU inference ([`crate::host::norm`]); in training the instance norm and
-//! `relu(a + b)` are nodes with our backward ([`crate::autodiff::norm`]); burn's operations
-//! elsewhere.
+//! pass per plane for CPU inference ([`crate::host::norm`]); in training the instance norm, the
+//! frozen batch norm's affine and `relu(a + b)` are nodes with our backward
+//! ([`crate::autodiff::norm`]); burn's operations elsewhere.
 
 use burn::tensor::Tensor;
 use burn::tensor::activation::relu;
 
 use crate::autodiff;
+use dgstereo_core::tensor::to_vec;
+
 use crate::dispatch::{Op, Path, path};
 use crate::host::norm;
 pub use crate::host::norm::PlaneNorm;
 
 /// `norm()` applied to every `(n, c)` plane of `x`, then `max(0, ·)` when `relu`, where the
 /// dispatch takes the host pass (`norm` is called only there); `stock(x)` (burn's norm module and
-/// ReLU, the reference) elsewhere. Under autodiff the host path takes the instance norm only: an
-/// affine norm's `scale` and `shift` come as plain values, without the gradient their
-/// parameters need, so it keeps `stock`.
+/// ReLU, the reference) elsewhere. Under autodiff the host path takes the instance norm and the
+/// ReLU only: an affine norm's `scale` and `shift` come here as plain values, without the
+/// gradient their parameters need, so it keeps `stock` ([`affine_planes_or`] is the frozen batch
+/// norm's way in, with tensors).
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output: the same
@@ -33,6 +36,33 @@ pub fn normalize_planes_or(
             PlaneNorm::Affine { .. } | PlaneNorm::Identity => stock(x),
         },
         Path::Host => norm::normalize_planes(x, &norm(), relu),
+        Path::Gpu | Path::Stock => stock(x),
+    }
+}
+
+/// A frozen batch norm, `x · scale[c] + shift[c]` per channel `c` with `(scale, shift)` from
+/// `scale_shift()`, then `max(0, ·)` when `relu`: in training on the host path one node with our
+/// backward (the gradients reach `scale` and `shift`, and through them the norm's parameters),
+/// for CPU inference the host pass, `stock(x)` elsewhere.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`; `scale`, `shift`: `[C]`; output: as `x`
+pub fn affine_planes_or(
+    x: Tensor<4>,
+    scale_shift: impl FnOnce() -> (Tensor<1>, Tensor<1>),
+    relu: bool,
+    stock: impl FnOnce(Tensor<4>) -> Tensor<4>,
+) -> Tensor<4> {
+    let device = x.device();
+    match path(&device, Op::Norm) {
+        Path::Host if device.is_autodiff() => {
+            let (scale, shift) = scale_shift();
+            autodiff::norm::channel_affine(x, scale, shift, relu)
+        }
+        Path::Host => {
+            let (scale, shift) = scale_shift();
+            norm::normalize_planes(x, &PlaneNorm::Affine { scale: to_vec(scale), shift: to_vec(shift) }, relu)
+        }
         Path::Gpu | Path::Stock => stock(x),
     }
 }
@@ -127,6 +157,52 @@ mod tests {
             let scale = to_vec(gx0.clone()).iter().fold(1e-6f32, |m, v| m.max(v.abs()));
             assert!(max_abs_diff(gx0, gx1) < 1e-4 * scale, "relu {relu_after}: input gradient");
             assert!(max_abs_diff(gb0, gb1) == 0.0, "relu {relu_after}: residual gradient");
+        }
+    }
+
+    /// Under autodiff the frozen batch norm's affine (with and without its ReLU) gives burn's
+    /// values and the gradients of the input, the scale and the shift (the loss `Σ y·r`, a random
+    /// `r`; scale and shift derived from parameters as the encoder derives them), at batch 2.
+    #[test]
+    fn the_affine_node_agrees_with_burns_autodiff() {
+        let ad = Device::flex().autodiff();
+        let [x, _] = operands().map(|t| Tensor::<4>::from_data(t.into_data(), &ad));
+        let c = x.dims()[1];
+        let r = Tensor::<4>::random(x.dims(), Distribution::Normal(0.0, 1.0), &ad);
+        let (weight, bias) = (
+            Tensor::<1>::random([c], Distribution::Normal(1.0, 0.5), &ad),
+            Tensor::<1>::random([c], Distribution::Normal(0.0, 0.5), &ad),
+        );
+        let plain = |t: Tensor<4>| Tensor::<4>::from_data(t.into_data(), &Device::flex());
+        let run = |pinned: Path, relu_after: bool| {
+            let (x, w, b) = (
+                x.clone().detach().require_grad(),
+                weight.clone().detach().require_grad(),
+                bias.clone().detach().require_grad(),
+            );
+            let scale_shift = || (w.clone().mul_scalar(0.7), b.clone() - w.clone().mul_scalar(0.2));
+            let y = with_path(pinned, || {
+                affine_planes_or(x.clone(), scale_shift, relu_after, |x| {
+                    let (scale, shift) = scale_shift();
+                    let y = x * scale.reshape([1, c, 1, 1]) + shift.reshape([1, c, 1, 1]);
+                    if relu_after { relu(y) } else { y }
+                })
+            });
+            let grads = (y.clone() * r.clone()).sum().backward();
+            let gx = x.grad(&grads).expect("the input's gradient");
+            let (gw, gb) =
+                (w.grad(&grads).expect("the weight's gradient"), b.grad(&grads).expect("the bias's gradient"));
+            (plain(y.detach()), plain(gx), to_vec(gw), to_vec(gb))
+        };
+        for relu_after in [true, false] {
+            let (y0, gx0, gw0, gb0) = run(Path::Stock, relu_after);
+            let (y1, gx1, gw1, gb1) = run(Path::Host, relu_after);
+            assert!(max_abs_diff(y0, y1) < 1e-6, "relu {relu_after}: output");
+            assert!(max_abs_diff(gx0, gx1) < 1e-6, "relu {relu_after}: input gradient");
+            for (name, a, b) in [("weight", gw0, gw1), ("bias", gb0, gb1)] {
+                let worst = a.iter().zip(&b).map(|(a, b)| (a - b).abs() / a.abs().max(1.0)).fold(0.0, f32::max);
+                assert!(worst < 1e-5, "relu {relu_after}: {name} gradient {worst}");
+            }
         }
     }
 }
