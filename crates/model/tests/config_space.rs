@@ -176,7 +176,7 @@ fn unequal_hidden_widths_run() {
 }
 
 /// Saved checkpoints keep the reference's top-level keys (`fnet.`, `cnet.`, `conv2.`) for both
-/// encoder layouts, and load back into the same layout.
+/// encoder layouts, load back into the same layout, and are readable by others (0644).
 #[test]
 fn saved_keys_keep_the_reference_names() {
     let device = default_device();
@@ -187,6 +187,14 @@ fn saved_keys_keep_the_reference_names() {
         let model = config.init(&device).unwrap();
         let path = std::env::temp_dir().join(format!("config-space-keys-{}-{shared}.safetensors", std::process::id()));
         dgstereo_model::checkpoint::save_safetensors(&model, &path, &[]).unwrap();
+        // Written through a temporary file that is gone, and readable by others as any output.
+        assert!(!path.with_extension("safetensors.tmp").exists(), "the temporary file is left behind");
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(&path).unwrap().permissions().mode();
+            assert_eq!(mode & 0o644, 0o644, "weights file mode {mode:o}");
+        }
         let bytes = std::fs::read(&path).unwrap();
         let file = safetensors::SafeTensors::deserialize(&bytes).unwrap();
         let mut tops: Vec<String> =
