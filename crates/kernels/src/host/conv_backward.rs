@@ -17,6 +17,7 @@ use dgstereo_core::tensor::reuse_buffer;
 use rayon::prelude::*;
 
 use super::conv::{conv2d_host_slices, image_columns};
+use super::fresh::CHUNK;
 use crate::geometry::conv_output_size;
 use crate::product::matmul_transposed_accumulate;
 
@@ -120,7 +121,6 @@ pub fn conv2d_weight_grad(
         .collect();
     // Each element sums the groups in order, chunks of elements in parallel.
     let mut total = vec![0.0f32; o * k];
-    const CHUNK: usize = 1 << 14;
     total.par_chunks_mut(CHUNK).enumerate().for_each(|(i, chunk)| {
         for partial in &partials {
             chunk.iter_mut().zip(&partial[i * CHUNK..]).for_each(|(t, v)| *t += v);

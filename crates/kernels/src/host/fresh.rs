@@ -6,16 +6,19 @@
 //! `calloc`) while the workers wait: in a profile of a training step those serial writes held a
 //! fifth of the main thread's samples. [`collect_chunks`] reserves the buffer uninitialised and
 //! lets each rayon task write its own chunk once, from an iterator of exactly the chunk's values,
-//! checked by count: safe code cannot leave a value unwritten.
+//! checked by count: safe code cannot leave a value unwritten. The buffer is the host kernels'
+//! usual unwritten one (`dgstereo_core::tensor::unwritten`).
 #![allow(unsafe_code)]
 
+use dgstereo_core::tensor::{unwritten, written};
 use rayon::prelude::*;
 
 /// Chunk of the element-wise passes (16 Ki values: large enough to amortise a task).
 pub const CHUNK: usize = 1 << 14;
 
 /// A vector of `n` values whose chunk `k` (values `k·chunk ..`, the last one shorter) holds
-/// what `values(k)` yields, every chunk written by one rayon task.
+/// what `values(k)` yields, every chunk written by one rayon task into a buffer from
+/// [`unwritten`] (NaN in tests and debug builds, uninitialised otherwise).
 ///
 /// # Panics
 /// If an iterator yields fewer values than its chunk holds (extra values are ignored).
@@ -24,20 +27,18 @@ where
     I: Iterator<Item = f32>,
     F: Fn(usize) -> I + Sync,
 {
-    let mut out = Vec::with_capacity(n);
-    out.spare_capacity_mut()[..n].par_chunks_mut(chunk.max(1)).enumerate().for_each(|(k, slots)| {
-        let mut written = 0;
+    let mut out = unwritten(n);
+    out.par_chunks_mut(chunk.max(1)).enumerate().for_each(|(k, slots)| {
+        let mut count = 0;
         for (slot, v) in slots.iter_mut().zip(values(k)) {
             slot.write(v);
-            written += 1;
+            count += 1;
         }
-        assert_eq!(written, slots.len(), "collect_chunks: chunk {k} got {written} of {} values", slots.len());
+        assert_eq!(count, slots.len(), "collect_chunks: chunk {k} got {count} of {} values", slots.len());
     });
-    // SAFETY: the first `n` slots are within the capacity reserved above, and every one of them
-    // was written: each chunk's task counted its writes against the chunk's length, and a task
-    // that panicked propagates out of `for_each` before this line.
-    unsafe { out.set_len(n) };
-    out
+    // SAFETY: every element was written: each chunk's task counted its writes against the
+    // chunk's length, and a task that panicked propagates out of `for_each` before this line.
+    unsafe { written(out) }
 }
 
 /// Chunk `k` of `x` in chunks of `chunk` values.

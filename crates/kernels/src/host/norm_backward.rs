@@ -28,21 +28,21 @@ pub struct InstanceNormSaved {
 /// the output is `normalized` itself, so the caller may keep one copy.
 pub fn instance_norm_forward(x: &[f32], plane: usize, epsilon: f64, relu: bool) -> (Vec<f32>, InstanceNormSaved) {
     let plane = plane.max(1);
-    // Per plane `1 / σ` and the affine map `v · a + b` that normalises it.
-    let stats: Vec<(f64, f32, f32)> = x
+    // Per plane the affine map `v · a + b` that normalises it; `a` is `1 / σ`.
+    let affine: Vec<(f32, f32)> = x
         .par_chunks(plane)
         .map(|p| {
             let mean = lane_sum(p, |v| v) / plane as f64;
             let var = lane_sum(p, |v| (v - mean) * (v - mean)) / plane as f64;
             let inv = 1.0 / (var + epsilon).sqrt();
-            (inv, inv as f32, (-mean * inv) as f32)
+            (inv as f32, (-mean * inv) as f32)
         })
         .collect();
     let normalized = collect_chunks(x.len(), plane, |k| {
-        let (_, a, b) = stats[k];
+        let (a, b) = affine[k];
         chunk_of(x, plane, k).iter().map(move |&v| v * a + b)
     });
-    let inv_std = stats.iter().map(|&(inv, _, _)| inv as f32).collect();
+    let inv_std = affine.iter().map(|&(a, _)| a).collect();
     let out = if relu { relu_of(&normalized) } else { normalized.clone() };
     (out, InstanceNormSaved { normalized, inv_std })
 }

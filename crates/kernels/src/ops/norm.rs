@@ -5,10 +5,9 @@
 
 use burn::tensor::Tensor;
 use burn::tensor::activation::relu;
-
-use crate::autodiff;
 use dgstereo_core::tensor::to_vec;
 
+use crate::autodiff;
 use crate::dispatch::{Op, Path, path};
 use crate::host::norm;
 pub use crate::host::norm::PlaneNorm;
