@@ -4,11 +4,12 @@
 //! and on nothing else of the workspace, so the stages stay swappable and independent. What lives
 //! here is what more than one stage needs: the device and precision choice, the error type, the
 //! input padder that makes any image size a multiple of 32, a few tensor helpers, the locator of
-//! the shared reference data, the stage clock of the profiler and the probe through which a
+//! the shared reference data, the atomic replacement of output files, the stage clock of the profiler and the probe through which a
 //! forward pass reports its intermediate tensors and stage times. The kernels live in
 //! `dgstereo-kernels`, which depends on this crate.
 #![deny(missing_docs)]
 
+pub mod atomic_file;
 pub mod device;
 pub mod error;
 pub mod layers;

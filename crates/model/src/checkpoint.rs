@@ -13,6 +13,7 @@
 use std::path::Path;
 
 use burn::store::{ApplyError, ModuleSnapshot, PytorchStore, SafetensorsStore};
+use dgstereo_core::atomic_file::commit_file;
 use dgstereo_core::{Error, Result};
 
 use crate::RaftStereo;
@@ -126,23 +127,15 @@ pub fn save_safetensors(model: &RaftStereo, path: &Path, metadata: &[(&str, &str
 }
 
 /// Makes the written temporary file `tmp` the file `path`: readable by all (the store creates
-/// it private, 0600, where a weights file is meant to be shared like any other output), on disk
-/// (`fsync`) before the rename, and the rename on disk too (the folder's `fsync`), so a crash
-/// leaves either the old file or the whole new one.
+/// it private, 0600, where a weights file is meant to be shared like any other output), then
+/// committed on disk ([`commit_file`]), so a crash leaves either the old file or the whole new one.
 fn finish_atomic(tmp: &Path, path: &Path) -> Result<()> {
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(tmp, std::fs::Permissions::from_mode(0o644)).map_err(|e| Error::io(tmp, e))?;
     }
-    std::fs::File::open(tmp).and_then(|f| f.sync_all()).map_err(|e| Error::io(tmp, e))?;
-    std::fs::rename(tmp, path).map_err(|e| Error::io(path, e))?;
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
-        && let Ok(d) = std::fs::File::open(dir)
-    {
-        let _ = d.sync_all();
-    }
-    Ok(())
+    commit_file(tmp, path)
 }
 
 /// Loads our own safetensors checkpoint into `model` (built with the config it was saved with).

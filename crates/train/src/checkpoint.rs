@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 
 use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::Bytes;
+use dgstereo_core::atomic_file::commit_file;
 use dgstereo_core::{Error, Result};
 use dgstereo_model::RaftStereo;
 use dgstereo_model::checkpoint::TRAINING_STATE_PREFIX;
@@ -41,7 +42,8 @@ pub fn checkpoint_name(step: usize) -> String {
     format!("step-{step:08}.safetensors")
 }
 
-/// Writes `bytes` to `path` atomically: temporary file, `fsync`, rename, folder `fsync`.
+/// Writes `bytes` to `path` atomically: a temporary file beside it, committed by [`commit_file`]
+/// (`fsync`, rename, folder `fsync`).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let name = path.file_name().ok_or_else(|| Error::Other(format!("{}: not a file path", path.display())))?;
@@ -49,13 +51,8 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let result = (|| {
         let mut f = std::fs::File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
         f.write_all(bytes).map_err(|e| Error::io(&tmp, e))?;
-        f.sync_all().map_err(|e| Error::io(&tmp, e))?;
         drop(f);
-        std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))?;
-        if let Ok(d) = std::fs::File::open(dir) {
-            let _ = d.sync_all();
-        }
-        Ok(())
+        commit_file(&tmp, path)
     })();
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
