@@ -6,11 +6,13 @@
 //! crate's narrowest micro-kernels for most of a training step. Here the input gradient of a
 //! stride-1 convolution is the host convolution of the output gradient with the flipped,
 //! transposed weight (Winograd where the layer suits it, as in inference; the forward itself
-//! keeps plain products, see `conv2d_host_direct_slices`), and the weight gradient is `G · Colsᵀ`, the output gradient (`O x P`) by the forward's own column matrix, tiles of
-//! a thousand and more pixels deep, summed over a fixed partition of the tiles (the same sums
-//! on any thread count, so training stays reproducible). burn's
-//! backward stays the reference and the path for what these do not take (strided input
-//! gradients, groups).
+//! keeps plain products, see `conv2d_host_direct_slices`). The weight gradient of a 3x3
+//! stride-1 layer with enough channels runs by Winograd's transforms
+//! ([`conv2d_weight_grad_winograd`], 4x fewer multiplications); elsewhere it is `G · Colsᵀ`, the
+//! output gradient (`O x P`) by the forward's own column matrix, tiles of a thousand and more
+//! pixels deep, summed over a fixed partition of the tiles. Both give the same sums on any
+//! thread count, so training stays reproducible. burn's backward stays the reference and the
+//! path for what these do not take (strided input gradients, groups).
 
 use burn::tensor::ops::ConvOptions;
 use dgstereo_core::tensor::reuse_buffer;
@@ -18,8 +20,10 @@ use rayon::prelude::*;
 
 use super::conv::{conv2d_host_slices, image_columns};
 use super::fresh::CHUNK;
+use super::winograd::{winograd_variant, winograd_weight_grad};
 use crate::geometry::conv_output_size;
 use crate::product::matmul_transposed_accumulate;
+use crate::settings::settings;
 
 /// Column-matrix elements per weight-gradient tile: deep enough (pixels) for a well-shaped
 /// product, small enough for a worker's buffer (16 MiB).
@@ -127,6 +131,23 @@ pub fn conv2d_weight_grad(
         }
     });
     total
+}
+
+/// [`conv2d_weight_grad`] by Winograd's transforms (`winograd::weight_grad`) where the layer
+/// takes the forward's Winograd variant (3x3, stride 1, enough channels and tiles) and the
+/// settings' `winograd` is on; `None` elsewhere.
+///
+/// # Shapes
+/// As [`conv2d_weight_grad`].
+pub fn conv2d_weight_grad_winograd(
+    x: &[f32],
+    x_dims: [usize; 4],
+    g: &[f32],
+    w_dims: [usize; 4],
+    options: &ConvOptions<2>,
+) -> Option<Vec<f32>> {
+    let variant = winograd_variant(x_dims, w_dims, options).filter(|_| settings().winograd)?;
+    Some(winograd_weight_grad(variant, x, x_dims, g, w_dims[0], options.padding))
 }
 
 /// Output rows per weight-gradient tile of `n` images of `out_h x out_w` pixels with `k`

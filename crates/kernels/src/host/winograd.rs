@@ -59,6 +59,7 @@ mod simd;
 mod split;
 mod transforms;
 mod weight_cache;
+mod weight_grad;
 
 use dgstereo_core::tensor::reuse_buffer;
 
@@ -70,6 +71,7 @@ pub(crate) use transforms::{Conv3x3, Variant, split_row, winograd_variant};
 use transforms::{Plan, transform_inputs, transform_outputs};
 pub use weight_cache::KeptWeights;
 use weight_cache::transformed_weights;
+pub(crate) use weight_grad::winograd_weight_grad;
 
 /// `conv` by Winograd `variant`: F(4x4) with few channels in blocks of tiles ([`blocks`]),
 /// otherwise in bands. Returns the output and its dimensions.

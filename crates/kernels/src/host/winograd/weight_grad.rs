@@ -1,0 +1,252 @@
+//! The weight gradient of a 3x3, stride-1 convolution by Winograd's transforms.
+//!
+//! Design decision: the im2col weight gradient (`conv_backward::conv2d_weight_grad`) was the
+//! largest single part of a CPU training step (three tenths of the workers' samples), because the
+//! forward and the input gradient of the GRUs' convolutions run by Winograd with 4x fewer
+//! multiplications and it did not. The forward's transforms give the weight gradient too: with
+//! `Y = Aᵀ[(G w Gᵀ) ⊙ (Bᵀ d B)]A` for one tile, the loss's derivative `Σ g·Y` is the trilinear
+//! form `Σ (A g Aᵀ) ⊙ (G w Gᵀ) ⊙ (Bᵀ d B)`, so `∂/∂w = Gᵀ[Σ_tiles (A g Aᵀ) ⊙ (Bᵀ d B)]G`: the same
+//! input transform as the forward's, the output transform's matrix applied to the output
+//! gradient's m x m tiles, α² products `M_k += U_k · V_kᵀ` (`O x T` by `T x C`, `T` tiles deep)
+//! summed over the tiles, and one transform by `G` at the end: α² products instead of 9·m² per
+//! tile and channel pair (F(4x4): 36 instead of 144).
+//!
+//! Each stage runs in parallel over what it owns (input channels, output channels, the α²
+//! products, output channels), and each `M_k` sums the bands of tile rows in order, so the
+//! result is the same bit for bit on any thread count: training stays reproducible.
+
+use dgstereo_core::tensor::{reuse_buffer, zeros_parallel};
+use rayon::prelude::*;
+
+use super::transforms::{Tiling, Variant, lincomb, transform_inputs};
+
+/// Elements of a band's transformed inputs or output gradients (`α² x C x T`): the band's tile
+/// rows are as many as this allows (16 MiB), the whole image on the 1/4 grids of training crops.
+const BAND_ELEMENTS: usize = 1 << 22;
+
+/// Output or input channels per transform job.
+const CHANNELS_PER_JOB: usize = 8;
+
+/// The gradient of a 3x3, stride-1, one-group convolution's weight (`[O, C, 3, 3]`), given its
+/// input `x` and output gradient `g`, by Winograd `variant`.
+///
+/// # Shapes
+/// - `x`: `x_dims = [N, C, H, W]`; `g`: `[N, O, H_out, W_out]` with `H_out = H + top + bottom - 2`
+///   (`padding = [(top, bottom), (left, right)]`); output `[O, C, 3, 3]`
+pub(crate) fn winograd_weight_grad(
+    variant: &Variant,
+    x: &[f32],
+    x_dims: [usize; 4],
+    g: &[f32],
+    o: usize,
+    padding: [(usize, usize); 2],
+) -> Vec<f32> {
+    weight_grad_in_bands(variant, x, x_dims, g, o, padding, BAND_ELEMENTS)
+}
+
+/// [`winograd_weight_grad`] with bands of at most `band_elements` transformed values.
+fn weight_grad_in_bands(
+    variant: &Variant,
+    x: &[f32],
+    x_dims: [usize; 4],
+    g: &[f32],
+    o: usize,
+    padding: [(usize, usize); 2],
+    band_elements: usize,
+) -> Vec<f32> {
+    let [n, c, h, w] = x_dims;
+    let [(ph, ph_end), (pw, pw_end)] = padding;
+    let (out_h, out_w) = ((h + ph + ph_end).saturating_sub(2), (w + pw + pw_end).saturating_sub(2));
+    assert_eq!(x.len(), n * c * h * w, "winograd_weight_grad: the input is not {x_dims:?}");
+    assert_eq!(
+        g.len(),
+        n * o * out_h * out_w,
+        "winograd_weight_grad: the output gradient is not [{n}, {o}, {out_h}, {out_w}]"
+    );
+    let (m, alpha) = (variant.m, variant.m + 2);
+    let k2 = alpha * alpha;
+    let (tiles_h, tiles_w) = (out_h.div_ceil(m), out_w.div_ceil(m));
+    let tws = tiles_w + 1;
+    let tiling = Tiling { c, h, w, ph, pw, out_w, m, tiles_w };
+    let band_rows = (band_elements / (k2 * c.max(o) * tws).max(1)).clamp(1, tiles_h.max(1));
+    let mut sums = zeros_parallel(k2 * o * c);
+    let (mut v_buffer, mut u_buffer) = (Vec::new(), Vec::new());
+    for b in 0..n {
+        let image = &x[b * c * h * w..][..c * h * w];
+        let grads = &g[b * o * out_h * out_w..][..o * out_h * out_w];
+        for start in (0..tiles_h).step_by(band_rows) {
+            let rows = start..(start + band_rows).min(tiles_h);
+            let t = rows.len() * tws;
+            // Every element of both is written by its transform before the products read it.
+            let (v, u) = (reuse_buffer(&mut v_buffer, k2 * c * t), reuse_buffer(&mut u_buffer, k2 * o * t));
+            v.par_chunks_mut(CHANNELS_PER_JOB * k2 * t).enumerate().for_each_init(Vec::new, |scratch, (job, dst)| {
+                let (c0, cc) = (job * CHANNELS_PER_JOB, dst.len() / (k2 * t));
+                let channels = &image[c0 * h * w..][..cc * h * w];
+                transform_inputs(variant, dst, channels, Tiling { c: cc, ..tiling }, rows.clone(), scratch);
+            });
+            u.par_chunks_mut(k2 * t).enumerate().for_each(|(oc, dst)| {
+                let plane = &grads[oc * out_h * out_w..][..out_h * out_w];
+                transform_grad_tiles(variant, dst, plane, [out_h, out_w], rows.clone(), tws);
+            });
+            let (u, v) = (&*u, &*v);
+            sums.par_chunks_mut(o * c).enumerate().for_each(|(k, mk)| {
+                crate::product::matmul_transposed_accumulate(
+                    mk,
+                    c,
+                    &u[k * t..],
+                    k2 * t,
+                    &v[k * t..],
+                    k2 * t,
+                    [o, c, t],
+                );
+            });
+        }
+    }
+    transform_sums(variant, &sums, o, c)
+}
+
+/// Writes `A g Aᵀ` of every m x m tile of one output-gradient plane in `tile_rows` into `dst`,
+/// laid out `[α²][T]` like the input transform's (tile-row-major, `tws` tiles a row, the last of
+/// each row unused and zero), with `g` zero past the plane's last row and column.
+fn transform_grad_tiles(
+    variant: &Variant,
+    dst: &mut [f32],
+    plane: &[f32],
+    [out_h, out_w]: [usize; 2],
+    tile_rows: std::ops::Range<usize>,
+    tws: usize,
+) {
+    let (m, alpha) = (variant.m, variant.m + 2);
+    let t = tile_rows.len() * tws;
+    // `at[r][i]` is `A[i][r]`: `U[i][j] = Σ_r Σ_s A[i][r]·g[r][s]·A[j][s]`.
+    let at = |r: usize, i: usize| variant.at[r][i];
+    for (l, ty) in tile_rows.enumerate() {
+        for tx in 0..tws {
+            let mut tile = [[0.0f32; 4]; 4];
+            if tx + 1 < tws {
+                for (r, row) in tile.iter_mut().enumerate().take(m) {
+                    let y = m * ty + r;
+                    if y < out_h {
+                        for (s, value) in row.iter_mut().enumerate().take(m) {
+                            let xcol = m * tx + s;
+                            *value = if xcol < out_w { plane[y * out_w + xcol] } else { 0.0 };
+                        }
+                    }
+                }
+            }
+            // `A g` (α x m), then `(A g) Aᵀ` (α x α).
+            let mut ag = [[0.0f32; 4]; 6];
+            for (i, row) in ag.iter_mut().enumerate().take(alpha) {
+                for (s, value) in row.iter_mut().enumerate().take(m) {
+                    *value = (0..m).map(|r| at(r, i) * tile[r][s]).sum();
+                }
+            }
+            for i in 0..alpha {
+                for j in 0..alpha {
+                    dst[(alpha * i + j) * t + l * tws + tx] = (0..m).map(|s| ag[i][s] * at(s, j)).sum();
+                }
+            }
+        }
+    }
+}
+
+/// The weight gradient `[O, C, 3, 3]` from the summed products `sums` (`[α²][O][C]`):
+/// `dw[a][b] = Σ_i Σ_j G[i][a]·M[αi + j]·G[j][b]`, per output channel over vectors of the `C`
+/// input channels.
+fn transform_sums(variant: &Variant, sums: &[f32], o: usize, c: usize) -> Vec<f32> {
+    let alpha = variant.m + 2;
+    let mut dw = vec![0.0f32; o * c * 9];
+    dw.par_chunks_mut(c * 9).enumerate().for_each_init(Vec::new, |scratch: &mut Vec<f32>, (oc, dst)| {
+        let scratch = reuse_buffer(scratch, (3 * alpha + 9) * c);
+        let (left, taps) = scratch.split_at_mut(3 * alpha * c);
+        let sum = |k: usize| &sums[(k * o + oc) * c..][..c];
+        // left[(α·a + j)·C ..] = Σ_i G[i][a]·M[αi + j], then taps[(3a + b)·C ..] = Σ_j left[a][j]·G[j][b].
+        let column = |a: usize| -> Vec<f32> { (0..alpha).map(|i| variant.g[i][a]).collect() };
+        for a in 0..3 {
+            let coefs = column(a);
+            for j in 0..alpha {
+                lincomb(&mut left[(alpha * a + j) * c..][..c], &coefs, |i| sum(alpha * i + j));
+            }
+        }
+        let left = &*left;
+        for a in 0..3 {
+            for b in 0..3 {
+                let coefs = column(b);
+                lincomb(&mut taps[(3 * a + b) * c..][..c], &coefs, |j| &left[(alpha * a + j) * c..][..c]);
+            }
+        }
+        for (ci, out) in dst.chunks_exact_mut(9).enumerate() {
+            for (tap, value) in out.iter_mut().enumerate() {
+                *value = taps[tap * c + ci];
+            }
+        }
+    });
+    dw
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::tensor::ops::ConvOptions;
+
+    use super::super::transforms::{F2, F4};
+    use super::*;
+    use crate::host::conv_backward::conv2d_weight_grad;
+
+    fn values(len: usize, seed: u32) -> Vec<f32> {
+        (0..len).map(|i| (((i as u32).wrapping_mul(2_654_435_761) ^ seed) % 2001) as f32 / 1000.0 - 1.0).collect()
+    }
+
+    /// Both variants against the im2col weight gradient (a plain sum of products) on odd sizes,
+    /// paddings and batches, bounded relative to the largest sum of absolute products (the scale
+    /// of the rounding): F(2x2) within 1e-5, F(4x4) within 4e-5, as the forward's tests.
+    #[test]
+    fn the_winograd_weight_gradient_equals_the_im2col_one() {
+        type Case = (usize, [usize; 2], [usize; 2], [(usize, usize); 2]);
+        let cases: [Case; 7] = [
+            (1, [3, 2], [9, 10], [(1, 1), (1, 1)]),
+            (2, [5, 4], [13, 18], [(1, 1), (1, 1)]),
+            (1, [4, 3], [7, 6], [(1, 0), (0, 2)]),
+            (2, [2, 3], [3, 3], [(0, 0), (0, 0)]),
+            (1, [3, 5], [1, 2], [(2, 2), (1, 2)]),
+            (1, [40, 33], [21, 27], [(1, 1), (1, 1)]),
+            (2, [17, 9], [30, 11], [(1, 1), (1, 1)]),
+        ];
+        for (n, [c, o], [h, w], padding) in cases {
+            let options = ConvOptions::new_with_padding([1, 1], padding, [1, 1], 1);
+            let [(pt, pb), (pl, pr)] = padding;
+            let (out_h, out_w) = (h + pt + pb - 2, w + pl + pr - 2);
+            let (x, g) = (values(n * c * h * w, 1), values(n * o * out_h * out_w, 2));
+            let want = conv2d_weight_grad(&x, [n, c, h, w], &g, [o, c, 3, 3], &options);
+            let abs = |v: &[f32]| v.iter().map(|v| v.abs()).collect::<Vec<_>>();
+            let magnitude = conv2d_weight_grad(&abs(&x), [n, c, h, w], &abs(&g), [o, c, 3, 3], &options);
+            let scale = magnitude.iter().fold(1e-6f32, |s, v| s.max(*v));
+            for (variant, bound) in [(&F2, 1e-5), (&F4, 4e-5)] {
+                let got = winograd_weight_grad(variant, &x, [n, c, h, w], &g, o, padding);
+                let worst = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max) / scale;
+                let case = format!("F({}) n {n} c {c} o {o} {h}x{w} padding {padding:?}", variant.m);
+                assert!(worst <= bound, "{case}: {worst:e} of the largest sum of |products|");
+            }
+        }
+    }
+
+    /// Bands of one and of two tile rows give the gradient of one band within rounding, and the
+    /// same gradient on one thread and on three, bit for bit.
+    #[test]
+    fn the_winograd_weight_gradient_is_reproducible_in_bands() {
+        let (n, c, o, h, w) = (2, 20, 12, 23, 30);
+        let (x, g) = (values(n * c * h * w, 3), values(n * o * h * w, 4));
+        let padding = [(1, 1), (1, 1)];
+        let in_bands = |rows: usize, threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let elements = 36 * c * (w.div_ceil(4) + 1) * rows;
+            pool.install(|| weight_grad_in_bands(&F4, &x, [n, c, h, w], &g, o, padding, elements))
+        };
+        let whole = winograd_weight_grad(&F4, &x, [n, c, h, w], &g, o, padding);
+        for rows in [1, 2] {
+            let banded = in_bands(rows, 1);
+            assert_eq!(banded, in_bands(rows, 3), "{rows} rows a band: one and three threads");
+            let worst = banded.iter().zip(&whole).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+            assert!(worst < 1e-3, "{rows} rows a band against one band: {worst}");
+        }
+    }
+}
