@@ -20,7 +20,7 @@ use burn::tensor::{Distribution, Int, Tensor};
 use criterion::{BenchmarkId, Criterion, criterion_group};
 use dgstereo_core::{Probe, default_device};
 use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CorrelationPyramid, OnTheFlyCorrelation};
-use dgstereo_kernels::{KeptWeights, Path, with_path};
+use dgstereo_kernels::{Path, UpdateLoop, with_path};
 use dgstereo_model::encoder::{ContextExtractor, FeatureExtractor};
 use dgstereo_model::fusion::{FusionConfig, ImageFusion};
 use dgstereo_model::updater::{GateContext, Updater, convex_upsample};
@@ -148,7 +148,7 @@ fn update(c: &mut Criterion) {
         let flow = Tensor::cat(vec![random([1, 1, h, w]), Tensor::zeros([1, 1, h, w], &default_device())], 1);
         group.bench_function(BenchmarkId::new("one iteration (3 GRU levels, flow head)", name), |b| {
             // As inside the model's loop: the transformed convolution weights kept between steps.
-            let _kept = KeptWeights::new();
+            let _update_loop = UpdateLoop::new();
             b.iter(|| {
                 let mut state = hidden.clone();
                 black_box(block.step(&mut state, &gates, corr.clone(), flow.clone(), None, &mut Probe::none()))

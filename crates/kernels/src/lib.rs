@@ -22,7 +22,7 @@ pub mod settings;
 mod test_paths;
 
 pub use dispatch::{Op, Path, path, with_path};
-pub use host::winograd::KeptWeights;
+pub use host::winograd::UpdateLoop;
 pub use ops::conv::{
     conv_options, conv2d_affine_or, conv2d_forward, conv2d_forward_then, conv2d_op, conv2d_op_then,
     conv2d_relu_forward, flat_pixels,

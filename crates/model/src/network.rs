@@ -16,7 +16,7 @@ use dgstereo_core::tensor::cast_float;
 use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementation, CostVolume};
 use dgstereo_encoder::{ContextFeatures, Encoded, EncoderInputs, Encoders};
 use dgstereo_fusion::{Fusion, FusionTarget, ImageFusion};
-use dgstereo_kernels::{KeptWeights, conv2d_forward};
+use dgstereo_kernels::{UpdateLoop, conv2d_forward};
 use dgstereo_updater::{GateContext, GuidanceKind, MultiLevelUpdateBlock, Updater, convex_upsample};
 
 use crate::config::ModelConfig;
@@ -167,8 +167,8 @@ impl RaftStereo {
         let factor = 1usize << self.n_downsample;
         let mut flow_up = Vec::new();
         // The iterations run the same convolutions: their transformed weights are kept until the
-        // loop ends (host Winograd path only; results unchanged).
-        let _kept = KeptWeights::new();
+        // loop ends, and the training forward takes Winograd in it (see `UpdateLoop`).
+        let _update_loop = UpdateLoop::new();
         for k in 0..iters {
             flow_x = flow_x.detach();
             let corr = probe

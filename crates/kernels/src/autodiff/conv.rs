@@ -20,6 +20,7 @@ use crate::host::conv::{conv2d_host_direct_slices, conv2d_host_slices};
 use crate::host::conv_backward::{
     conv2d_bias_grad, conv2d_input_grad, conv2d_weight_grad, conv2d_weight_grad_winograd,
 };
+use crate::host::winograd::in_update_loop;
 
 /// Fewest input channels for which training takes [`conv2d`]. The stems (3 input channels, a 7x7
 /// kernel at stride 2, each followed by an instance or batch norm) keep burn's: with ours the
@@ -40,9 +41,9 @@ pub trait HostConvBackend: Backend {
     ) -> FloatTensor<Self>;
 }
 
-/// Fewest input channels for which the training forward may take Winograd: the ConvGRUs' gate
-/// and candidate convolutions (256 or 384 input channels, most of an update iteration's
-/// products). The encoders' layers (at most 128 input channels) keep plain products, whose sums
+/// Fewest input channels for which the training forward may take Winograd outside an update
+/// loop (inside one, every layer that suits it does: `UpdateLoop`): the ConvGRUs' gate and
+/// candidate convolutions (256 or 384 input channels, most of an update iteration's products). The encoders' layers (at most 128 input channels) keep plain products, whose sums
 /// the feature encoder's instance norms would otherwise magnify past the official training
 /// step's check (see `conv2d_host_direct_slices`; from 128 channels its Adam update check of
 /// `fnet.layer1.0.conv1` fails). The weight gradient takes Winograd wherever the layer suits it
@@ -54,7 +55,8 @@ pub const WINOGRAD_MIN_CHANNELS: usize = 256;
 fn forward(x: &FlexTensor, weight: &FlexTensor, bias: &FlexTensor, options: &ConvOptions<2>) -> FlexTensor {
     let (xv, wv, bv) = (values(x), values(weight), values(bias));
     let (x_dims, w_dims) = (dims4(x), dims4(weight));
-    let conv = if x_dims[1] >= WINOGRAD_MIN_CHANNELS { conv2d_host_slices } else { conv2d_host_direct_slices };
+    let winograd = x_dims[1] >= WINOGRAD_MIN_CHANNELS || in_update_loop();
+    let conv = if winograd { conv2d_host_slices } else { conv2d_host_direct_slices };
     let (out, dims) = conv(&xv, x_dims, &wv, w_dims, Some(&bv), options);
     flex(out, &dims)
 }
@@ -153,6 +155,28 @@ mod tests {
         let (got, want) = (to_vec(got), to_vec(want));
         let scale = want.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
         got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max) / scale
+    }
+
+    /// Inside an update loop the training forward of a 64-channel layer takes Winograd (its sums
+    /// differ from the plain products' in rounding) and still agrees with burn's convolution;
+    /// outside one it keeps the plain products.
+    #[test]
+    fn an_update_loop_takes_winograd_in_the_training_forward() {
+        let ad = Device::flex().autodiff();
+        let x = Tensor::<4>::random([1, 64, 40, 48], Distribution::Normal(0.0, 1.0), &ad);
+        let w = Tensor::<4>::random([64, 64, 3, 3], Distribution::Normal(0.0, 0.05), &ad);
+        let options = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
+        let run = || to_vec(conv2d(x.clone(), w.clone(), None, options.clone()));
+        let outside = run();
+        let inside = {
+            let _update_loop = crate::host::winograd::UpdateLoop::new();
+            run()
+        };
+        let want = to_vec(burn_conv2d(x.clone(), w.clone(), None, options.clone()));
+        let scale = want.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
+        let worst = |got: &[f32]| got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max) / scale;
+        assert!(worst(&outside) < 1e-5 && worst(&inside) < 4e-5, "{} {}", worst(&outside), worst(&inside));
+        assert_ne!(inside, outside, "the update loop's forward took the plain products");
     }
 
     /// The gradients of the input, the weight and the bias against burn's own autodiff of

@@ -13,7 +13,7 @@
 //!
 //! - The weights are transformed into `[O][α²][C]` (the product's left operand `U_k` has row
 //!   stride `α²·C`), in parallel over output channels, and kept for the next call with the same
-//!   weights while a [`KeptWeights`] scope is open (`weight_cache`: the update loop would
+//!   weights while a [`UpdateLoop`] scope is open (`weight_cache`: the update loop would
 //!   transform the GRUs' weights again at every iteration).
 //! - The output is cut into bands of whole tile rows per image, processed in parallel with
 //!   rayon; each band transforms its input tiles into the thread's reusable buffers (zeros where
@@ -69,7 +69,8 @@ pub(crate) use split::{Pending, first as split_first, second as split_second};
 pub(crate) use transforms::MIN_F4_TILES;
 pub(crate) use transforms::{Conv3x3, Variant, split_row, winograd_variant};
 use transforms::{Plan, transform_inputs, transform_outputs};
-pub use weight_cache::KeptWeights;
+pub use weight_cache::UpdateLoop;
+pub(crate) use weight_cache::in_update_loop;
 use weight_cache::transformed_weights;
 pub(crate) use weight_grad::winograd_weight_grad;
 
