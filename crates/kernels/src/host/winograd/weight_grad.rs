@@ -18,7 +18,7 @@
 use dgstereo_core::tensor::{reuse_buffer, zeros_parallel};
 use rayon::prelude::*;
 
-use super::transforms::{Tiling, Variant, lincomb, transform_inputs};
+use super::transforms::{Tiling, Variant, lincomb, split_row, transform_inputs};
 
 /// Elements of a band's transformed inputs or output gradients (`α² x C x T`): the band's tile
 /// rows are as many as this allows (16 MiB), the whole image on the 1/4 grids of training crops.
@@ -87,9 +87,9 @@ fn weight_grad_in_bands(
                         transform_inputs(variant, dst, channels, Tiling { c: cc, ..tiling }, rows.clone(), scratch);
                     },
                 );
-                u.par_chunks_mut(k2 * t).enumerate().for_each(|(oc, dst)| {
+                u.par_chunks_mut(k2 * t).enumerate().for_each_init(Vec::new, |scratch, (oc, dst)| {
                     let plane = &grads[oc * out_h * out_w..][..out_h * out_w];
-                    transform_grad_tiles(variant, dst, plane, [out_h, out_w], rows.clone(), tws);
+                    transform_grad_tiles(variant, dst, plane, [out_h, out_w], rows.clone(), tws, scratch);
                 });
                 let (u, v) = (&*u, &*v);
                 sums.par_chunks_mut(o * c).enumerate().for_each(|(k, mk)| {
@@ -120,6 +120,11 @@ thread_local! {
 /// Writes `A g Aᵀ` of every m x m tile of one output-gradient plane in `tile_rows` into `dst`,
 /// laid out `[α²][T]` like the input transform's (tile-row-major, `tws` tiles a row, the last of
 /// each row unused and zero), with `g` zero past the plane's last row and column.
+///
+/// As the input transform does, every row of the band is first split into its `m` column phases
+/// (`phases[(r·m + s)·T + l·tws + tx] = g[m·ty + r][m·tx + s]`, `ty` the band's `l`-th tile row),
+/// so both products with `A` are combinations of vectors over the whole band's tiles. One tile at
+/// a time in scalar code was a tenth of the workers' samples.
 fn transform_grad_tiles(
     variant: &Variant,
     dst: &mut [f32],
@@ -127,38 +132,36 @@ fn transform_grad_tiles(
     [out_h, out_w]: [usize; 2],
     tile_rows: std::ops::Range<usize>,
     tws: usize,
+    scratch: &mut Vec<f32>,
 ) {
     let (m, alpha) = (variant.m, variant.m + 2);
     let t = tile_rows.len() * tws;
-    // `at[r][i]` is `A[i][r]`: `U[i][j] = Σ_r Σ_s A[i][r]·g[r][s]·A[j][s]`.
-    let at = |r: usize, i: usize| variant.at[r][i];
+    let (phases, columns) = reuse_buffer(scratch, (m * m + m * alpha) * t).split_at_mut(m * m * t);
     for (l, ty) in tile_rows.enumerate() {
-        for tx in 0..tws {
-            let mut tile = [[0.0f32; 4]; 4];
-            if tx + 1 < tws {
-                for (r, row) in tile.iter_mut().enumerate().take(m) {
-                    let y = m * ty + r;
-                    if y < out_h {
-                        for (s, value) in row.iter_mut().enumerate().take(m) {
-                            let xcol = m * tx + s;
-                            *value = if xcol < out_w { plane[y * out_w + xcol] } else { 0.0 };
-                        }
-                    }
-                }
-            }
-            // `A g` (α x m), then `(A g) Aᵀ` (α x α).
-            let mut ag = [[0.0f32; 4]; 6];
-            for (i, row) in ag.iter_mut().enumerate().take(alpha) {
-                for (s, value) in row.iter_mut().enumerate().take(m) {
-                    *value = (0..m).map(|r| at(r, i) * tile[r][s]).sum();
-                }
-            }
-            for i in 0..alpha {
-                for j in 0..alpha {
-                    dst[(alpha * i + j) * t + l * tws + tx] = (0..m).map(|s| ag[i][s] * at(s, j)).sum();
-                }
+        for r in 0..m {
+            let y = m * ty + r;
+            let line = if y < out_h { &plane[y * out_w..][..out_w] } else { &[][..] };
+            let mut by_phase = phases.chunks_exact_mut(t).skip(r * m).map(|d| &mut d[l * tws..][..tws]);
+            match m {
+                2 => split_row::<2>(line, 0, std::array::from_fn(|_| by_phase.next().expect("2 phases"))),
+                4 => split_row::<4>(line, 0, std::array::from_fn(|_| by_phase.next().expect("4 phases"))),
+                _ => unreachable!("the Winograd variants are F(2x2) and F(4x4), not m = {m}"),
             }
         }
+    }
+    // `U[i][j] = Σ_r A[i][r]·(Σ_s g[r][s]·A[j][s])` with `A[i][r] = at[r][i]`: first the columns,
+    // `columns[(r·α + j)·T ..] = Σ_s at[s][j]·phases[r][s]`, then the rows.
+    let phases = &*phases;
+    for (rj, dst) in columns.chunks_exact_mut(t).enumerate() {
+        let (r, j) = (rj / alpha, rj % alpha);
+        let coefs: [f32; 4] = std::array::from_fn(|s| if s < m { variant.at[s][j] } else { 0.0 });
+        lincomb(dst, &coefs[..m], |s| &phases[(r * m + s) * t..][..t]);
+    }
+    let columns = &*columns;
+    for (k, dst) in dst.chunks_exact_mut(t).enumerate() {
+        let (i, j) = (k / alpha, k % alpha);
+        let coefs: [f32; 4] = std::array::from_fn(|r| if r < m { variant.at[r][i] } else { 0.0 });
+        lincomb(dst, &coefs[..m], |r| &columns[(r * alpha + j) * t..][..t]);
     }
 }
 
