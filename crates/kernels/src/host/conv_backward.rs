@@ -19,7 +19,7 @@ use dgstereo_core::tensor::reuse_buffer;
 use rayon::prelude::*;
 
 use super::conv::{conv2d_host_slices, image_columns};
-use super::fresh::CHUNK;
+use super::fresh::{CHUNK, collect_chunks};
 use super::winograd::{winograd_variant, winograd_weight_grad};
 use crate::geometry::conv_output_size;
 use crate::product::matmul_transposed_accumulate;
@@ -61,14 +61,10 @@ pub fn conv2d_input_grad(
         return None;
     }
     let taps = kh * kw;
-    let mut flipped = vec![0.0f32; c * o * taps];
-    flipped.par_chunks_mut(o * taps).enumerate().for_each(|(ic, dst)| {
-        for oc in 0..o {
-            let src = &wt[(oc * c + ic) * taps..][..taps];
-            for (t, d) in dst[oc * taps..][..taps].iter_mut().enumerate() {
-                *d = src[taps - 1 - t];
-            }
-        }
+    // `[C][O][taps]`, each tap mirrored; written in parallel into a fresh buffer (a zeroed one
+    // was a `memset` on the calling thread).
+    let flipped = collect_chunks(c * o * taps, o * taps, |ic| {
+        (0..o).flat_map(move |oc| (0..taps).map(move |t| wt[(oc * c + ic) * taps + taps - 1 - t]))
     });
     let padding = [(kh - 1 - pt, kh - 1 - pb), (kw - 1 - pl, kw - 1 - pr)];
     let transposed = ConvOptions::new_with_padding([1, 1], padding, [1, 1], 1);
@@ -124,13 +120,11 @@ pub fn conv2d_weight_grad(
         })
         .collect();
     // Each element sums the groups in order, chunks of elements in parallel.
-    let mut total = vec![0.0f32; o * k];
-    total.par_chunks_mut(CHUNK).enumerate().for_each(|(i, chunk)| {
-        for partial in &partials {
-            chunk.iter_mut().zip(&partial[i * CHUNK..]).for_each(|(t, v)| *t += v);
-        }
-    });
-    total
+    collect_chunks(o * k, CHUNK, |i| {
+        let len = CHUNK.min(o * k - i * CHUNK);
+        let partials = &partials;
+        (i * CHUNK..i * CHUNK + len).map(move |e| partials.iter().fold(0.0f32, |t, p| t + p[e]))
+    })
 }
 
 /// [`conv2d_weight_grad`] by Winograd's transforms (`winograd::weight_grad`) where the layer

@@ -32,7 +32,7 @@
 use std::mem::MaybeUninit;
 use std::ops::Range;
 
-use dgstereo_core::tensor::reuse_buffer;
+use dgstereo_core::tensor::{reuse_buffer, zeros_parallel};
 use rayon::prelude::*;
 
 use super::simd::{self, Simd};
@@ -95,7 +95,9 @@ pub(crate) fn blocked_conv(isa: Isa, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
 /// adjacent.
 fn pack_weights(u: &[f32], o: usize, c: usize) -> Vec<f32> {
     let groups = o.div_ceil(ROWS);
-    let mut packed = vec![0.0; K2 * groups * c * ROWS];
+    // Zeros in parallel: the padding rows stay zero (a `vec![0.0; ..]` was a `memset` on the
+    // calling thread at every training call).
+    let mut packed = zeros_parallel(K2 * groups * c * ROWS);
     packed.par_chunks_mut(groups * c * ROWS).enumerate().for_each(|(k, dst)| {
         for oc in 0..o {
             let (group, r) = (oc / ROWS, oc % ROWS);

@@ -170,7 +170,7 @@ fn transform_grad_tiles(
 /// input channels.
 fn transform_sums(variant: &Variant, sums: &[f32], o: usize, c: usize) -> Vec<f32> {
     let alpha = variant.m + 2;
-    let mut dw = vec![0.0f32; o * c * 9];
+    let mut dw = zeros_parallel(o * c * 9);
     dw.par_chunks_mut(c * 9).enumerate().for_each_init(Vec::new, |scratch: &mut Vec<f32>, (oc, dst)| {
         let scratch = reuse_buffer(scratch, (3 * alpha + 9) * c);
         let (left, taps) = scratch.split_at_mut(3 * alpha * c);
