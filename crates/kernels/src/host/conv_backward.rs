@@ -98,10 +98,18 @@ pub fn conv2d_weight_grad(
     // stealing, so training stays reproducible bit for bit.
     let jobs = n * tiles;
     let groups = jobs.min(GROUPS);
-    let partials: Vec<Vec<f32>> = (0..groups)
+    // Fewer groups than GROUPS (a small plane: one tile of one image) also split the output
+    // channels into blocks, so that the layer still gives GROUPS tasks: one task ran the GRU
+    // at 1/16's weight gradients on the calling thread while the workers waited. The rows of a
+    // block are their own sums, so the split changes no value.
+    let rows = o.div_ceil((GROUPS / groups).clamp(1, o.max(1)));
+    let blocks = o.div_ceil(rows.max(1));
+    let partials: Vec<Vec<f32>> = (0..groups * blocks)
         .into_par_iter()
-        .map(|group| {
-            let mut acc = vec![0.0f32; o * k];
+        .map(|task| {
+            let (group, block) = (task / blocks, task % blocks);
+            let (o0, o1) = (block * rows, ((block + 1) * rows).min(o));
+            let mut acc = vec![0.0f32; (o1 - o0) * k];
             for job in group * jobs / groups..(group + 1) * jobs / groups {
                 let (b, tile) = (job / tiles, job % tiles);
                 let (oy0, oy1) = (tile * rows_per_tile, ((tile + 1) * rows_per_tile).min(out_h));
@@ -112,8 +120,8 @@ pub fn conv2d_weight_grad(
                     let col = reuse_buffer(buffer, k * p);
                     let image = &x[b * c * h * w..][..c * h * w];
                     image_columns(col, image, [c, h, w], [kh, kw], options, out_w, oy0..oy1);
-                    let g_tile = &g[b * o * plane + oy0 * out_w..];
-                    matmul_transposed_accumulate(&mut acc, k, g_tile, plane, col, p, [o, k, p]);
+                    let g_tile = &g[(b * o + o0) * plane + oy0 * out_w..];
+                    matmul_transposed_accumulate(&mut acc, k, g_tile, plane, col, p, [o1 - o0, k, p]);
                 });
             }
             acc
@@ -123,7 +131,10 @@ pub fn conv2d_weight_grad(
     collect_chunks(o * k, CHUNK, |i| {
         let len = CHUNK.min(o * k - i * CHUNK);
         let partials = &partials;
-        (i * CHUNK..i * CHUNK + len).map(move |e| partials.iter().fold(0.0f32, |t, p| t + p[e]))
+        (i * CHUNK..i * CHUNK + len).map(move |e| {
+            let (block, offset) = (e / k / rows, e - (e / k / rows) * rows * k);
+            (0..groups).fold(0.0f32, |t, group| t + partials[group * blocks + block][offset])
+        })
     })
 }
 
