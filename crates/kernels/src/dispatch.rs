@@ -66,7 +66,7 @@ impl Op {
     /// Whether the host kernel has a backward of its own ([`crate::autodiff`]), so that training
     /// takes it too.
     fn has_host_backward(self) -> bool {
-        matches!(self, Self::Conv | Self::Norm | Self::GruStep | Self::Deform)
+        matches!(self, Self::Conv | Self::Norm | Self::GruStep | Self::Deform | Self::Upsample)
     }
 
     /// The GPU formulation's route, where the operation has one.

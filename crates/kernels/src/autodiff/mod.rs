@@ -8,7 +8,8 @@
 //! autodiff of the same operations stays the reference the tests compare with, and the path the
 //! settings' `stock-training` restores. [`conv`]: the convolution; [`deform`]: DGIA's deformable
 //! convolution; [`norm`]: the instance norm
-//! with its ReLU and the residual `relu(a + b)`; [`gru`]: the ConvGRU step's gates and blend.
+//! with its ReLU and the residual `relu(a + b)`; [`gru`]: the ConvGRU step's gates and blend;
+//! [`upsample`]: convex upsampling.
 
 use burn::backend::flex::FlexTensor;
 use burn::tensor::TensorData;
@@ -17,6 +18,7 @@ pub mod conv;
 pub mod deform;
 pub mod gru;
 pub mod norm;
+pub mod upsample;
 
 pub use conv::{HostConvBackend, MIN_CHANNELS, conv2d};
 

@@ -13,4 +13,5 @@ pub mod norm_backward;
 pub mod on_the_fly_lookup;
 pub mod pyramid_lookup;
 pub mod upsample;
+pub mod upsample_backward;
 pub mod winograd;

@@ -1,7 +1,8 @@
 //! Convex upsampling of the disparity field.
 //!
-//! Design decision: burn's operations are the reference and run everywhere (training, the GPU);
-//! CPU inference (the dispatch's host path) takes a host pass instead ([`crate::host::upsample`]),
+//! Design decision: burn's operations are the reference and run wherever the host kernels do not
+//! (the GPU, `stock` settings); the CPU (the dispatch's host path) takes a host pass instead
+//! ([`crate::host::upsample`]; in training with its own backward, [`crate::autodiff::upsample`]),
 //! one parallel sweep that computes each coarse pixel's softmax weights once and writes its
 //! `factor x factor` block of every channel. The stock composition (softmax over a reshaped mask, `unfold`, a broadcast
 //! product, a sum and a permute) ran mostly on one core: 35-90 ms of a 384x448 pass on the
@@ -23,10 +24,14 @@ use crate::host::upsample::convex_upsample_host;
 /// # Shapes
 /// - `flow`: `[N, D, H, W]`, `mask`: `[N, 9·factor², H, W]`; output `[N, D, factor·H, factor·W]`
 pub fn convex_upsample(flow: Tensor<4>, mask: Tensor<4>, factor: usize) -> Tensor<4> {
-    if path(&flow.device(), Op::Upsample) == Path::Host && path(&mask.device(), Op::Upsample) == Path::Host {
-        return convex_upsample_host(flow, mask, factor);
+    let device = flow.device();
+    match (path(&device, Op::Upsample), path(&mask.device(), Op::Upsample)) {
+        (Path::Host, Path::Host) if device.is_autodiff() => {
+            crate::autodiff::upsample::convex_upsample(flow, mask, factor)
+        }
+        (Path::Host, Path::Host) => convex_upsample_host(flow, mask, factor),
+        _ => convex_upsample_stock(flow, mask, factor),
     }
-    convex_upsample_stock(flow, mask, factor)
 }
 
 /// [`convex_upsample`] in burn's operations: the reference, and the path wherever the host
