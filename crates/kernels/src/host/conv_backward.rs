@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use super::conv::{conv2d_host_slices, image_columns};
 use super::fresh::{CHUNK, collect_chunks};
-use super::winograd::{winograd_variant, winograd_weight_grad};
+use super::winograd::{WEIGHT_GRAD_BAND_ELEMENTS, winograd_variant, winograd_weight_grad};
 use crate::geometry::conv_output_size;
 use crate::product::matmul_transposed_accumulate;
 use crate::settings::settings;
@@ -152,7 +152,7 @@ pub fn conv2d_weight_grad_winograd(
     options: &ConvOptions<2>,
 ) -> Option<Vec<f32>> {
     let variant = winograd_variant(x_dims, w_dims, options).filter(|_| settings().winograd)?;
-    Some(winograd_weight_grad(variant, x, x_dims, g, w_dims[0], options.padding))
+    Some(winograd_weight_grad(variant, x, x_dims, g, w_dims[0], options.padding, WEIGHT_GRAD_BAND_ELEMENTS))
 }
 
 /// Output rows per weight-gradient tile of `n` images of `out_h x out_w` pixels with `k`

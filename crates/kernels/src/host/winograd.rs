@@ -72,7 +72,7 @@ use transforms::{Plan, transform_inputs, transform_outputs};
 pub use weight_cache::UpdateLoop;
 pub(crate) use weight_cache::in_update_loop;
 use weight_cache::transformed_weights;
-pub(crate) use weight_grad::winograd_weight_grad;
+pub(crate) use weight_grad::{BAND_ELEMENTS as WEIGHT_GRAD_BAND_ELEMENTS, winograd_weight_grad};
 
 /// `conv` by Winograd `variant`: F(4x4) with few channels in blocks of tiles ([`blocks`]),
 /// otherwise in bands. Returns the output and its dimensions.

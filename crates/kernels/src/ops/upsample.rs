@@ -52,6 +52,7 @@ mod tests {
     use dgstereo_core::tensor::{max_abs_diff, to_vec};
 
     use super::*;
+    use crate::dispatch::with_path;
 
     /// The host pass against burn's composition, two images, two channels, a mask with large
     /// logits, factors 2 and 4, grids down to one pixel (every tap of the border padding).
@@ -67,6 +68,37 @@ mod tests {
             let scale = to_vec(stock.clone()).iter().fold(0.0f32, |m, v| m.max(v.abs()));
             let diff = max_abs_diff(host.clone(), stock);
             assert!(diff <= 1e-5 * scale.max(1.0), "factor {factor}, {h}x{w}: {diff} (scale {scale})");
+        }
+    }
+
+    /// The training node's (`crate::autodiff::upsample`) flow and mask gradients against burn's
+    /// autodiff of the stock composition
+    /// (the loss `Σ up·r` with a random `r`): one and two channels, two images, factors 2 and 4,
+    /// grids down to one pixel (every tap in the border padding), a mask with large logits.
+    #[test]
+    fn the_training_gradients_agree_with_burns_autodiff() {
+        let ad = Device::flex().autodiff();
+        for (n, d, factor, [h, w]) in [(2, 1, 4, [5, 7]), (1, 2, 2, [3, 1]), (2, 2, 4, [1, 1]), (1, 1, 4, [6, 6])] {
+            let flow = Tensor::<4>::random([n, d, h, w], Distribution::Normal(0.0, 5.0), &ad);
+            let mask = Tensor::<4>::random([n, 9 * factor * factor, h, w], Distribution::Normal(0.0, 4.0), &ad);
+            let r = Tensor::<4>::random([n, d, factor * h, factor * w], Distribution::Normal(0.0, 1.0), &ad);
+            let run = |pinned: Path| {
+                let (flow, mask) = (flow.clone().detach().require_grad(), mask.clone().detach().require_grad());
+                let up =
+                    with_path(pinned, || crate::ops::upsample::convex_upsample(flow.clone(), mask.clone(), factor));
+                let grads = (up.clone() * r.clone()).sum().backward();
+                let grad = |t: &Tensor<4>| to_vec(t.grad(&grads).expect("a gradient"));
+                (to_vec(up.detach()), grad(&flow), grad(&mask))
+            };
+            let (ours, stock) = (run(Path::Host), run(Path::Stock));
+            let case = format!("n {n} d {d} factor {factor} {h}x{w}");
+            for (what, got, want) in
+                [("output", &ours.0, &stock.0), ("flow", &ours.1, &stock.1), ("mask", &ours.2, &stock.2)]
+            {
+                let scale = want.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
+                let worst = got.iter().zip(want).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max) / scale;
+                assert!(worst < 1e-5, "{case}: {what} gradient differs by {worst:e} of its largest value");
+            }
         }
     }
 

@@ -22,30 +22,19 @@ use super::transforms::{Tiling, Variant, lincomb, split_row, transform_inputs};
 
 /// Elements of a band's transformed inputs or output gradients (`α² x C x T`): the band's tile
 /// rows are as many as this allows (16 MiB), the whole image on the 1/4 grids of training crops.
-const BAND_ELEMENTS: usize = 1 << 22;
+pub(crate) const BAND_ELEMENTS: usize = 1 << 22;
 
 /// Output or input channels per transform job.
 const CHANNELS_PER_JOB: usize = 8;
 
 /// The gradient of a 3x3, stride-1, one-group convolution's weight (`[O, C, 3, 3]`), given its
-/// input `x` and output gradient `g`, by Winograd `variant`.
+/// input `x` and output gradient `g`, by Winograd `variant`, in bands of tile rows of at most
+/// `band_elements` transformed values ([`BAND_ELEMENTS`] outside the tests).
 ///
 /// # Shapes
 /// - `x`: `x_dims = [N, C, H, W]`; `g`: `[N, O, H_out, W_out]` with `H_out = H + top + bottom - 2`
 ///   (`padding = [(top, bottom), (left, right)]`); output `[O, C, 3, 3]`
 pub(crate) fn winograd_weight_grad(
-    variant: &Variant,
-    x: &[f32],
-    x_dims: [usize; 4],
-    g: &[f32],
-    o: usize,
-    padding: [(usize, usize); 2],
-) -> Vec<f32> {
-    weight_grad_in_bands(variant, x, x_dims, g, o, padding, BAND_ELEMENTS)
-}
-
-/// [`winograd_weight_grad`] with bands of at most `band_elements` transformed values.
-fn weight_grad_in_bands(
     variant: &Variant,
     x: &[f32],
     x_dims: [usize; 4],
@@ -201,21 +190,53 @@ fn transform_sums(variant: &Variant, sums: &[f32], o: usize, c: usize) -> Vec<f3
 
 #[cfg(test)]
 mod tests {
-    use burn::tensor::ops::ConvOptions;
-
     use super::super::transforms::{F2, F4};
     use super::*;
-    use crate::host::conv_backward::conv2d_weight_grad;
+
+    /// `Σ_images Σ_pixels g·x` of a 3x3 stride-1 convolution's definition, in f64: the
+    /// weight gradient `[O, C, 3, 3]`.
+    fn plain_weight_grad(
+        x: &[f32],
+        [n, c, h, w]: [usize; 4],
+        g: &[f32],
+        o: usize,
+        padding: [(usize, usize); 2],
+    ) -> Vec<f32> {
+        let [(pt, pb), (pl, pr)] = padding;
+        let (out_h, out_w) = (h + pt + pb - 2, w + pl + pr - 2);
+        let mut dw = vec![0.0f64; o * c * 9];
+        for b in 0..n {
+            for oc in 0..o {
+                for y in 0..out_h {
+                    for xx in 0..out_w {
+                        let gv = f64::from(g[((b * o + oc) * out_h + y) * out_w + xx]);
+                        for ic in 0..c {
+                            for tap in 0..9 {
+                                let (iy, ix) = ((y + tap / 3).checked_sub(pt), (xx + tap % 3).checked_sub(pl));
+                                if let (Some(iy), Some(ix)) = (iy, ix)
+                                    && iy < h
+                                    && ix < w
+                                {
+                                    dw[(oc * c + ic) * 9 + tap] += gv * f64::from(x[((b * c + ic) * h + iy) * w + ix]);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        dw.into_iter().map(|v| v as f32).collect()
+    }
 
     fn values(len: usize, seed: u32) -> Vec<f32> {
         (0..len).map(|i| (((i as u32).wrapping_mul(2_654_435_761) ^ seed) % 2001) as f32 / 1000.0 - 1.0).collect()
     }
 
-    /// Both variants against the im2col weight gradient (a plain sum of products) on odd sizes,
+    /// Both variants against the definition's plain sum of products on odd sizes,
     /// paddings and batches, bounded relative to the largest sum of absolute products (the scale
     /// of the rounding): F(2x2) within 1e-5, F(4x4) within 4e-5, as the forward's tests.
     #[test]
-    fn the_winograd_weight_gradient_equals_the_im2col_one() {
+    fn the_winograd_weight_gradient_equals_the_plain_sum() {
         type Case = (usize, [usize; 2], [usize; 2], [(usize, usize); 2]);
         let cases: [Case; 7] = [
             (1, [3, 2], [9, 10], [(1, 1), (1, 1)]),
@@ -227,16 +248,15 @@ mod tests {
             (2, [17, 9], [30, 11], [(1, 1), (1, 1)]),
         ];
         for (n, [c, o], [h, w], padding) in cases {
-            let options = ConvOptions::new_with_padding([1, 1], padding, [1, 1], 1);
             let [(pt, pb), (pl, pr)] = padding;
             let (out_h, out_w) = (h + pt + pb - 2, w + pl + pr - 2);
             let (x, g) = (values(n * c * h * w, 1), values(n * o * out_h * out_w, 2));
-            let want = conv2d_weight_grad(&x, [n, c, h, w], &g, [o, c, 3, 3], &options);
+            let want = plain_weight_grad(&x, [n, c, h, w], &g, o, padding);
             let abs = |v: &[f32]| v.iter().map(|v| v.abs()).collect::<Vec<_>>();
-            let magnitude = conv2d_weight_grad(&abs(&x), [n, c, h, w], &abs(&g), [o, c, 3, 3], &options);
+            let magnitude = plain_weight_grad(&abs(&x), [n, c, h, w], &abs(&g), o, padding);
             let scale = magnitude.iter().fold(1e-6f32, |s, v| s.max(*v));
             for (variant, bound) in [(&F2, 1e-5), (&F4, 4e-5)] {
-                let got = winograd_weight_grad(variant, &x, [n, c, h, w], &g, o, padding);
+                let got = winograd_weight_grad(variant, &x, [n, c, h, w], &g, o, padding, BAND_ELEMENTS);
                 let worst = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max) / scale;
                 let case = format!("F({}) n {n} c {c} o {o} {h}x{w} padding {padding:?}", variant.m);
                 assert!(worst <= bound, "{case}: {worst:e} of the largest sum of |products|");
@@ -254,9 +274,9 @@ mod tests {
         let in_bands = |rows: usize, threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             let elements = 36 * c * (w.div_ceil(4) + 1) * rows;
-            pool.install(|| weight_grad_in_bands(&F4, &x, [n, c, h, w], &g, o, padding, elements))
+            pool.install(|| winograd_weight_grad(&F4, &x, [n, c, h, w], &g, o, padding, elements))
         };
-        let whole = winograd_weight_grad(&F4, &x, [n, c, h, w], &g, o, padding);
+        let whole = winograd_weight_grad(&F4, &x, [n, c, h, w], &g, o, padding, BAND_ELEMENTS);
         for rows in [1, 2] {
             let banded = in_bands(rows, 1);
             assert_eq!(banded, in_bands(rows, 3), "{rows} rows a band: one and three threads");
