@@ -43,10 +43,11 @@ pub trait HostConvBackend: Backend {
 
 /// Fewest input channels for which the training forward may take Winograd outside an update
 /// loop (inside one, every layer that suits it does: `UpdateLoop`): the ConvGRUs' gate and
-/// candidate convolutions (256 or 384 input channels, most of an update iteration's products). The encoders' layers (at most 128 input channels) keep plain products, whose sums
-/// the feature encoder's instance norms would otherwise magnify past the official training
-/// step's check (see `conv2d_host_direct_slices`; from 128 channels its Adam update check of
-/// `fnet.layer1.0.conv1` fails). The weight gradient takes Winograd wherever the layer suits it
+/// candidate convolutions (256 or 384 input channels, most of an update iteration's products).
+/// The encoders' layers (at most 128 input channels) keep plain products, whose sums the feature
+/// encoder's instance norms would otherwise magnify past the official training step's check (see
+/// `conv2d_host_direct_slices`; from 128 channels its Adam update check of `fnet.layer1.0.conv1`
+/// fails). The weight gradient takes Winograd wherever the layer suits it
 /// (`conv2d_weight_grad_winograd`): a weight's gradient feeds no other gradient, so its rounding
 /// is not magnified.
 pub const WINOGRAD_MIN_CHANNELS: usize = 256;
@@ -182,8 +183,8 @@ mod tests {
     /// The gradients of the input, the weight and the bias against burn's own autodiff of
     /// `conv2d`, with a random output gradient (the loss `Σ conv·r`): 3x3 stride 1 with enough
     /// channels for Winograd in the input gradient (and, at 256 input channels, in the forward
-    /// and, with 32 outputs, the weight gradient too), few channels, asymmetric and no padding, a 1x1, a strided 7x7 stem and a strided
-    /// 3x3 (burn's input gradient), without a bias.
+    /// and, with 32 outputs, the weight gradient too), few channels, asymmetric and no padding, a
+    /// 1x1, a strided 7x7 stem and a strided 3x3 (burn's input gradient), without a bias.
     #[test]
     fn gradients_agree_with_burns_autodiff() {
         let ad = Device::flex().autodiff();
