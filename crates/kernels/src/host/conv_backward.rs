@@ -132,7 +132,7 @@ pub fn conv2d_weight_grad(
         let len = CHUNK.min(o * k - i * CHUNK);
         let partials = &partials;
         (i * CHUNK..i * CHUNK + len).map(move |e| {
-            let (block, offset) = (e / k / rows, e - (e / k / rows) * rows * k);
+            let (block, offset) = (e / (rows * k), e % (rows * k));
             (0..groups).fold(0.0f32, |t, group| t + partials[group * blocks + block][offset])
         })
     })

@@ -5,6 +5,8 @@ use burn::tensor::{Tensor, TensorData};
 use dgstereo_core::tensor::{host_values, zeros_parallel};
 use rayon::prelude::*;
 
+use crate::geometry::band_jobs;
+
 /// Convex upsampling (`crate::ops::upsample::convex_upsample`) on the host: per image and
 /// coarse row, the softmax weights of the row's pixels (`[W][factor²][9]`), then the `factor`
 /// output rows of every channel.
@@ -31,11 +33,7 @@ pub fn convex_upsample_values(flow: &[f32], mask: &[f32], [n, d, h, w]: [usize; 
     let wide = factor * w;
     let mut out = zeros_parallel(n * d * plane * ff);
     // One job per (image, coarse row): its `factor` output rows in each of the `d` channels.
-    let mut jobs: Vec<Vec<&mut [f32]>> = (0..n * h).map(|_| Vec::with_capacity(d)).collect();
-    for (i, rows) in out.chunks_mut(factor * wide).enumerate() {
-        let (b, y) = (i / (d * h), i % h);
-        jobs[b * h + y].push(rows);
-    }
+    let jobs = band_jobs(&mut out, d, plane * ff, (factor * wide).max(1));
     jobs.into_par_iter().enumerate().for_each_init(Vec::new, |weights, (job, mut rows)| {
         let (b, y) = (job / h, job % h);
         softmax_weights(weights, &mask[b * 9 * ff * plane..][..9 * ff * plane], [h, w], y, ff);

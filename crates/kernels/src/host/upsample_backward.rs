@@ -12,10 +12,7 @@ use dgstereo_core::tensor::zeros_parallel;
 use rayon::prelude::*;
 
 use super::upsample::{neighbourhood, softmax_weights};
-
-/// One (image, coarse row) job's rows: of each of the `9·factor²` mask-gradient planes, and of
-/// each channel's tap gradients.
-type RowJob<'a> = (Vec<&'a mut [f32]>, Vec<&'a mut [f32]>);
+use crate::geometry::band_jobs;
 
 /// The gradients of [`super::upsample::convex_upsample_values`] with respect to `flow` and `mask`,
 /// given the output gradient `g`.
@@ -48,16 +45,10 @@ pub fn convex_upsample_backward(
     let mut dtaps = zeros_parallel(n * d * plane * 9);
     // One job per (image, coarse row): its row of each of the 9·ff mask planes and of each
     // channel's taps.
-    let mut jobs: Vec<RowJob> = (0..n * h).map(|_| (Vec::new(), Vec::new())).collect();
-    for (i, row) in dmask.chunks_mut(w.max(1)).enumerate() {
-        let (b, y) = (i / (9 * ff * h), i % h);
-        jobs[b * h + y].0.push(row);
-    }
-    for (i, row) in dtaps.chunks_mut((9 * w).max(1)).enumerate() {
-        let (b, y) = (i / (d * h), i % h);
-        jobs[b * h + y].1.push(row);
-    }
-    jobs.into_par_iter().enumerate().for_each_init(Vec::new, |weights, (job, (mut mask_rows, mut tap_rows))| {
+    let mask_jobs = band_jobs(&mut dmask, 9 * ff, plane, w.max(1));
+    let tap_jobs = band_jobs(&mut dtaps, d, plane * 9, (9 * w).max(1));
+    let jobs = mask_jobs.into_par_iter().zip(tap_jobs);
+    jobs.enumerate().for_each_init(Vec::new, |weights, (job, (mut mask_rows, mut tap_rows))| {
         let (b, y) = (job / h, job % h);
         softmax_weights(weights, &mask[b * 9 * ff * plane..][..9 * ff * plane], [h, w], y, ff);
         let (mut taps, mut grads) = (vec![[0.0f32; 9]; d], vec![0.0f32; d]);

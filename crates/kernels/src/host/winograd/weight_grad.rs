@@ -165,18 +165,18 @@ fn transform_sums(variant: &Variant, sums: &[f32], o: usize, c: usize) -> Vec<f3
         let (left, taps) = scratch.split_at_mut(3 * alpha * c);
         let sum = |k: usize| &sums[(k * o + oc) * c..][..c];
         // left[(α·a + j)·C ..] = Σ_i G[i][a]·M[αi + j], then taps[(3a + b)·C ..] = Σ_j left[a][j]·G[j][b].
-        let column = |a: usize| -> Vec<f32> { (0..alpha).map(|i| variant.g[i][a]).collect() };
+        let column = |a: usize| -> [f32; 6] { std::array::from_fn(|i| if i < alpha { variant.g[i][a] } else { 0.0 }) };
         for a in 0..3 {
             let coefs = column(a);
             for j in 0..alpha {
-                lincomb(&mut left[(alpha * a + j) * c..][..c], &coefs, |i| sum(alpha * i + j));
+                lincomb(&mut left[(alpha * a + j) * c..][..c], &coefs[..alpha], |i| sum(alpha * i + j));
             }
         }
         let left = &*left;
         for a in 0..3 {
             for b in 0..3 {
                 let coefs = column(b);
-                lincomb(&mut taps[(3 * a + b) * c..][..c], &coefs, |j| &left[(alpha * a + j) * c..][..c]);
+                lincomb(&mut taps[(3 * a + b) * c..][..c], &coefs[..alpha], |j| &left[(alpha * a + j) * c..][..c]);
             }
         }
         for (ci, out) in dst.chunks_exact_mut(9).enumerate() {
