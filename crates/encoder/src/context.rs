@@ -4,7 +4,7 @@ use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
-use dgstereo_kernels::conv2d_forward;
+use dgstereo_kernels::{WinogradForward, conv2d_forward};
 
 use crate::feature::trunk_strides;
 use crate::norm::{Norm, NormKind};
@@ -112,8 +112,21 @@ impl ContextEncoder {
     }
 }
 
+impl ContextEncoder {
+    /// Whether its norms are fixed per-channel maps (frozen batch norms, or none) rather than
+    /// norms that divide by the activations' statistics.
+    pub fn norms_are_fixed(&self) -> bool {
+        matches!(self.norm1, Norm::Batch(_) | Norm::None(_))
+    }
+}
+
 impl ContextExtractor for ContextEncoder {
+    /// With fixed norms the training forward takes Winograd in every layer that suits it (a
+    /// [`WinogradForward`] region): no norm of this encoder, and none after it, magnifies the
+    /// change of rounding. With instance or group norms it keeps the plain products, as the
+    /// feature encoder does.
     fn context(&self, image: Tensor<4>, levels: usize) -> ContextFeatures {
+        let _winograd = self.norms_are_fixed().then(WinogradForward::new);
         self.heads(self.trunk(image), levels)
     }
 }

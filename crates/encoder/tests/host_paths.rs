@@ -73,3 +73,28 @@ fn context_encoder_host_path_equals_tensor_operations() {
         }
     }
 }
+
+/// In training, a context encoder with frozen batch norms takes Winograd in its layers
+/// (`WinogradForward`, opened by `context`): its result differs from the plain products' in
+/// rounding only. With instance norms it keeps the plain products, bit for bit.
+#[test]
+fn context_encoder_training_forward_takes_winograd_only_with_fixed_norms() {
+    let ad = Device::flex().autodiff();
+    let x = Tensor::<4>::random([1, 3, 96, 128], Distribution::Uniform(-1.0, 1.0), &ad);
+    let outputs = |encoder: &ContextEncoder, guarded: bool| {
+        let features = if guarded { encoder.context(x.clone(), 3) } else { encoder.heads(encoder.trunk(x.clone()), 3) };
+        features.levels.into_iter().flatten().map(dgstereo_core::tensor::to_vec).collect::<Vec<_>>()
+    };
+    let batch = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Batch, 2, &ad);
+    assert!(batch.norms_are_fixed());
+    let (winograd, plain) = (outputs(&batch, true), outputs(&batch, false));
+    assert_ne!(winograd, plain, "the context encoder's training forward kept the plain products");
+    for (a, b) in winograd.iter().zip(&plain) {
+        let scale = b.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+        let worst = a.iter().zip(b).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max) / scale;
+        assert!(worst < 1e-4, "Winograd and plain products differ by {worst} (relative)");
+    }
+    let instance = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Instance, 2, &ad);
+    assert!(!instance.norms_are_fixed());
+    assert_eq!(outputs(&instance, true), outputs(&instance, false), "an instance-norm encoder took Winograd");
+}

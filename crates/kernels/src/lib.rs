@@ -21,6 +21,7 @@ pub mod product;
 pub mod settings;
 mod test_paths;
 
+pub use autodiff::WinogradForward;
 pub use dispatch::{Op, Path, path, with_path};
 pub use host::winograd::UpdateLoop;
 pub use ops::conv::{

@@ -19,8 +19,10 @@ pub mod deform;
 pub mod gru;
 pub mod norm;
 pub mod upsample;
+pub mod winograd_region;
 
 pub use conv::{HostConvBackend, MIN_CHANNELS, conv2d};
+pub use winograd_region::WinogradForward;
 
 /// A float32 Flex tensor's values, row-major (a copy only where it is not contiguous).
 fn values(t: &FlexTensor) -> std::borrow::Cow<'_, [f32]> {

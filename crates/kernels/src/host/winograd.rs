@@ -70,7 +70,6 @@ pub(crate) use transforms::MIN_F4_TILES;
 pub(crate) use transforms::{Conv3x3, Variant, split_row, winograd_variant};
 use transforms::{Plan, transform_inputs, transform_outputs};
 pub use weight_cache::UpdateLoop;
-pub(crate) use weight_cache::in_update_loop;
 use weight_cache::transformed_weights;
 pub(crate) use weight_grad::{BAND_ELEMENTS as WEIGHT_GRAD_BAND_ELEMENTS, winograd_weight_grad};
 

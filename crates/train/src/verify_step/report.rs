@@ -10,6 +10,15 @@
 //! any implementation other than PyTorch's is, acts like such a perturbation. So those two
 //! ([`ILL_CONDITIONED`]) pass within 3e-3 and 90 %; every other parameter is held to the
 //! README's limits, and a broken component misses them by far (see docs/training.md).
+//!
+//! The same noise decides the largest single update difference those two may show. An element
+//! whose gradient lies within the float noise of zero may take the other sign in a step, and
+//! Adam then moves it by about the step's learning rate the other way: a difference of up to
+//! `2·lr2 / (lr1 + lr2)`, 1.86 in the reference's recipe, where every other parameter is held to
+//! [`UPDATE_BOUND`], half of `lr1 + lr2`. Measured with the verification's own path and the
+//! starting weights moved by one unit in the last place: the worst update difference of
+//! `fnet.layer1.0.conv1` is 0.734 (0.484 unmoved), past half. So the two are held to
+//! [`ILL_CONDITIONED_UPDATE_BOUND`]: an update may reverse, not grow.
 
 use std::fmt;
 
@@ -38,15 +47,29 @@ pub const ILL_CONDITIONED: [&str; 2] = ["fnet.conv1.", "fnet.layer1.0.conv1."];
 pub const ILL_CONDITIONED_GRADIENT_TOLERANCE: f64 = 3e-3;
 /// [`UPDATE_SHARE`] of the [`ILL_CONDITIONED`] parameters.
 pub const ILL_CONDITIONED_UPDATE_SHARE: f64 = 0.90;
+/// [`UPDATE_BOUND`] of the [`ILL_CONDITIONED`] parameters: one element's update reversed (see
+/// the module documentation).
+pub const ILL_CONDITIONED_UPDATE_BOUND: f64 = 2.0;
 
-/// The gradient tolerance and update share of the parameter `key` names (a parameter name, or a
-/// reference key such as `step1.grad.<name>`, with or without `module.`).
-fn tolerances(key: &str) -> (f64, f64) {
+/// The tolerances of one parameter.
+struct Tolerances {
+    gradient: f64,
+    update_share: f64,
+    update_bound: f64,
+}
+
+/// The tolerances of the parameter `key` names (a parameter name, or a reference key such as
+/// `step1.grad.<name>`, with or without `module.`).
+fn tolerances(key: &str) -> Tolerances {
     let named = |prefix: &str| key.starts_with(prefix) || key.contains(&format!(".{prefix}"));
     if ILL_CONDITIONED.iter().any(|p| named(p)) {
-        (ILL_CONDITIONED_GRADIENT_TOLERANCE, ILL_CONDITIONED_UPDATE_SHARE)
+        Tolerances {
+            gradient: ILL_CONDITIONED_GRADIENT_TOLERANCE,
+            update_share: ILL_CONDITIONED_UPDATE_SHARE,
+            update_bound: ILL_CONDITIONED_UPDATE_BOUND,
+        }
     } else {
-        (GRADIENT_TOLERANCE, UPDATE_SHARE)
+        Tolerances { gradient: GRADIENT_TOLERANCE, update_share: UPDATE_SHARE, update_bound: UPDATE_BOUND }
     }
 }
 /// No element's update may differ by more than this fraction of `lr1 + lr2`.
@@ -178,7 +201,7 @@ pub fn gradient_check(
     let small = global_norm * SMALL_GRADIENT;
     if norm > small {
         let e = error / norm;
-        let tolerance = tolerances(key).0;
+        let tolerance = tolerances(key).gradient;
         let text = format!("{shape:<18} norm {norm:.3e} rel L2 err {e:.3e} (tol {tolerance:.0e})");
         let passed = e <= tolerance;
         (CheckLine { kind: CheckKind::Gradient, key: key.into(), text, passed }, Some(e))
@@ -193,7 +216,8 @@ pub fn gradient_check(
 
 /// Compares a parameter's update over the two steps (`p2 - p0`, both sides from the same `p0`):
 /// at least [`UPDATE_SHARE`] (or the [`ILL_CONDITIONED`] one) of the elements within [`UPDATE_CLOSE`] of `lr_sum = lr1 + lr2`,
-/// none beyond [`UPDATE_BOUND`] of it. Returns the line and the agreeing share in percent.
+/// none beyond [`UPDATE_BOUND`] (or the [`ILL_CONDITIONED`] one) of it. Returns the line and the
+/// agreeing share in percent.
 pub fn update_check(
     key: &str,
     shape: &[usize],
@@ -210,12 +234,12 @@ pub fn update_check(
     let close = differences.iter().filter(|&&d| d <= UPDATE_CLOSE).count();
     let share = 100.0 * close as f64 / differences.len().max(1) as f64;
     let worst = differences.iter().copied().fold(0.0, f64::max);
-    let required = tolerances(key).1;
-    let passed = share >= 100.0 * required && worst <= UPDATE_BOUND && !differences.is_empty();
+    let Tolerances { update_share, update_bound, .. } = tolerances(key);
+    let passed = share >= 100.0 * update_share && worst <= update_bound && !differences.is_empty();
     let text = format!(
-        "{:<18} update agreement {share:6.2} % (>= {:.0} %), worst {worst:.3e} (lr1 + lr2) (tol {UPDATE_BOUND})",
+        "{:<18} update agreement {share:6.2} % (>= {:.0} %), worst {worst:.3e} (lr1 + lr2) (tol {update_bound})",
         format!("{shape:?}"),
-        100.0 * required
+        100.0 * update_share
     );
     (CheckLine { kind: CheckKind::Update, key: key.into(), text, passed }, share)
 }
@@ -280,8 +304,12 @@ mod tests {
         fewer[9] += 3e-5;
         fewer[10] += 3e-5;
         assert!(!update_check("fnet.conv1.weight", &[100], &p0, &fewer, &reference, lr_sum).0.passed);
-        // One element beyond half of lr1 + lr2.
+        // One element beyond half of lr1 + lr2: too far for most parameters, a reversal the
+        // ill-conditioned ones may show; beyond twice it, too far for every parameter.
         ours[50] += 6e-5;
         assert!(!update_check("p", &[100], &p0, &ours, &reference, lr_sum).0.passed);
+        assert!(update_check("fnet.layer1.0.conv1.weight", &[100], &p0, &ours, &reference, lr_sum).0.passed);
+        ours[50] += 1.5e-4;
+        assert!(!update_check("fnet.layer1.0.conv1.weight", &[100], &p0, &ours, &reference, lr_sum).0.passed);
     }
 }

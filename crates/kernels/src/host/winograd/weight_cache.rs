@@ -20,6 +20,7 @@
 use std::sync::{Arc, Mutex};
 
 use super::transforms::{Variant, transform_weights};
+use crate::autodiff::winograd_region::WinogradForward;
 
 /// Bytes of transformed and raw weights the process-wide cache keeps: the update loop of the
 /// default RAFT-Stereo needs ~65 MB (the GRU pairs at 1/4 and 1/8 with F(4x4) 20 MB each and
@@ -130,35 +131,25 @@ pub(crate) fn transformed_weights(variant: &Variant, wt: &[f32], o: usize, c: us
     WeightCache::get(&CACHE, variant, wt, o, c)
 }
 
-thread_local! {
-    /// [`UpdateLoop`] guards alive on this thread.
-    static UPDATE_LOOPS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
-}
-
-/// Whether the calling thread holds an [`UpdateLoop`]: its update loop is running. Per thread,
-/// so a loop running on another thread (a test, a second model) never changes this one's path.
-pub(crate) fn in_update_loop() -> bool {
-    UPDATE_LOOPS.get() > 0
-}
-
 /// A running update loop, held by the model around its iterations. While alive:
 /// - the host Winograd convolutions keep the weights they transform for the next call with the
 ///   same weights (see the module's doc), freed when the last guard drops; this never changes
 ///   results;
-/// - the training forward takes Winograd for every layer that suits it, not only from
-///   `autodiff::conv::WINOGRAD_MIN_CHANNELS` input channels: the update block's heads feed no
-///   instance norm that would magnify the rounding (the official training step's check passes
-///   either way, its update agreement 93.13 -> 93.34 %).
+/// - the training forward takes Winograd for every layer that suits it (a
+///   [`WinogradForward`] region): the update block's heads feed no instance norm that would
+///   magnify the rounding (the official training step's check passes either way, its update
+///   agreement 93.13 -> 93.34 %).
 #[must_use = "the loop's kernels apply only while the guard is alive"]
-pub struct UpdateLoop(std::marker::PhantomData<*const ()>);
+pub struct UpdateLoop {
+    _winograd: WinogradForward,
+}
 
 impl UpdateLoop {
-    /// Opens a scope of the process-wide cache: the loop begins, on the calling thread (the
-    /// guard stays on it: not `Send`).
+    /// Opens a scope of the process-wide cache and a Winograd region: the loop begins, on the
+    /// calling thread (the guard stays on it: not `Send`).
     pub fn new() -> Self {
         WeightCache::open(&CACHE);
-        UPDATE_LOOPS.set(UPDATE_LOOPS.get() + 1);
-        Self(std::marker::PhantomData)
+        Self { _winograd: WinogradForward::new() }
     }
 }
 
@@ -170,7 +161,6 @@ impl Default for UpdateLoop {
 
 impl Drop for UpdateLoop {
     fn drop(&mut self) {
-        UPDATE_LOOPS.set(UPDATE_LOOPS.get() - 1);
         WeightCache::close(&CACHE);
     }
 }
