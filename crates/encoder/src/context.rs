@@ -95,6 +95,12 @@ impl ContextEncoder {
         forward_layer(&self.layer3, x)
     }
 
+    /// Whether its norms are fixed per-channel maps (frozen batch norms, or none) rather than
+    /// norms that divide by the activations' statistics.
+    pub fn norms_are_fixed(&self) -> bool {
+        matches!(self.norm1, Norm::Batch(_) | Norm::None(_))
+    }
+
     /// The heads of `levels` levels from a trunk output.
     pub fn heads(&self, trunk: Tensor<4>, levels: usize) -> ContextFeatures {
         let pair = |heads: &[ContextHead], x: &Tensor<4>| [heads[0].forward(x.clone()), heads[1].forward(x.clone())];
@@ -109,14 +115,6 @@ impl ContextEncoder {
             }
         }
         ContextFeatures { levels: out }
-    }
-}
-
-impl ContextEncoder {
-    /// Whether its norms are fixed per-channel maps (frozen batch norms, or none) rather than
-    /// norms that divide by the activations' statistics.
-    pub fn norms_are_fixed(&self) -> bool {
-        matches!(self.norm1, Norm::Batch(_) | Norm::None(_))
     }
 }
 

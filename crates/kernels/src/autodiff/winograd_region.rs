@@ -14,12 +14,13 @@ thread_local! {
 }
 
 /// A region of the training forward whose convolutions feed no norm that divides by the
-/// activations' own statistics (instance or group norm, which magnify a change of rounding in
-/// the layer before them): while a guard is alive on this thread, `autodiff::conv2d` takes Winograd for
-/// every layer that suits it, not only from `autodiff::conv::WINOGRAD_MIN_CHANNELS` input channels. The update
-/// loop holds one (`UpdateLoop`), and so does the context encoder where its norms are frozen
-/// batch norms or none. Per thread, so a region open on another thread (a test, a second model)
-/// never changes this one's path; not `Send`. Inference takes Winograd everywhere regardless.
+/// activations' own statistics (instance or group norm, which magnify a change of rounding in the
+/// layer before them): while a guard is alive on this thread, `autodiff::conv2d` takes Winograd for
+/// every layer that suits it, not only from `autodiff::conv::WINOGRAD_MIN_CHANNELS` input channels.
+/// The update loop holds one (`UpdateLoop`), and so does the context encoder where its norms are
+/// frozen batch norms or none. Per thread, so a region open on another thread (a test, a second
+/// model) never changes this one's path; not `Send`. Inference takes Winograd everywhere
+/// regardless.
 #[must_use = "the training forward takes Winograd only while the guard is alive"]
 pub struct WinogradForward(std::marker::PhantomData<*const ()>);
 
