@@ -39,9 +39,12 @@ pub const SMALL_GRADIENT: f64 = 1e-6;
 pub const UPDATE_CLOSE: f64 = 0.01;
 /// The share of every tensor's elements whose updates must agree (the README's).
 pub const UPDATE_SHARE: f64 = 0.95;
+/// No element's update may differ by more than this fraction of `lr1 + lr2`.
+pub const UPDATE_BOUND: f64 = 0.5;
 /// Parameters (reference names, by prefix) whose gradients are within the trainer's own float
 /// noise of the README's limits (see the module documentation), and so are held to
-/// [`ILL_CONDITIONED_GRADIENT_TOLERANCE`] and [`ILL_CONDITIONED_UPDATE_SHARE`].
+/// [`ILL_CONDITIONED_GRADIENT_TOLERANCE`], [`ILL_CONDITIONED_UPDATE_SHARE`] and
+/// [`ILL_CONDITIONED_UPDATE_BOUND`].
 pub const ILL_CONDITIONED: [&str; 2] = ["fnet.conv1.", "fnet.layer1.0.conv1."];
 /// [`GRADIENT_TOLERANCE`] of the [`ILL_CONDITIONED`] parameters.
 pub const ILL_CONDITIONED_GRADIENT_TOLERANCE: f64 = 3e-3;
@@ -72,8 +75,6 @@ fn tolerances(key: &str) -> Tolerances {
         Tolerances { gradient: GRADIENT_TOLERANCE, update_share: UPDATE_SHARE, update_bound: UPDATE_BOUND }
     }
 }
-/// No element's update may differ by more than this fraction of `lr1 + lr2`.
-pub const UPDATE_BOUND: f64 = 0.5;
 
 /// What a check compares.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
