@@ -3,6 +3,7 @@
 use burn::module::Module;
 use burn::tensor::Tensor;
 use dgstereo_core::Probe;
+use dgstereo_kernels::WinogradForward;
 
 use crate::context::ContextEncoder;
 use crate::feature::{FeatureEncoder, SharedFeatureHead};
@@ -108,7 +109,13 @@ impl Encoders {
                 let trunk = probe.time("context encoder", || {
                     cnet.trunk(normalise(Tensor::cat(vec![context_left, features_right], 0)))
                 });
-                let context = probe.time("context encoder", || cnet.heads(trunk.clone().narrow(0, 0, n), levels));
+                // The heads feed only the GRUs, so with fixed norms they take Winograd as the
+                // separate context encoder does; the trunk feeds `conv2`'s instance norm and
+                // keeps the plain products.
+                let context = probe.time("context encoder", || {
+                    let _winograd = cnet.norms_are_fixed().then(WinogradForward::new);
+                    cnet.heads(trunk.clone().narrow(0, 0, n), levels)
+                });
                 let feats = probe.time("feature encoder", || conv2.forward(trunk));
                 Encoded { fmap1: feats.clone().narrow(0, 0, n), fmap2: feats.narrow(0, n, n), context }
             }

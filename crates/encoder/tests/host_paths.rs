@@ -4,10 +4,14 @@
 
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Distribution, Tensor};
+use dgstereo_core::Probe;
 use dgstereo_core::tensor::max_abs_diff;
 use dgstereo_encoder::norm::Norm;
 use dgstereo_encoder::residual::ResidualBlock;
-use dgstereo_encoder::{ContextEncoder, ContextExtractor, FeatureEncoder, FeatureExtractor, NormKind};
+use dgstereo_encoder::{
+    ContextEncoder, ContextExtractor, EncoderInputs, Encoders, FeatureEncoder, FeatureExtractor, NormKind,
+    SharedBackbone, SharedFeatureHead,
+};
 
 /// Agreement up to float rounding: the largest difference relative to the largest magnitude
 /// (the outputs of these randomly initialised encoders reach tens, where 1e-4 is a few ulps).
@@ -97,4 +101,35 @@ fn context_encoder_training_forward_takes_winograd_only_with_fixed_norms() {
     let instance = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Instance, 2, &ad);
     assert!(!instance.norms_are_fixed());
     assert_eq!(outputs(&instance, true), outputs(&instance, false), "an instance-norm encoder took Winograd");
+}
+
+/// The shared backbone's context heads take Winograd in training as the separate context encoder
+/// does (they feed only the GRUs), while its trunk, which also feeds the feature head's instance
+/// norm, keeps the plain products: the features are bit-identical to the unguarded path's.
+#[test]
+fn shared_backbone_takes_winograd_in_its_heads_only() {
+    let ad = Device::flex().autodiff();
+    let image = || Tensor::<4>::random([1, 3, 96, 128], Distribution::Uniform(0.0, 255.0), &ad);
+    let (left, right) = (image(), image());
+    let cnet = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Batch, 2, &ad);
+    let encoders = Encoders::Shared(SharedBackbone { cnet, conv2: SharedFeatureHead::new(64, 64, &ad) });
+    let inputs = EncoderInputs { context_left: left.clone(), features_left: left.clone(), features_right: right.clone() };
+    let encoded = encoders.encode(inputs, 3, &mut Probe::none());
+
+    let Encoders::Shared(SharedBackbone { cnet, conv2 }) = &encoders else { unreachable!() };
+    let normalise = |x: Tensor<4>| x.div_scalar(255.0).mul_scalar(2.0).sub_scalar(1.0);
+    let trunk = cnet.trunk(normalise(Tensor::cat(vec![left, right], 0)));
+    let plain = cnet.heads(trunk.clone().narrow(0, 0, 1), 3);
+    let feats = conv2.forward(trunk);
+    let to_vec = dgstereo_core::tensor::to_vec;
+    assert_eq!(to_vec(encoded.fmap1), to_vec(feats.clone().narrow(0, 0, 1)), "the trunk or feature head changed path");
+    assert_eq!(to_vec(encoded.fmap2), to_vec(feats.narrow(0, 1, 1)), "the trunk or feature head changed path");
+    let heads = |c: dgstereo_encoder::ContextFeatures| c.levels.into_iter().flatten().map(to_vec).collect::<Vec<_>>();
+    let (winograd, plain) = (heads(encoded.context), heads(plain));
+    assert_ne!(winograd, plain, "the shared backbone's context heads kept the plain products");
+    for (a, b) in winograd.iter().zip(&plain) {
+        let scale = b.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+        let worst = a.iter().zip(b).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max) / scale;
+        assert!(worst < 1e-4, "Winograd and plain products differ by {worst} (relative)");
+    }
 }
