@@ -1,6 +1,6 @@
 //! Convex upsampling with our backward: the forward runs the host pass on the inner Flex
-//! tensors and registers a node whose backward computes the gradients of the flow and the mask
-//! ([`crate::host::upsample_backward`]).
+//! tensors, keeping its softmax weights, and registers a node whose backward computes the
+//! gradients of the flow and the mask from them ([`crate::host::upsample_backward`]).
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
@@ -12,7 +12,7 @@ use burn::backend::{Autodiff, Backend, Flex, backend_extension};
 use burn::tensor::{DType, Tensor};
 
 use super::{dims4, flex, values};
-use crate::host::upsample::convex_upsample_values;
+use crate::host::upsample::{convex_upsample_values, convex_upsample_values_keeping_weights};
 use crate::host::upsample_backward::convex_upsample_backward;
 
 /// Convex upsampling whose backward is the host kernels'.
@@ -35,25 +35,34 @@ impl HostUpsampleBackend for Flex {
     }
 }
 
-/// The backward node of [`HostUpsampleBackend::host_convex_upsample`]; its state is the flow,
-/// the mask and the factor.
+/// The backward node of [`HostUpsampleBackend::host_convex_upsample`].
 #[derive(Debug)]
 struct ConvexUpsample;
 
+/// What the backward reads: the flow, the forward's softmax weights (`[N][H][W][factor²][9]`, as
+/// large as the mask, which the node then does not keep), the mask's shape and the factor.
+#[derive(Debug, Clone)]
+struct UpsampleState {
+    flow: FlexTensor,
+    weights: Vec<f32>,
+    mask_dims: [usize; 4],
+    factor: usize,
+}
+
 impl Backward<Flex, 2> for ConvexUpsample {
-    type State = (FlexTensor, FlexTensor, usize);
+    type State = UpsampleState;
 
     fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, _: &mut Checkpointer) {
         let [node_flow, node_mask] = ops.parents;
         let grad = grads.consume::<Flex>(&ops.node);
-        let (flow, mask, factor) = &ops.state;
+        let UpsampleState { flow, weights, mask_dims, factor } = &ops.state;
         let dims = dims4(flow);
-        let (dflow, dmask) = convex_upsample_backward(&values(flow), &values(mask), &values(&grad), dims, *factor);
+        let (dflow, dmask) = convex_upsample_backward(&values(flow), weights, &values(&grad), dims, *factor);
         if let Some(node) = node_flow {
             grads.register::<Flex>(node.id, flex(dflow, &dims));
         }
         if let Some(node) = node_mask {
-            grads.register::<Flex>(node.id, flex(dmask, &dims4(mask)));
+            grads.register::<Flex>(node.id, flex(dmask, mask_dims));
         }
     }
 }
@@ -63,8 +72,11 @@ impl<C: CheckpointStrategy> HostUpsampleBackend for Autodiff<Flex, C> {
         let (fp, mp) = (flow.primitive(), mask.primitive());
         match ConvexUpsample.prepare::<C>([flow.node(), mask.node()]).compute_bound().stateful() {
             OpsKind::Tracked(prep) => {
-                let out = forward(fp, mp, factor);
-                prep.finish((fp.clone(), mp.clone(), factor), out)
+                let [n, d, h, w] = dims4(fp);
+                let (out, weights) =
+                    convex_upsample_values_keeping_weights(&values(fp), &values(mp), [n, d, h, w], factor);
+                let state = UpsampleState { flow: fp.clone(), weights, mask_dims: dims4(mp), factor };
+                prep.finish(state, flex(out, &[n, d, factor * h, factor * w]))
             }
             OpsKind::UnTracked(prep) => prep.finish(forward(fp, mp, factor)),
         }

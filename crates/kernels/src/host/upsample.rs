@@ -1,5 +1,6 @@
 //! Convex upsampling on the host: one parallel sweep that computes each coarse pixel's softmax
-//! weights once and writes its `factor x factor` block of every channel.
+//! weights once and writes its `factor x factor` block of every channel; in training it keeps
+//! the weights for the backward.
 
 use burn::tensor::{Tensor, TensorData};
 use dgstereo_core::tensor::{host_values, zeros_parallel};
@@ -25,7 +26,31 @@ pub fn convex_upsample_host(flow: Tensor<4>, mask: Tensor<4>, factor: usize) -> 
 ///
 /// # Panics
 /// When `mask` does not have `9·factor²` channels of `flow`'s batch and size.
-pub fn convex_upsample_values(flow: &[f32], mask: &[f32], [n, d, h, w]: [usize; 4], factor: usize) -> Vec<f32> {
+pub fn convex_upsample_values(flow: &[f32], mask: &[f32], dims: [usize; 4], factor: usize) -> Vec<f32> {
+    upsample(flow, mask, dims, factor, None)
+}
+
+/// [`convex_upsample_values`] that also returns the softmax weights it computed,
+/// `[N][H][W][factor²][9]`: the training forward keeps them for the backward
+/// (`crate::host::upsample_backward`), which then needs no softmax of its own.
+///
+/// # Panics
+/// As [`convex_upsample_values`].
+pub fn convex_upsample_values_keeping_weights(
+    flow: &[f32],
+    mask: &[f32],
+    dims: [usize; 4],
+    factor: usize,
+) -> (Vec<f32>, Vec<f32>) {
+    let mut weights = zeros_parallel(mask.len());
+    let out = upsample(flow, mask, dims, factor, Some(&mut weights));
+    (out, weights)
+}
+
+/// The sweep of both: per image and coarse row, the softmax weights of the row's pixels
+/// (`[W][factor²][9]`, into `kept`'s row where given, else a scratch buffer), then the `factor`
+/// output rows of every channel.
+fn upsample(flow: &[f32], mask: &[f32], [n, d, h, w]: [usize; 4], factor: usize, kept: Option<&mut [f32]>) -> Vec<f32> {
     let ff = factor * factor;
     let plane = h * w;
     assert_eq!(flow.len(), n * d * plane, "convex_upsample: the flow is not [{n}, {d}, {h}, {w}]");
@@ -34,9 +59,24 @@ pub fn convex_upsample_values(flow: &[f32], mask: &[f32], [n, d, h, w]: [usize; 
     let mut out = zeros_parallel(n * d * plane * ff);
     // One job per (image, coarse row): its `factor` output rows in each of the `d` channels.
     let jobs = band_jobs(&mut out, d, plane * ff, (factor * wide).max(1));
-    jobs.into_par_iter().enumerate().for_each_init(Vec::new, |weights, (job, mut rows)| {
+    let kept_rows: Vec<Option<&mut [f32]>> = match kept {
+        Some(kept) => kept.chunks_mut((w * ff * 9).max(1)).map(Some).collect(),
+        None => (0..n * h).map(|_| None).collect(),
+    };
+    jobs.into_par_iter().zip(kept_rows).enumerate().for_each_init(Vec::new, |scratch, (job, (mut rows, kept))| {
         let (b, y) = (job / h, job % h);
-        softmax_weights(weights, &mask[b * 9 * ff * plane..][..9 * ff * plane], [h, w], y, ff);
+        let mask = &mask[b * 9 * ff * plane..][..9 * ff * plane];
+        let weights: &[f32] = match kept {
+            Some(kept) => {
+                softmax_into(kept, mask, [h, w], y, ff);
+                kept
+            }
+            None => {
+                scratch.resize(w * ff * 9, 0.0);
+                softmax_into(scratch, mask, [h, w], y, ff);
+                scratch
+            }
+        };
         for (c, rows) in rows.iter_mut().enumerate() {
             let flow = &flow[(b * d + c) * plane..][..plane];
             for x in 0..w {
@@ -52,10 +92,10 @@ pub fn convex_upsample_values(flow: &[f32], mask: &[f32], [n, d, h, w]: [usize; 
     out
 }
 
-/// Fills `weights[(x·ff + s)·9 + k]` with the softmax over the 9 taps of subpixel `s` of every
-/// pixel `x` of coarse row `y`, from one image's mask (`[9·ff][H][W]`, tap-major).
-pub(crate) fn softmax_weights(weights: &mut Vec<f32>, mask: &[f32], [h, w]: [usize; 2], y: usize, ff: usize) {
-    weights.resize(w * ff * 9, 0.0);
+/// Fills `weights[(x·ff + s)·9 + k]` (`W·ff·9` values) with the softmax over the 9 taps of
+/// subpixel `s` of every pixel `x` of coarse row `y`, from one image's mask (`[9·ff][H][W]`,
+/// tap-major).
+fn softmax_into(weights: &mut [f32], mask: &[f32], [h, w]: [usize; 2], y: usize, ff: usize) {
     let plane = h * w;
     for x in 0..w {
         for s in 0..ff {

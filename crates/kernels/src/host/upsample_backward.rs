@@ -3,19 +3,21 @@
 //! Design decision: burn's autodiff of the stock composition (softmax over a reshaped mask,
 //! `unfold`, a broadcast product, a sum and a permute) ran its forward and backward mostly on the
 //! calling thread, about 5 % of the main thread's samples in a training step. Here the forward is
-//! the inference pass ([`super::upsample::convex_upsample_values`]) and the backward two parallel
-//! sweeps: per (image, coarse row) the softmax weights again, the mask's gradient and each tap's
+//! the inference pass, keeping its softmax weights
+//! ([`super::upsample::convex_upsample_values_keeping_weights`]), and the backward two parallel
+//! sweeps: per (image, coarse row) the mask's gradient from those weights and each tap's
 //! gradient `dT`; then per (image, channel, row) the flow's gradient, gathered from the `dT` of
 //! the 9 coarse pixels that read it (a gather, so no two tasks write one value).
 
 use dgstereo_core::tensor::zeros_parallel;
 use rayon::prelude::*;
 
-use super::upsample::{neighbourhood, softmax_weights};
+use super::upsample::neighbourhood;
 use crate::geometry::band_jobs;
 
 /// The gradients of [`super::upsample::convex_upsample_values`] with respect to `flow` and `mask`,
-/// given the output gradient `g`.
+/// given the output gradient `g` and the forward's softmax weights `weights`
+/// ([`super::upsample::convex_upsample_values_keeping_weights`]).
 ///
 /// With `W[s][k]` the softmax over the 9 taps of subpixel `s`, `T[k]` the tap's value times
 /// `factor` and `G[s]` the output gradient: `dW[s][k] = Σ_c G_c[s]·T_c[k]`, `dmask[k][s] =
@@ -23,11 +25,11 @@ use crate::geometry::band_jobs;
 /// the flow at the tap's position times `factor`.
 ///
 /// # Shapes
-/// - `flow`: `dims = [N, D, H, W]`; `mask`: `[N, 9·factor², H, W]`; `g`: `[N, D, factor·H,
-///   factor·W]`; returns `(dflow, dmask)` of the shapes of `flow` and `mask`
+/// - `flow`: `dims = [N, D, H, W]`; `weights`: `[N][H][W][factor²][9]`; `g`: `[N, D, factor·H,
+///   factor·W]`; returns `(dflow, dmask)`, `dmask` of the mask's shape `[N, 9·factor², H, W]`
 pub fn convex_upsample_backward(
     flow: &[f32],
-    mask: &[f32],
+    weights: &[f32],
     g: &[f32],
     dims: [usize; 4],
     factor: usize,
@@ -40,6 +42,11 @@ pub fn convex_upsample_backward(
         "convex_upsample_backward: the gradient is not [{n}, {d}, {}, {wide}]",
         factor * h
     );
+    assert_eq!(
+        weights.len(),
+        n * 9 * ff * plane,
+        "convex_upsample_backward: the weights are not [{n}][{h}][{w}][{ff}][9]"
+    );
     let mut dmask = zeros_parallel(n * 9 * ff * plane);
     // dT[((b·D + c)·H + y)·W·9 + x·9 + k].
     let mut dtaps = zeros_parallel(n * d * plane * 9);
@@ -48,9 +55,9 @@ pub fn convex_upsample_backward(
     let mask_jobs = band_jobs(&mut dmask, 9 * ff, plane, w.max(1));
     let tap_jobs = band_jobs(&mut dtaps, d, plane * 9, (9 * w).max(1));
     let jobs = mask_jobs.into_par_iter().zip(tap_jobs);
-    jobs.enumerate().for_each_init(Vec::new, |weights, (job, (mut mask_rows, mut tap_rows))| {
+    jobs.enumerate().for_each(|(job, (mut mask_rows, mut tap_rows))| {
         let (b, y) = (job / h, job % h);
-        softmax_weights(weights, &mask[b * 9 * ff * plane..][..9 * ff * plane], [h, w], y, ff);
+        let weights = &weights[(b * h + y) * w * ff * 9..][..w * ff * 9];
         let (mut taps, mut grads) = (vec![[0.0f32; 9]; d], vec![0.0f32; d]);
         for x in 0..w {
             for (c, t) in taps.iter_mut().enumerate() {
