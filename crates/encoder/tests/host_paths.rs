@@ -113,7 +113,8 @@ fn shared_backbone_takes_winograd_in_its_heads_only() {
     let (left, right) = (image(), image());
     let cnet = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Batch, 2, &ad);
     let encoders = Encoders::Shared(SharedBackbone { cnet, conv2: SharedFeatureHead::new(64, 64, &ad) });
-    let inputs = EncoderInputs { context_left: left.clone(), features_left: left.clone(), features_right: right.clone() };
+    let inputs =
+        EncoderInputs { context_left: left.clone(), features_left: left.clone(), features_right: right.clone() };
     let encoded = encoders.encode(inputs, 3, &mut Probe::none());
 
     let Encoders::Shared(SharedBackbone { cnet, conv2 }) = &encoders else { unreachable!() };
