@@ -101,6 +101,14 @@ impl ContextEncoder {
         matches!(self.norm1, Norm::Batch(_) | Norm::None(_))
     }
 
+    /// The [`WinogradForward`] region its layers may run in, opened where its norms are fixed
+    /// ([`Self::norms_are_fixed`]): no norm of this encoder magnifies the change of rounding.
+    /// Held around the whole forward (`context`), or around the heads alone where the trunk also
+    /// feeds the shared backbone's feature head, whose instance norm would.
+    pub fn winograd_region(&self) -> Option<WinogradForward> {
+        self.norms_are_fixed().then(WinogradForward::new)
+    }
+
     /// The heads of `levels` levels from a trunk output.
     pub fn heads(&self, trunk: Tensor<4>, levels: usize) -> ContextFeatures {
         let pair = |heads: &[ContextHead], x: &Tensor<4>| [heads[0].forward(x.clone()), heads[1].forward(x.clone())];
@@ -124,7 +132,7 @@ impl ContextExtractor for ContextEncoder {
     /// change of rounding. With instance or group norms it keeps the plain products, as the
     /// feature encoder does.
     fn context(&self, image: Tensor<4>, levels: usize) -> ContextFeatures {
-        let _winograd = self.norms_are_fixed().then(WinogradForward::new);
+        let _winograd = self.winograd_region();
         self.heads(self.trunk(image), levels)
     }
 }

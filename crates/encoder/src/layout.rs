@@ -3,7 +3,6 @@
 use burn::module::Module;
 use burn::tensor::Tensor;
 use dgstereo_core::Probe;
-use dgstereo_kernels::WinogradForward;
 
 use crate::context::ContextEncoder;
 use crate::feature::{FeatureEncoder, SharedFeatureHead};
@@ -109,11 +108,10 @@ impl Encoders {
                 let trunk = probe.time("context encoder", || {
                     cnet.trunk(normalise(Tensor::cat(vec![context_left, features_right], 0)))
                 });
-                // The heads feed only the GRUs, so with fixed norms they take Winograd as the
-                // separate context encoder does; the trunk feeds `conv2`'s instance norm and
-                // keeps the plain products.
+                // The heads feed only the GRUs, so they take the context encoder's Winograd
+                // region; the trunk feeds `conv2`'s instance norm and keeps the plain products.
                 let context = probe.time("context encoder", || {
-                    let _winograd = cnet.norms_are_fixed().then(WinogradForward::new);
+                    let _winograd = cnet.winograd_region();
                     cnet.heads(trunk.clone().narrow(0, 0, n), levels)
                 });
                 let feats = probe.time("feature encoder", || conv2.forward(trunk));

@@ -46,8 +46,8 @@ pub trait HostConvBackend: Backend {
 /// candidate convolutions (256 or 384 input channels, most of an update iteration's products). The
 /// feature encoder's layers (at most 128 input channels) keep plain products, whose rounding its
 /// instance norms magnify (see `conv2d_host_direct_slices`; with Winograd from 128 channels the
-/// official training step's worst gradient, `fnet.layer1.0.conv1`'s, rose from 1.674e-3 to 1.839e-3
-/// of the 3e-3 it allows). The weight gradient takes Winograd wherever the layer suits it
+/// official training step's worst gradient, `fnet.layer1.0.conv1`'s, rose from 1.789e-3 to
+/// 1.948e-3 of the 3e-3 it allows, and the step was no faster). The weight gradient takes Winograd wherever the layer suits it
 /// (`conv2d_weight_grad_winograd`): a weight's gradient feeds no other gradient, so its rounding is
 /// not magnified.
 pub const WINOGRAD_MIN_CHANNELS: usize = 256;

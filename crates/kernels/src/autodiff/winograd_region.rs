@@ -19,9 +19,9 @@ thread_local! {
 /// every layer that suits it, not only from `autodiff::conv::WINOGRAD_MIN_CHANNELS` input channels.
 /// The update loop holds one (`UpdateLoop`), and so does the context encoder where its norms are
 /// frozen batch norms or none (around its whole forward, or around the heads alone where its
-/// trunk is shared with the feature head). Per thread, so a region open on another thread (a test, a second
-/// model) never changes this one's path; not `Send`. Inference takes Winograd everywhere
-/// regardless.
+/// trunk is shared with the feature head). Per thread, so a region open on another thread (a
+/// test, a second model) never changes this one's path; not `Send`. Inference takes Winograd
+/// everywhere regardless.
 #[must_use = "the training forward takes Winograd only while the guard is alive"]
 pub struct WinogradForward(std::marker::PhantomData<*const ()>);
 
