@@ -50,6 +50,12 @@ impl Error {
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
         Self::Format { path: path.into(), message: message.into() }
     }
+
+    /// An invalid configuration value: `key` is the dotted key (or option field) at fault,
+    /// `reason` what is wrong with its value.
+    pub fn config(key: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::Config(format!("{}: {}", key.into(), reason.into()))
+    }
 }
 
 /// Result with [`Error`].
