@@ -1,6 +1,7 @@
 //! Checks the architecture invariants of ARCHITECTURE.md that the sources can show: which crate
 //! may depend on which, no source files importing each other round a loop, no file over the
-//! size limit.
+//! size limit, the kernels crate's internals named only inside it, no `anyhow` in a library
+//! crate.
 
 use std::path::{Path, PathBuf};
 
@@ -9,23 +10,63 @@ use dgstereo_suite::import_graph::ImportGraph;
 const STAGES: [&str; 6] = ["prior", "fusion", "encoder", "costvolume", "updater", "loss"];
 
 /// The most lines a source file may have.
-const MAX_LINES: usize = 600;
+const MAX_LINES: usize = 500;
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
-fn dependencies(krate: &str) -> Vec<String> {
+fn manifest(krate: &str) -> toml::Table {
     let path = root().join("crates").join(krate).join("Cargo.toml");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let manifest: toml::Table = text.parse().unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    text.parse().unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// The names of a crate's dependencies in `sections` of its manifest.
+fn dependency_names(krate: &str, sections: &[&str]) -> Vec<String> {
+    let manifest = manifest(krate);
     let mut deps = Vec::new();
-    for section in ["dependencies", "dev-dependencies", "build-dependencies"] {
-        if let Some(table) = manifest.get(section).and_then(|t| t.as_table()) {
-            deps.extend(table.keys().filter(|k| k.starts_with("dgstereo-")).cloned());
+    for section in sections {
+        if let Some(table) = manifest.get(*section).and_then(|t| t.as_table()) {
+            deps.extend(table.keys().cloned());
         }
     }
     deps
+}
+
+fn dependencies(krate: &str) -> Vec<String> {
+    dependency_names(krate, &["dependencies", "dev-dependencies", "build-dependencies"])
+        .into_iter()
+        .filter(|k| k.starts_with("dgstereo-"))
+        .collect()
+}
+
+/// Every crate folder under `crates/`.
+fn crate_names() -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(root().join("crates"))
+        .expect("crates/")
+        .map(|e| e.expect("crates/ entry").file_name().to_string_lossy().into_owned())
+        .filter(|n| root().join("crates").join(n).join("Cargo.toml").is_file())
+        .collect();
+    names.sort();
+    names
+}
+
+/// Every `.rs` file below `dir`, `target` and hidden folders left out.
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let path = entry.path();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if path.is_dir() && name != "target" && !name.starts_with('.') {
+            rust_files(&path, out);
+        } else if name.ends_with(".rs") {
+            out.push(path);
+        }
+    }
+}
+
+fn relative(path: &Path) -> String {
+    path.strip_prefix(root()).unwrap_or(path).display().to_string()
 }
 
 /// Every crate folder of the workspace, and the root package's `src`.
@@ -77,23 +118,93 @@ fn no_source_files_import_each_other() {
 /// **Architecture Invariant:** no source file is over [`MAX_LINES`] lines.
 #[test]
 fn no_source_file_is_over_the_limit() {
-    fn walk(dir: &Path, out: &mut Vec<String>) {
-        for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
-            let path = entry.path();
-            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
-            if path.is_dir() && name != "target" && !name.starts_with('.') {
-                walk(&path, out);
-            } else if name.ends_with(".rs") {
-                let lines = std::fs::read_to_string(&path).map(|t| t.lines().count()).unwrap_or(0);
-                if lines > MAX_LINES {
-                    out.push(format!("{} ({lines} lines)", path.strip_prefix(root()).unwrap_or(&path).display()));
-                }
+    let mut files = Vec::new();
+    for dir in ["crates", "src", "tests", "benches", "bindings"] {
+        rust_files(&root().join(dir), &mut files);
+    }
+    let long: Vec<String> = files
+        .iter()
+        .filter_map(|path| {
+            let lines = std::fs::read_to_string(path).map(|t| t.lines().count()).unwrap_or(0);
+            (lines > MAX_LINES).then(|| format!("{} ({lines} lines)", relative(path)))
+        })
+        .collect();
+    assert!(long.is_empty(), "files over {MAX_LINES} lines:\n{}", long.join("\n"));
+}
+
+/// The kernels crate's internal modules, which only the kernels crate itself may name.
+const KERNEL_INTERNALS: [&str; 3] = ["gpu", "host", "autodiff"];
+
+/// The internal modules of the kernels crate that `code` names through `dgstereo_kernels::`,
+/// in a path or a `use` tree (`dgstereo_kernels::{gpu::x, ...}`). Comment lines are skipped.
+fn kernel_internals_named(code: &str) -> Vec<&'static str> {
+    let code: String = code.lines().filter(|l| !l.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n");
+    let mut named = Vec::new();
+    for (at, _) in code.match_indices("dgstereo_kernels::") {
+        let rest = &code[at + "dgstereo_kernels::".len()..];
+        // A path ends at the first character that cannot continue it; a use tree at its `;`.
+        let end = if rest.starts_with('{') {
+            rest.find(';').unwrap_or(rest.len())
+        } else {
+            rest.find(|c: char| !(c.is_alphanumeric() || c == '_' || c == ':')).unwrap_or(rest.len())
+        };
+        let tree = &rest[..end];
+        for internal in KERNEL_INTERNALS {
+            let prefix = format!("{internal}::");
+            let starts_segment = |i: usize| i == 0 || !tree[..i].ends_with(|c: char| c.is_alphanumeric() || c == '_');
+            if tree.match_indices(&prefix).any(|(i, _)| starts_segment(i) && !tree[..i].ends_with("::")) {
+                named.push(internal);
             }
         }
     }
-    let mut long = Vec::new();
-    for dir in ["crates", "src", "tests", "benches"] {
-        walk(&root().join(dir), &mut long);
+    named.sort();
+    named.dedup();
+    named
+}
+
+/// **Architecture Invariant:** the kernels crate's `gpu`, `host` and `autodiff` modules are its
+/// own: no code outside `crates/kernels` names them, so stages reach the kernels through the
+/// face alone.
+#[test]
+fn kernel_internals_are_named_only_inside_kernels() {
+    let mut files = Vec::new();
+    for dir in ["crates", "src", "tests", "benches", "bindings"] {
+        rust_files(&root().join(dir), &mut files);
     }
-    assert!(long.is_empty(), "files over {MAX_LINES} lines:\n{}", long.join("\n"));
+    let kernels = root().join("crates").join("kernels");
+    let offenders: Vec<String> = files
+        .iter()
+        .filter(|path| !path.starts_with(&kernels))
+        .filter_map(|path| {
+            let text = std::fs::read_to_string(path).unwrap_or_default();
+            let named = kernel_internals_named(&text);
+            (!named.is_empty()).then(|| format!("{} names dgstereo_kernels::{named:?}", relative(path)))
+        })
+        .collect();
+    assert!(offenders.is_empty(), "kernel internals named outside crates/kernels:\n{}", offenders.join("\n"));
+}
+
+#[test]
+fn the_kernel_internals_check_sees_paths_and_use_trees() {
+    assert_eq!(kernel_internals_named("use dgstereo_kernels::gpu::matmul_conv::X;"), ["gpu"]);
+    assert_eq!(kernel_internals_named("use dgstereo_kernels::{conv2d_forward, host::conv};"), ["host"]);
+    assert_eq!(kernel_internals_named("let y = dgstereo_kernels::autodiff::f(x);"), ["autodiff"]);
+    assert!(kernel_internals_named("use dgstereo_kernels::{conv2d_forward, resize_bilinear};").is_empty());
+    assert!(kernel_internals_named("use dgstereo_kernels::ops::lookup::all_pairs;").is_empty());
+    assert!(kernel_internals_named("// see dgstereo_kernels::host::conv").is_empty());
+}
+
+/// The crates that may use `anyhow`: the binary and the Python bindings (outside `crates/`).
+const ANYHOW_ALLOWED: [&str; 1] = ["cli"];
+
+/// **Architecture Invariant:** library crates return `dgstereo_core::Error`; `anyhow` is for the
+/// binary (and the Python bindings) alone.
+#[test]
+fn no_library_crate_depends_on_anyhow() {
+    let offenders: Vec<String> = crate_names()
+        .into_iter()
+        .filter(|c| !ANYHOW_ALLOWED.contains(&c.as_str()))
+        .filter(|c| dependency_names(c, &["dependencies"]).iter().any(|d| d == "anyhow"))
+        .collect();
+    assert!(offenders.is_empty(), "library crates depending on anyhow: {offenders:?}");
 }
