@@ -1,12 +1,12 @@
 //! The one place that decides how an operation is computed.
 //!
-//! Every operation of the face asks [`plan`] once and carries out the [`Plan`] it gets; no
+//! Every operation of the face asks `plan` once and carries out the `Plan` it gets; no
 //! other code looks at the device, the settings or a shape threshold to choose a kernel. The
 //! choice depends on the device (the Flex CPU backend or another), its float dtype, whether it
-//! records gradients, the process's [`Settings`](crate::settings::Settings), the operation's
+//! records gradients, the process's [`Settings`], the operation's
 //! shape and, for a convolution, the [`Numerics`] its caller asks for. [`path`] is the coarse
 //! half of it (host, GPU formulation or burn's operation, from the device and the settings);
-//! each operation's [`Call`] gives the fine half (which algorithm on that path, or none where
+//! each operation's `Call` gives the fine half (which algorithm on that path, or none where
 //! the path does not take the shape). Tests and comparisons can pin a path for a closure on the
 //! calling thread ([`with_path`]), which is how one test body runs on every path
 //! ([`crate::test_paths!`]).
@@ -172,7 +172,7 @@ thread_local! {
     static PINNED: Cell<Option<Path>> = const { Cell::new(None) };
 }
 
-/// Where `op` runs on `device`: the coarse half of [`plan`].
+/// Where `op` runs on `device`: the coarse half of `plan`.
 ///
 /// With gradients recorded, burn's operations (their autodiff is the reference backward), except
 /// on the Flex CPU device in f32 for an operation whose backward is ours (`crate::autodiff`)
