@@ -109,7 +109,7 @@ fn correlation(c: &mut Criterion) {
 fn convolution(c: &mut Criterion) {
     use burn::tensor::module::conv2d;
     use burn::tensor::ops::ConvOptions;
-    use dgstereo_kernels::host::conv::{conv2d_host, conv2d_host_im2col};
+    use dgstereo_kernels::testing::{conv2d_host_dispatched as conv2d_host, conv2d_host_im2col};
     let mut group = c.benchmark_group("convolution");
     group.sample_size(10);
     let [h, w] = SIZES[0].0;

@@ -52,7 +52,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     dgstereo_kernels::allocator::retain_freed_memory();
     // `bench --kernels` configures the kernels itself; every other command takes
-    // `DGSTEREO_KERNELS`, and a word it does not know is an error before any work.
+    // `DGSTEREO_KERNELS`, and a malformed value is an error naming the variable and the value,
+    // before any work.
     if !matches!(cli.command, Command::Bench(_))
         && let Err(e) = dgstereo_kernels::Settings::from_env().and_then(dgstereo_kernels::configure)
     {

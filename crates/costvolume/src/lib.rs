@@ -7,7 +7,7 @@
 //! the `W x W` volume per row once (fast lookups; "reg" in the reference) and
 //! [`OnTheFlyCorrelation`] stores only the pooled features and takes the dot products at the
 //! sampled positions (memory linear in `W`; "alt"). They agree to float rounding. Both are the
-//! kernels crate's lookups (`dgstereo_kernels::ops::lookup`), which keep their data where the
+//! kernels crate's lookups (`dgstereo_kernels::CorrelationPyramid`, `OnTheFlyCorrelation`), which keep their data where the
 //! dispatch's path samples it: host buffers and one loop for CPU inference, gathered levels for
 //! GPU inference, burn's tensor operations (the reference and the differentiable path)
 //! elsewhere. This crate is the stage: its configuration, its trait and the choice between the
@@ -15,7 +15,7 @@
 #![deny(missing_docs)]
 
 use burn::tensor::Tensor;
-pub use dgstereo_kernels::ops::lookup::{CorrelationPyramid, OnTheFlyCorrelation, all_pairs};
+pub use dgstereo_kernels::{CorrelationPyramid, OnTheFlyCorrelation, all_pairs};
 use serde::{Deserialize, Serialize};
 
 /// The stage trait: correlation features around the current match positions.

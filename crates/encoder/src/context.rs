@@ -4,7 +4,7 @@ use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
-use dgstereo_kernels::{WinogradForward, conv2d_forward};
+use dgstereo_kernels::{Numerics, conv2d_forward};
 
 use crate::feature::trunk_strides;
 use crate::norm::{Norm, NormKind};
@@ -29,8 +29,8 @@ impl ContextHead {
         }
     }
 
-    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        conv2d_forward(&self.conv, self.block.forward(x))
+    fn forward(&self, x: Tensor<4>, numerics: Numerics) -> Tensor<4> {
+        conv2d_forward(&self.conv, self.block.forward(x, numerics), numerics)
     }
 }
 
@@ -87,12 +87,13 @@ impl ContextEncoder {
         }
     }
 
-    /// The trunk output at 1/f (`[N, trunk[2], H/f, W/f]`).
-    pub fn trunk(&self, image: Tensor<4>) -> Tensor<4> {
-        let x = self.norm1.conv_forward_relu(&self.conv1, image, true);
-        let x = forward_layer(&self.layer1, x);
-        let x = forward_layer(&self.layer2, x);
-        forward_layer(&self.layer3, x)
+    /// The trunk output at 1/f (`[N, trunk[2], H/f, W/f]`), its convolutions with the rounding
+    /// `numerics` allows in training.
+    pub fn trunk(&self, image: Tensor<4>, numerics: Numerics) -> Tensor<4> {
+        let x = self.norm1.conv_forward_relu(&self.conv1, image, true, numerics);
+        let x = forward_layer(&self.layer1, x, numerics);
+        let x = forward_layer(&self.layer2, x, numerics);
+        forward_layer(&self.layer3, x, numerics)
     }
 
     /// Whether its norms are fixed per-channel maps (frozen batch norms, or none) rather than
@@ -101,25 +102,29 @@ impl ContextEncoder {
         matches!(self.norm1, Norm::Batch(_) | Norm::None(_))
     }
 
-    /// The [`WinogradForward`] region its layers may run in, opened where its norms are fixed
-    /// ([`Self::norms_are_fixed`]): no norm of this encoder magnifies the change of rounding.
-    /// Held around the whole forward (`context`), or around the heads alone where the trunk also
-    /// feeds the shared backbone's feature head, whose instance norm would.
-    pub fn winograd_region(&self) -> Option<WinogradForward> {
-        self.norms_are_fixed().then(WinogradForward::new)
+    /// The numerics its layers allow: [`Numerics::Tolerant`] where its norms are fixed
+    /// ([`Self::norms_are_fixed`]: no norm of this encoder, and none after it, magnifies a change
+    /// of rounding), else [`Numerics::Sensitive`]. For the whole forward (`context`), or for the
+    /// heads alone where the trunk also feeds the shared backbone's feature head, whose instance
+    /// norm would magnify it.
+    pub fn numerics(&self) -> Numerics {
+        if self.norms_are_fixed() { Numerics::Tolerant } else { Numerics::Sensitive }
     }
 
-    /// The heads of `levels` levels from a trunk output.
-    pub fn heads(&self, trunk: Tensor<4>, levels: usize) -> ContextFeatures {
-        let pair = |heads: &[ContextHead], x: &Tensor<4>| [heads[0].forward(x.clone()), heads[1].forward(x.clone())];
+    /// The heads of `levels` levels from a trunk output, their convolutions with the rounding
+    /// `numerics` allows in training.
+    pub fn heads(&self, trunk: Tensor<4>, levels: usize, numerics: Numerics) -> ContextFeatures {
+        let pair = |heads: &[ContextHead], x: &Tensor<4>| {
+            [heads[0].forward(x.clone(), numerics), heads[1].forward(x.clone(), numerics)]
+        };
         let mut out = vec![pair(&self.outputs08, &trunk)];
         if levels >= 2 {
-            let y = forward_layer(&self.layer4, trunk);
+            let y = forward_layer(&self.layer4, trunk, numerics);
             out.push(pair(&self.outputs16, &y));
             if levels >= 3 {
-                let z = forward_layer(&self.layer5, y);
+                let z = forward_layer(&self.layer5, y, numerics);
                 let [hidden, context] = [&self.outputs32[0], &self.outputs32[1]];
-                out.push([conv2d_forward(hidden, z.clone()), conv2d_forward(context, z)]);
+                out.push([conv2d_forward(hidden, z.clone(), numerics), conv2d_forward(context, z, numerics)]);
             }
         }
         ContextFeatures { levels: out }
@@ -127,12 +132,12 @@ impl ContextEncoder {
 }
 
 impl ContextExtractor for ContextEncoder {
-    /// With fixed norms the training forward takes Winograd in every layer that suits it (a
-    /// [`WinogradForward`] region): no norm of this encoder, and none after it, magnifies the
-    /// change of rounding. With instance or group norms it keeps the plain products, as the
-    /// feature encoder does.
+    /// With fixed norms the training forward takes Winograd in every layer that suits it
+    /// ([`Self::numerics`]): no norm of this encoder, and none after it, magnifies the change of
+    /// rounding. With instance or group norms it keeps the plain products, as the feature
+    /// encoder does.
     fn context(&self, image: Tensor<4>, levels: usize) -> ContextFeatures {
-        let _winograd = self.winograd_region();
-        self.heads(self.trunk(image), levels)
+        let numerics = self.numerics();
+        self.heads(self.trunk(image, numerics), levels, numerics)
     }
 }

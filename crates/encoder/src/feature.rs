@@ -4,7 +4,7 @@ use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
-use dgstereo_kernels::conv2d_forward;
+use dgstereo_kernels::{Numerics, conv2d_forward};
 
 use crate::FeatureExtractor;
 use crate::norm::{Norm, NormKind};
@@ -56,11 +56,13 @@ impl FeatureEncoder {
 
 impl FeatureExtractor for FeatureEncoder {
     fn features(&self, images: Tensor<4>) -> Tensor<4> {
-        let x = self.norm1.conv_forward_relu(&self.conv1, images, true);
-        let x = forward_layer(&self.layer1, x);
-        let x = forward_layer(&self.layer2, x);
-        let x = forward_layer(&self.layer3, x);
-        conv2d_forward(&self.conv2, x)
+        // Instance norms follow its layers: they magnify a change of rounding.
+        let numerics = Numerics::Sensitive;
+        let x = self.norm1.conv_forward_relu(&self.conv1, images, true, numerics);
+        let x = forward_layer(&self.layer1, x, numerics);
+        let x = forward_layer(&self.layer2, x, numerics);
+        let x = forward_layer(&self.layer3, x, numerics);
+        conv2d_forward(&self.conv2, x, numerics)
     }
 }
 
@@ -86,6 +88,6 @@ impl SharedFeatureHead {
 
     /// Features from the trunk output `[N, 128, H, W]`.
     pub fn forward(&self, trunk: Tensor<4>) -> Tensor<4> {
-        conv2d_forward(&self.conv, self.block.forward(trunk))
+        conv2d_forward(&self.conv, self.block.forward(trunk, Numerics::Sensitive), Numerics::Sensitive)
     }
 }

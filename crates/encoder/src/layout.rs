@@ -3,6 +3,7 @@
 use burn::module::Module;
 use burn::tensor::Tensor;
 use dgstereo_core::Probe;
+use dgstereo_kernels::Numerics;
 
 use crate::context::ContextEncoder;
 use crate::feature::{FeatureEncoder, SharedFeatureHead};
@@ -105,15 +106,13 @@ impl Encoders {
             Self::Shared(SharedBackbone { cnet, conv2 }) => {
                 // The trunk sees both images; the context heads only the left.
                 let n = context_left.dims()[0];
+                // The heads feed only the GRUs, so they take the context encoder's numerics; the
+                // trunk feeds `conv2`'s instance norm and keeps the plain products.
                 let trunk = probe.time("context encoder", || {
-                    cnet.trunk(normalise(Tensor::cat(vec![context_left, features_right], 0)))
+                    cnet.trunk(normalise(Tensor::cat(vec![context_left, features_right], 0)), Numerics::Sensitive)
                 });
-                // The heads feed only the GRUs, so they take the context encoder's Winograd
-                // region; the trunk feeds `conv2`'s instance norm and keeps the plain products.
-                let context = probe.time("context encoder", || {
-                    let _winograd = cnet.winograd_region();
-                    cnet.heads(trunk.clone().narrow(0, 0, n), levels)
-                });
+                let context = probe
+                    .time("context encoder", || cnet.heads(trunk.clone().narrow(0, 0, n), levels, cnet.numerics()));
                 let feats = probe.time("feature encoder", || conv2.forward(trunk));
                 Encoded { fmap1: feats.clone().narrow(0, 0, n), fmap2: feats.narrow(0, n, n), context }
             }

@@ -5,7 +5,7 @@ use burn::nn::Identity;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::tensor::instance_norm;
-use dgstereo_kernels::{PlaneNorm, affine_planes_or, conv2d_affine_or, conv2d_forward, normalize_planes_or, rectify};
+use dgstereo_kernels::{Normalization, Numerics, affine_planes, conv2d_affine, conv2d_forward, normalize_planes};
 use serde::{Deserialize, Serialize};
 
 const EPS: f64 = 1e-5;
@@ -61,40 +61,43 @@ impl Norm {
         }
     }
 
-    /// `conv`, then this norm, then a ReLU when `relu_after`. For CPU inference a frozen batch
-    /// norm is folded into the convolution ([`conv2d_affine_or`]), so the host convolution writes
-    /// the normalised (and rectified) output at once; otherwise, and for the other norms, the
-    /// convolution and [`forward_relu`](Self::forward_relu).
+    /// `conv` (with the rounding `numerics` allows in training), then this norm, then a ReLU
+    /// when `relu_after`. A frozen batch norm goes to the kernels with the convolution
+    /// ([`conv2d_affine`]: CPU inference folds it in, so the host convolution writes the
+    /// normalised and rectified output at once); the other norms follow the convolution
+    /// ([`forward_relu`](Self::forward_relu)).
     ///
     /// # Shapes
     /// - `x`: `[N, C_in, H, W]`; output `[N, C_out, H_out, W_out]`
-    pub fn conv_forward_relu(&self, conv: &Conv2d, x: Tensor<4>, relu_after: bool) -> Tensor<4> {
-        let stock = |x| self.forward_relu(conv2d_forward(conv, x), relu_after);
+    pub fn conv_forward_relu(&self, conv: &Conv2d, x: Tensor<4>, relu_after: bool, numerics: Numerics) -> Tensor<4> {
         match self {
-            Self::Batch(bn) => conv2d_affine_or(conv, x, || bn.scale_shift(), relu_after, stock),
-            _ => stock(x),
+            Self::Batch(bn) => {
+                let (scale, shift) = bn.scale_shift();
+                conv2d_affine(conv, x, [scale, shift], relu_after, numerics)
+            }
+            _ => self.forward_relu(conv2d_forward(conv, x, numerics), relu_after),
         }
     }
 
-    /// [`forward`](Self::forward), then a ReLU when `relu_after`. For CPU inference the batch,
-    /// instance and no norm run as one parallel host pass with the ReLU
-    /// ([`normalize_planes_or`]); elsewhere, and for the group norm, the tensor operations.
+    /// [`forward`](Self::forward), then a ReLU when `relu_after`: the batch, instance and no
+    /// norm as the kernels' operations ([`affine_planes`], [`normalize_planes`]: one parallel host
+    /// pass with the ReLU for CPU inference), the group norm in tensor operations.
     ///
     /// # Shapes
     /// - `x`: `[N, C, H, W]`; output: the same
     pub fn forward_relu(&self, x: Tensor<4>, relu_after: bool) -> Tensor<4> {
-        let stock = |x| {
-            let y = self.forward(x);
-            if relu_after { rectify(y) } else { y }
-        };
         match self {
-            Self::Batch(n) => affine_planes_or(x, || n.scale_shift(), relu_after, stock),
-            Self::Instance(n) => {
-                normalize_planes_or(x, || PlaneNorm::Instance { epsilon: n.epsilon }, relu_after, stock)
+            Self::Batch(n) => {
+                let (scale, shift) = n.scale_shift();
+                affine_planes(x, scale, shift, relu_after)
             }
+            Self::Instance(n) => normalize_planes(x, Normalization::Instance { epsilon: n.epsilon }, relu_after),
             Self::None(_) if !relu_after => x,
-            Self::None(_) => normalize_planes_or(x, || PlaneNorm::Identity, true, stock),
-            Self::Group(_) => stock(x),
+            Self::None(_) => normalize_planes(x, Normalization::Identity, true),
+            Self::Group(n) => {
+                let y = n.forward(x);
+                if relu_after { dgstereo_kernels::rectify(y) } else { y }
+            }
         }
     }
 }

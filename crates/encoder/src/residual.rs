@@ -4,7 +4,7 @@ use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
-use dgstereo_kernels::add_relu;
+use dgstereo_kernels::{Numerics, add_relu};
 
 use crate::norm::{Norm, NormKind};
 
@@ -47,12 +47,12 @@ impl ResidualBlock {
         }
     }
 
-    /// Applies the block.
-    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = self.norm1.conv_forward_relu(&self.conv1, x.clone(), true);
-        let y = self.norm2.conv_forward_relu(&self.conv2, y, true);
+    /// Applies the block, its convolutions with the rounding `numerics` allows in training.
+    pub fn forward(&self, x: Tensor<4>, numerics: Numerics) -> Tensor<4> {
+        let y = self.norm1.conv_forward_relu(&self.conv1, x.clone(), true, numerics);
+        let y = self.norm2.conv_forward_relu(&self.conv2, y, true, numerics);
         let x = match (&self.downsample, &self.norm3) {
-            (Some(conv), Some(norm)) => norm.conv_forward_relu(conv, x, false),
+            (Some(conv), Some(norm)) => norm.conv_forward_relu(conv, x, false, numerics),
             _ => x,
         };
         add_relu(x, y)
@@ -73,10 +73,10 @@ pub fn make_layer(
     ]
 }
 
-/// Applies a sequence of blocks.
-pub fn forward_layer(blocks: &[ResidualBlock], mut x: Tensor<4>) -> Tensor<4> {
+/// Applies a sequence of blocks, with the rounding `numerics` allows in training.
+pub fn forward_layer(blocks: &[ResidualBlock], mut x: Tensor<4>, numerics: Numerics) -> Tensor<4> {
     for b in blocks {
-        x = b.forward(x);
+        x = b.forward(x, numerics);
     }
     x
 }

@@ -79,14 +79,21 @@ fn context_encoder_host_path_equals_tensor_operations() {
 }
 
 /// In training, a context encoder with frozen batch norms takes Winograd in its layers
-/// (`WinogradForward`, opened by `context`): its result differs from the plain products' in
+/// (`ContextEncoder::numerics`, taken by `context`): its result differs from the plain products' in
 /// rounding only. With instance norms it keeps the plain products, bit for bit.
 #[test]
 fn context_encoder_training_forward_takes_winograd_only_with_fixed_norms() {
     let ad = Device::flex().autodiff();
     let x = Tensor::<4>::random([1, 3, 96, 128], Distribution::Uniform(-1.0, 1.0), &ad);
     let outputs = |encoder: &ContextEncoder, guarded: bool| {
-        let features = if guarded { encoder.context(x.clone(), 3) } else { encoder.heads(encoder.trunk(x.clone()), 3) };
+        let features = if guarded {
+            encoder.context(x.clone(), 3)
+        } else {
+            {
+                let plain = dgstereo_kernels::Numerics::Sensitive;
+                encoder.heads(encoder.trunk(x.clone(), plain), 3, plain)
+            }
+        };
         features.levels.into_iter().flatten().map(dgstereo_core::tensor::to_vec).collect::<Vec<_>>()
     };
     let batch = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Batch, 2, &ad);
@@ -119,8 +126,8 @@ fn shared_backbone_takes_winograd_in_its_heads_only() {
 
     let Encoders::Shared(SharedBackbone { cnet, conv2 }) = &encoders else { unreachable!() };
     let normalise = |x: Tensor<4>| x.div_scalar(255.0).mul_scalar(2.0).sub_scalar(1.0);
-    let trunk = cnet.trunk(normalise(Tensor::cat(vec![left, right], 0)));
-    let plain = cnet.heads(trunk.clone().narrow(0, 0, 1), 3);
+    let trunk = cnet.trunk(normalise(Tensor::cat(vec![left, right], 0)), dgstereo_kernels::Numerics::Sensitive);
+    let plain = cnet.heads(trunk.clone().narrow(0, 0, 1), 3, dgstereo_kernels::Numerics::Sensitive);
     let feats = conv2.forward(trunk);
     let to_vec = dgstereo_core::tensor::to_vec;
     assert_eq!(to_vec(encoded.fmap1), to_vec(feats.clone().narrow(0, 0, 1)), "the trunk or feature head changed path");

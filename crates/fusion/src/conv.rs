@@ -4,7 +4,7 @@ use burn::module::Module;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::tensor::{Device, Tensor};
-use dgstereo_kernels::conv2d_forward;
+use dgstereo_kernels::{Numerics, conv2d_forward};
 
 use crate::ImageFusion;
 use crate::deformable::KERNEL;
@@ -49,7 +49,7 @@ impl ConvFusion {
     /// - output: `[N, 3, H, W]`
     pub fn forward(&self, image: Tensor<4>, depth: Tensor<4>) -> Tensor<4> {
         let (image_features, depth_features) = self.projection.forward(image, depth);
-        conv2d_forward(&self.mixer, Tensor::cat(vec![image_features, depth_features], 1))
+        conv2d_forward(&self.mixer, Tensor::cat(vec![image_features, depth_features], 1), Numerics::Sensitive)
     }
 }
 

@@ -5,8 +5,8 @@ use burn::module::Module;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig, DeformConv2d, DeformConv2dConfig};
 use burn::tensor::{Device, Tensor};
-use dgstereo_kernels::conv2d_forward;
 use dgstereo_kernels::deform_conv2d_forward;
+use dgstereo_kernels::{Numerics, conv2d_forward};
 
 use crate::ImageFusion;
 use crate::init::{RGB, near_identity_deform_conv, zeroed};
@@ -60,7 +60,7 @@ impl DeformableFusion {
     /// - `depth_features`: `[N, F, H, W]`
     /// - output: `[N, 18, H, W]`
     pub fn offsets(&self, depth_features: Tensor<4>) -> Tensor<4> {
-        conv2d_forward(&self.offset, depth_features)
+        conv2d_forward(&self.offset, depth_features, Numerics::Sensitive)
     }
 
     /// The enhanced image.

@@ -31,5 +31,5 @@ pub fn normalize_depth(depth: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
     let max = flat.max_dim(1).reshape([n, 1, 1, 1]);
     let range = (max - min.clone()).clamp_min(DEPTH_RANGE_EPS);
     let unit = (depth - min) / range;
-    dgstereo_kernels::ops::resample::resize_bilinear(unit.mul_scalar(IMAGE_RANGE), size, false)
+    dgstereo_kernels::resize_bilinear(unit.mul_scalar(IMAGE_RANGE), size, false)
 }

@@ -3,7 +3,7 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::tensor::{Device, Tensor};
-use dgstereo_kernels::conv2d_forward;
+use dgstereo_kernels::{Numerics, conv2d_forward};
 
 use crate::depth::normalize_depth;
 use crate::init::{RGB, identity_padded_projection};
@@ -47,6 +47,9 @@ impl FeatureProjection {
     pub fn forward(&self, image: Tensor<4>, depth: Tensor<4>) -> (Tensor<4>, Tensor<4>) {
         let [_, _, h, w] = image.dims();
         let depth = normalize_depth(depth, [h, w]);
-        (conv2d_forward(&self.image, image), conv2d_forward(&self.depth, depth))
+        (
+            conv2d_forward(&self.image, image, Numerics::Sensitive),
+            conv2d_forward(&self.depth, depth, Numerics::Sensitive),
+        )
     }
 }

@@ -1,25 +1,38 @@
-//! The one place that decides where an operation is computed.
+//! The one place that decides how an operation is computed.
 //!
-//! Every operation of the face ([`crate::ops`]) asks [`path`] and runs the implementation it
-//! names; no other code looks at the device to choose a kernel. The choice depends on the
-//! device (the Flex CPU backend or another), its float dtype, whether it records gradients, and
-//! the process's [`Settings`](crate::settings::Settings). Tests and comparisons can pin a path
-//! for a closure on the calling thread ([`with_path`]), which is how one test body runs on every
-//! path ([`crate::test_paths!`]).
+//! Every operation of the face asks `plan` once and carries out the `Plan` it gets; no
+//! other code looks at the device, the settings or a shape threshold to choose a kernel. The
+//! choice depends on the device (the Flex CPU backend or another), its float dtype, whether it
+//! records gradients, the process's [`Settings`], the operation's
+//! shape and, for a convolution, the [`Numerics`] its caller asks for. [`path`] is the coarse
+//! half of it (host, GPU formulation or burn's operation, from the device and the settings);
+//! each operation's `Call` gives the fine half (which algorithm on that path, or none where
+//! the path does not take the shape). Tests and comparisons can pin a path for a closure on the
+//! calling thread ([`with_path`]), which is how one test body runs on every path
+//! ([`crate::test_paths!`]).
 
 use std::cell::Cell;
 
 use burn::tensor::{Device, FloatDType};
 use dgstereo_core::device::float_dtype;
 
-use crate::settings::{GpuRoute, settings};
+use crate::settings::{GpuRoute, Settings, settings};
+
+mod calls;
+mod conv;
+
+pub(crate) use calls::{ADD_RELU, DeformCall, NodeCall, NormCall, NormKind, PlainCall, RECTIFY};
+pub(crate) use conv::{ConvCall, GruStepCall, host_algorithm};
+#[cfg(test)]
+pub(crate) use conv::{TRAINING_WINOGRAD_MIN_CHANNELS, training_algorithms, winograd_tile};
 
 /// Where an operation is computed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Path {
-    /// Hand-written host code (`crate::host`): inference on the Flex CPU backend in f32.
+    /// Hand-written host code: inference, and training of the operations whose backward is
+    /// ours, on the Flex CPU backend in f32.
     Host,
-    /// burn's operations arranged for fewer kernel launches (`crate::gpu`): GPU inference.
+    /// burn's operations arranged for fewer kernel launches: GPU inference.
     Gpu,
     /// burn's own operations: the reference, the autodiff path, and everything else.
     Stock,
@@ -58,12 +71,22 @@ pub enum Op {
 }
 
 impl Op {
-    /// Whether a hand-written host kernel exists.
+    /// Whether a hand-written host kernel exists for inference (each operation's [`Call`] says
+    /// which shapes it takes).
     fn has_host_kernel(self) -> bool {
-        true
+        match self {
+            Self::Conv
+            | Self::Norm
+            | Self::Resize
+            | Self::Pool
+            | Self::Lookup
+            | Self::Deform
+            | Self::GruStep
+            | Self::Upsample => true,
+        }
     }
 
-    /// Whether the host kernel has a backward of its own ([`crate::autodiff`]), so that training
+    /// Whether the host kernel has a backward of its own (`crate::autodiff`), so that training
     /// takes it too.
     fn has_host_backward(self) -> bool {
         matches!(self, Self::Conv | Self::Norm | Self::GruStep | Self::Deform | Self::Upsample)
@@ -81,19 +104,83 @@ impl Op {
     }
 }
 
+/// How much a convolution's rounding may change in the training forward: an explicit argument
+/// of every convolution of the face, given by the stage that knows what follows the layer.
+///
+/// Winograd's sums differ from plain products in rounding, and an instance or group norm after
+/// a layer divides by that layer's own statistics, which magnifies the difference (the official
+/// training step's check fails on the feature encoder's gradients when its layers take
+/// Winograd). A convolution cannot see what follows it, so its caller says. Inference takes
+/// Winograd wherever it suits regardless.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Numerics {
+    /// A norm that divides by the activations' own statistics may follow, directly or later:
+    /// the training forward keeps plain products below 256 input channels.
+    #[default]
+    Sensitive,
+    /// Nothing after the layer magnifies a change of rounding (the update loop; an encoder with
+    /// frozen batch norms or none): the training forward takes Winograd wherever it suits.
+    Tolerant,
+}
+
+/// What the dispatch decided for one call: the path and, on it, the algorithm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Plan<I, T = (), G = ()> {
+    /// CPU inference: the host kernel, by algorithm `I`.
+    HostInference(I),
+    /// CPU training: the node with our backward, by algorithm `T`.
+    HostTraining(T),
+    /// GPU inference: the launch-saving formulation `G`.
+    Gpu(G),
+    /// burn's operations (or, for a composite operation, the composition of face operations).
+    Stock,
+}
+
+/// One call of an operation as the dispatch sees it: which operation, and which algorithm each
+/// path would take for its shape (`None` where that path does not take it).
+pub(crate) trait Call {
+    /// The host kernel's algorithm in inference.
+    type Inference;
+    /// The algorithm of the node with our backward in training.
+    type Training;
+    /// The GPU formulation.
+    type Gpu;
+    /// The operation.
+    fn op(&self) -> Op;
+    /// The host kernel's algorithm for CPU inference, or `None` where it does not take the call.
+    fn inference(&self, settings: &Settings) -> Option<Self::Inference>;
+    /// The training node's algorithm, or `None` where burn's autodiff runs the call.
+    fn training(&self, settings: &Settings) -> Option<Self::Training>;
+    /// The GPU formulation, or `None` where burn's operation runs the call.
+    fn gpu(&self, settings: &Settings, device: &Device) -> Option<Self::Gpu>;
+}
+
+/// The whole choice for `call` on `device`: [`path`] from the device and the settings, then, on
+/// that path, the algorithm the call's shape takes, or [`Plan::Stock`] where none does.
+pub(crate) fn plan<C: Call>(device: &Device, call: &C) -> Plan<C::Inference, C::Training, C::Gpu> {
+    let settings = settings();
+    let plan = match path(device, call.op()) {
+        Path::Host if device.is_autodiff() => call.training(settings).map(Plan::HostTraining),
+        Path::Host => call.inference(settings).map(Plan::HostInference),
+        Path::Gpu => call.gpu(settings, device).map(Plan::Gpu),
+        Path::Stock => None,
+    };
+    plan.unwrap_or(Plan::Stock)
+}
+
 thread_local! {
     static PINNED: Cell<Option<Path>> = const { Cell::new(None) };
 }
 
-/// Where `op` runs on `device`.
+/// Where `op` runs on `device`: the coarse half of `plan`.
 ///
 /// With gradients recorded, burn's operations (their autodiff is the reference backward), except
-/// on the Flex CPU device in f32 for an operation whose backward is ours ([`crate::autodiff`])
+/// on the Flex CPU device in f32 for an operation whose backward is ours (`crate::autodiff`)
 /// unless the settings say `stock-training`. On the Flex CPU device in f32 without gradients, the
-/// host kernel unless the settings say `stock`. Elsewhere without
-/// gradients (the GPU, or the CPU with `gpu-routes`), the GPU formulation unless its route is
-/// switched off. Else burn's operation. A path pinned by [`with_path`] replaces the settings'
-/// choice where the device allows it, and gives [`Path::Stock`] where it does not.
+/// host kernel unless the settings say `stock`. Elsewhere without gradients (the GPU, or the CPU
+/// with `gpu-routes`), the GPU formulation unless its route is switched off. Else burn's
+/// operation. A path pinned by [`with_path`] replaces the settings' choice where the device
+/// allows it, and gives [`Path::Stock`] where it does not.
 pub fn path(device: &Device, op: Op) -> Path {
     let settings = settings();
     let autodiff = device.is_autodiff();
@@ -149,5 +236,27 @@ mod tests {
             assert_eq!(path(&cpu, Op::Conv), Path::Gpu, "the outer pin is restored");
         });
         assert_eq!(path(&cpu, Op::Conv), Path::Host);
+    }
+
+    /// The simple operations' plans: the host pass for inference, our node in training where the
+    /// operation has one, burn's operations elsewhere.
+    #[test]
+    fn simple_operations_plan_by_device() {
+        let cpu = Device::flex();
+        let ad = cpu.clone().autodiff();
+        assert_eq!(plan(&cpu, &PlainCall(Op::Resize)), Plan::HostInference(()));
+        assert_eq!(plan(&ad, &PlainCall(Op::Resize)), Plan::Stock);
+        assert_eq!(plan(&ad, &PlainCall(Op::Upsample)), Plan::HostTraining(()));
+        assert_eq!(plan(&cpu, &RECTIFY), Plan::Stock, "inference folds its ReLUs into the kernels");
+        assert_eq!(plan(&ad, &RECTIFY), Plan::HostTraining(()));
+        let identity = NormCall { kind: NormKind::Identity, relu: false };
+        assert_eq!(plan(&ad, &identity), Plan::Stock, "nothing to compute");
+        assert_eq!(plan(&cpu, &identity), Plan::HostInference(()));
+        let affine = NormCall { kind: NormKind::AffineTensors, relu: true };
+        assert_eq!(plan(&ad, &affine), Plan::HostTraining(()), "the frozen batch norm's node");
+        with_path(Path::Gpu, || {
+            assert_eq!(plan(&cpu, &PlainCall(Op::Resize)), Plan::Gpu(()));
+            assert_eq!(plan(&cpu, &PlainCall(Op::Pool)), Plan::Stock);
+        });
     }
 }

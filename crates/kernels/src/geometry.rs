@@ -1,7 +1,20 @@
-//! Shapes shared by the host kernels: a convolution's output size, the cut of an output into
+//! Shapes shared by the dispatch and the kernels: a convolution's options and output size, the cut of an output into
 //! parallel band jobs, and the element-wise epilogue a kernel applies as it writes.
 
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::Conv2d;
 use burn::tensor::ops::ConvOptions;
+
+/// The options of `conv` as the host kernel takes them; `None` for what it does not do (groups,
+/// `Same` padding, which depends on the input size).
+pub fn conv_options(conv: &Conv2d) -> Option<ConvOptions<2>> {
+    let padding = match conv.padding {
+        PaddingConfig2d::Explicit(top, left, bottom, right) => [(top, bottom), (left, right)],
+        PaddingConfig2d::Valid => [(0, 0), (0, 0)],
+        PaddingConfig2d::Same => return None,
+    };
+    (conv.groups == 1).then(|| ConvOptions::new_with_padding(conv.stride, padding, conv.dilation, 1))
+}
 
 /// What the host convolution does to each output value after adding the bias.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

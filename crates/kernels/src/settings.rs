@@ -9,7 +9,7 @@
 //! - `host` (the default): hand-written kernels for CPU inference, GPU formulations on the GPU;
 //! - `stock`: burn's operations everywhere on the CPU (what the kernels gain is measured so);
 //! - `stock-training`: burn's own backward passes in training (the operations with a host
-//!   backward, [`crate::autodiff`], record burn's operations instead);
+//!   backward, `crate::autodiff`, record burn's operations instead);
 //! - `gpu-routes`: the GPU formulations on the CPU too, where no host kernel runs (with `stock`,
 //!   the CPU computes what GPU inference computes);
 //! - `no-winograd`, `no-winograd-blocks`: the host convolution without Winograd's algorithm, or
@@ -121,11 +121,15 @@ impl Settings {
     }
 
     /// The settings `DGSTEREO_KERNELS` names (the defaults where it is unset or empty); an error
-    /// names the variable and the word it does not know.
+    /// names the variable, its whole value and the word it does not know (a value that is not
+    /// Unicode is an error too).
     pub fn from_env() -> Result<Self> {
         match std::env::var(ENV_VAR) {
-            Ok(text) => text.parse().map_err(|e: Error| Error::Config(format!("{ENV_VAR}: {e}"))),
-            Err(_) => Ok(Self::default()),
+            Ok(text) => text.parse().map_err(|e: Error| Error::config(ENV_VAR, format!("'{text}': {}", reason(&e)))),
+            Err(std::env::VarError::NotPresent) => Ok(Self::default()),
+            Err(std::env::VarError::NotUnicode(text)) => {
+                Err(Error::config(ENV_VAR, format!("{text:?} is not Unicode text")))
+            }
         }
     }
 }
@@ -190,11 +194,38 @@ pub fn configure(settings: Settings) -> Result<()> {
     }
 }
 
-/// The process's settings: those [`configure`]d, else `DGSTEREO_KERNELS`'s (read once; the
-/// defaults where it is unset or does not parse: a binary that wants the error calls
-/// `configure(Settings::from_env()?)` at start).
+/// Why `DGSTEREO_KERNELS` did not parse, where [`settings`] read it and it did not.
+static ENV_PROBLEM: OnceLock<String> = OnceLock::new();
+
+/// The process's settings: those [`configure`]d, else `DGSTEREO_KERNELS`'s, read once. An
+/// operation cannot return an error, so where the variable does not parse the operations run with
+/// the defaults and [`check`] returns the error: every entry point (the binary, a library's
+/// constructor) calls [`check`] or `configure(Settings::from_env()?)` before its first operation.
 pub fn settings() -> &'static Settings {
-    SETTINGS.get_or_init(|| Settings::from_env().unwrap_or_default())
+    SETTINGS.get_or_init(|| {
+        Settings::from_env().unwrap_or_else(|e| {
+            let _ = ENV_PROBLEM.set(reason(&e));
+            Settings::default()
+        })
+    })
+}
+
+/// The settings in use, or the error naming `DGSTEREO_KERNELS` and its value where they were
+/// read from the variable and it does not parse.
+pub fn check() -> Result<&'static Settings> {
+    let in_use = settings();
+    match ENV_PROBLEM.get() {
+        Some(problem) => Err(Error::Config(problem.clone())),
+        None => Ok(in_use),
+    }
+}
+
+/// The reason of a configuration error, without a key of its own.
+fn reason(e: &Error) -> String {
+    match e {
+        Error::Config(text) => text.clone(),
+        other => other.to_string(),
+    }
 }
 
 #[cfg(test)]
@@ -215,6 +246,17 @@ mod tests {
         assert!(e.contains("'fast'") && e.contains("gpu-routes"), "{e}");
         let e = "stock-route=warp".parse::<Settings>().unwrap_err().to_string();
         assert!(e.contains("'warp'") && e.contains("shared-columns"), "{e}");
+    }
+
+    /// A malformed variable is an error naming the variable and its value.
+    #[test]
+    fn a_malformed_variable_is_named_with_its_value() {
+        let e = Error::config(
+            ENV_VAR,
+            format!("'{}': {}", "host,fast", reason(&"host,fast".parse::<Settings>().unwrap_err())),
+        );
+        let text = e.to_string();
+        assert!(text.contains(ENV_VAR) && text.contains("'host,fast'") && text.contains("'fast'"), "{text}");
     }
 
     #[test]

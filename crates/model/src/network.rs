@@ -16,7 +16,7 @@ use dgstereo_core::tensor::cast_float;
 use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementation, CostVolume};
 use dgstereo_encoder::{ContextFeatures, Encoded, EncoderInputs, Encoders};
 use dgstereo_fusion::{Fusion, FusionTarget, ImageFusion};
-use dgstereo_kernels::{UpdateLoop, conv2d_forward};
+use dgstereo_kernels::{Numerics, UpdateLoop, conv2d_forward};
 use dgstereo_updater::{GateContext, GuidanceKind, MultiLevelUpdateBlock, Updater, convex_upsample};
 
 use crate::config::ModelConfig;
@@ -233,7 +233,10 @@ impl RaftStereo {
         let mut gates: Vec<GateContext> = Vec::with_capacity(levels);
         for (i, [h, c]) in context.levels.into_iter().enumerate() {
             let (h, g) = probe.time("context encoder", || {
-                (tanh(h), GateContext::from_zqr(conv2d_forward(&self.context_zqr_convs[i], relu(c))))
+                (
+                    tanh(h),
+                    GateContext::from_zqr(conv2d_forward(&self.context_zqr_convs[i], relu(c), Numerics::Sensitive)),
+                )
             });
             probe.record(format_args!("context.hidden.{i}"), &h);
             probe.record(format_args!("context.z.{i}"), &g.z);

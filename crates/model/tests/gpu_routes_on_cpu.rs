@@ -1,5 +1,5 @@
 //! GPU inference's composition, computed on the CPU: the forward pass with the GPU routes
-//! (`dgstereo_kernels::gpu`: the gathered im2col and its strided and few-output forms,
+//! (the kernels' GPU formulations: the gathered im2col and its strided and few-output forms,
 //! burn's `interpolate`, the gathered lookup) equals the pass with burn's stock operations, and
 //! so does the pass with the host kernels.
 //!

@@ -5,12 +5,17 @@ use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::Probe;
 use dgstereo_core::layers::{ConvInit, conv2d};
+use dgstereo_kernels::{Numerics, conv2d_forward, conv2d_forward_then, conv2d_relu_forward};
 use dgstereo_kernels::{average_pool_half, resize_bilinear};
-use dgstereo_kernels::{conv2d_forward, conv2d_forward_then, conv2d_relu_forward};
 
 use crate::gru::{ConvGru, GateContext};
 use crate::motion::MotionEncoder;
 use crate::{UpdateOutput, Updater, UpdaterConfig};
+
+/// The numerics of the update loop's convolutions: no norm after them divides by the
+/// activations' statistics, so a change of rounding is not magnified and the training forward
+/// may take Winograd wherever it suits.
+pub(crate) const UPDATE_LOOP: Numerics = Numerics::Tolerant;
 
 /// Two convolutions predicting the disparity update (`FlowHead`).
 #[derive(Module, Debug)]
@@ -102,7 +107,8 @@ impl MultiLevelUpdateBlock {
     /// # Shapes
     /// - `hidden_fine`: `[N, hidden, H, W]`; output `[N, 1, H, W]`
     pub fn delta_x(&self, hidden_fine: Tensor<4>) -> Tensor<4> {
-        let delta = conv2d_forward(&self.flow_head.conv2, conv2d_relu_forward(&self.flow_head.conv1, hidden_fine));
+        let hidden = conv2d_relu_forward(&self.flow_head.conv1, hidden_fine, UPDATE_LOOP);
+        let delta = conv2d_forward(&self.flow_head.conv2, hidden, UPDATE_LOOP);
         delta.narrow(1, 0, 1)
     }
 
@@ -158,8 +164,7 @@ impl Updater for MultiLevelUpdateBlock {
 
     /// The mask head on the finest state, its logits scaled by 0.25 as in the reference.
     fn upsample_mask(&self, hidden: &[Tensor<4>]) -> Tensor<4> {
-        conv2d_forward_then(&self.mask.conv2, conv2d_relu_forward(&self.mask.conv1, hidden[0].clone()), |m| {
-            m.mul_scalar(0.25)
-        })
+        let features = conv2d_relu_forward(&self.mask.conv1, hidden[0].clone(), UPDATE_LOOP);
+        conv2d_forward_then(&self.mask.conv2, features, UPDATE_LOOP, |m| m.mul_scalar(0.25))
     }
 }

@@ -1,20 +1,18 @@
 //! The convolutional GRU cell.
 //!
-//! The update and reset gates read the same input `[h, x]`, so one step runs them as a single
-//! convolution with `2·hidden` output channels: the weights of `convz` and `convr` are
-//! concatenated at each call (a few MB, next to a multi-GMAC convolution), which halves the
-//! im2col work and gives the matrix product a wider output. The modules stay separate so the
-//! official checkpoint keys `convz`, `convr`, `convq` keep loading and training updates each.
+//! The step is one operation of the kernels crate (`conv_gru_step`), which runs the update and
+//! reset gates as a single convolution of the concatenated weights and arranges the rest for the
+//! path it takes. The modules stay separate so the official checkpoint keys `convz`, `convr`,
+//! `convq` keep loading and training updates each.
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
-use dgstereo_kernels::gpu::matmul_conv::{SharedColumns, shared_columns_apply};
-use dgstereo_kernels::{
-    conv_gru_step_or, conv_options, conv2d_forward_then, conv2d_op_then, flat_pixels, gru_blend, gru_gates,
-};
+use dgstereo_kernels::{conv_gru_step, conv2d_op};
+
+use crate::block::UPDATE_LOOP;
 
 /// A ConvGRU whose gates also receive precomputed context terms.
 ///
@@ -67,58 +65,11 @@ impl ConvGru {
         Self { convz: c(0), convr: c(1), convq: c(2) }
     }
 
-    /// One step: the kernels' fused host step for CPU inference, [`Self::tensor_step`]
-    /// elsewhere.
+    /// One step, as the kernels crate's `conv_gru_step` runs it on this device (the numerics of
+    /// the update loop: nothing after it magnifies a change of rounding).
     pub fn forward(&self, h: Tensor<4>, ctx: &GateContext, inputs: Vec<Tensor<4>>) -> Tensor<4> {
         let convs = [&self.convz, &self.convr, &self.convq];
-        conv_gru_step_or(convs, h, [&ctx.zr, &ctx.q], &inputs, |h| self.tensor_step(h, ctx, &inputs))
-    }
-
-    /// One step of burn's tensor operations (the reference, and the training path).
-    fn tensor_step(&self, h: Tensor<4>, ctx: &GateContext, inputs: &[Tensor<4>]) -> Tensor<4> {
-        let hidden = h.dims()[1];
-        // `[h, x]` and `[r·h, x]` each as one concatenation of all parts (no `x` of its own: one
-        // copy fewer a step).
-        let with_inputs =
-            |first: Tensor<4>| Tensor::cat([first].into_iter().chain(inputs.iter().cloned()).collect(), 1);
-        // The gates' context, the activations and the blend are each convolution's epilogue, on
-        // `[N, C, H·W]` with their operands flattened before it (GPU inference runs them in the
-        // product's kernel: `conv2d_op_then`). On the GPU the inputs' columns are gathered once
-        // for both convolutions (`SharedColumns`).
-        let shared = self.shared_columns(inputs);
-        let zr_context = flat_pixels(ctx.zr.clone());
-        let gates = |zr: Tensor<3>| gru_gates(zr, zr_context);
-        let zr = match &shared {
-            Some(shared) => {
-                let (weight, bias) = self.gate_weights();
-                shared.conv_then(h.clone(), weight, bias, gates)
-            }
-            None => self.gates_then(with_inputs(h.clone()), gates),
-        };
-        let z = flat_pixels(zr.clone().narrow(1, 0, hidden));
-        let r = zr.narrow(1, hidden, hidden);
-        let (h_flat, q_context) = (flat_pixels(h.clone()), flat_pixels(ctx.q.clone()));
-        let blend = |q: Tensor<3>| gru_blend(q, q_context, z, h_flat);
-        match shared {
-            Some(shared) => {
-                let bias = self.convq.bias.as_ref().map(|b| b.val());
-                shared.conv_then(r * h, self.convq.weight.val(), bias, blend)
-            }
-            None => conv2d_forward_then(&self.convq, with_inputs(r * h), blend),
-        }
-    }
-
-    /// The inputs' columns for both convolutions of a step, where GPU inference shares them
-    /// (`shared_columns_apply`) and the candidate's convolution has the gates' geometry.
-    fn shared_columns(&self, inputs: &[Tensor<4>]) -> Option<SharedColumns> {
-        let options = self.gate_options();
-        let [_, _, kh, kw] = self.convz.weight.dims();
-        let device = inputs.first()?.device();
-        if !shared_columns_apply(&device, &options, [kh, kw]) || conv_options(&self.convq) != Some(options.clone()) {
-            return None;
-        }
-        let x = if inputs.len() == 1 { inputs[0].clone() } else { Tensor::cat(inputs.to_vec(), 1) };
-        Some(SharedColumns::gather(x, [kh, kw], &options))
+        conv_gru_step(convs, h, [&ctx.zr, &ctx.q], &inputs, UPDATE_LOOP)
     }
 
     /// The gates' convolution options: `convz`'s, padded to keep the size.
@@ -132,14 +83,8 @@ impl ConvGru {
     /// # Shapes
     /// - `hx`: `[N, hidden + input_dim, H, W]`; output `[N, 2·hidden, H, W]`
     pub fn gates(&self, hx: Tensor<4>) -> Tensor<4> {
-        self.gates_then(hx, |zr| zr)
-    }
-
-    /// [`Self::gates`] followed by `then` on its output seen as `[N, 2·hidden, H·W]`
-    /// (`conv2d_op_then`).
-    fn gates_then(&self, hx: Tensor<4>, then: impl FnOnce(Tensor<3>) -> Tensor<3>) -> Tensor<4> {
         let (weight, bias) = self.gate_weights();
-        conv2d_op_then(hx, weight, bias, self.gate_options(), then)
+        conv2d_op(hx, weight, bias, self.gate_options(), UPDATE_LOOP)
     }
 
     /// The weights and biases of `convz` and `convr` stacked along the output channels: the one
@@ -147,7 +92,7 @@ impl ConvGru {
     ///
     /// # Shapes
     /// - weight `[2·hidden, hidden + input_dim, kh, kw]`; bias `[2·hidden]`
-    pub(crate) fn gate_weights(&self) -> (Tensor<4>, Option<Tensor<1>>) {
+    fn gate_weights(&self) -> (Tensor<4>, Option<Tensor<1>>) {
         let weight = Tensor::cat(vec![self.convz.weight.val(), self.convr.weight.val()], 0);
         let bias = match (&self.convz.bias, &self.convr.bias) {
             (Some(bz), Some(br)) => Some(Tensor::cat(vec![bz.val(), br.val()], 0)),

@@ -5,7 +5,7 @@
 //! disparity update and the convex-upsampling weights. [`MultiLevelUpdateBlock`] is RAFT-Stereo's
 //! three-level ConvGRU; its motion encoder gains a guidance branch when [`GuidanceKind`] is not
 //! `none`, so the guidance reaches the GRU input but never the disparity head directly. Bilinear
-//! resizes between levels are matrix products (see `dgstereo_kernels::ops::resample`), which train on
+//! resizes between levels are matrix products (see `dgstereo_kernels::resize_bilinear`), which train on
 //! every backend.
 #![deny(missing_docs)]
 

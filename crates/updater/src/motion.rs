@@ -7,6 +7,8 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_kernels::conv2d_relu_forward;
 
+use crate::block::UPDATE_LOOP;
+
 /// Correlation branch (1x1, 3x3), flow branch (7x7, 3x3) and an optional guidance branch
 /// (7x7, 3x3) joined by a 3x3 merge convolution; the 2-channel flow is appended to the output.
 ///
@@ -60,13 +62,17 @@ impl MotionEncoder {
     /// - `flow`: `[N, 2, H, W]`; `corr`: `[N, corr_channels, H, W]`; output `[N, 126, H, W]` and
     ///   `[N, 2, H, W]`
     pub fn forward_parts(&self, flow: Tensor<4>, corr: Tensor<4>, guidance: Option<&Tensor<4>>) -> [Tensor<4>; 2] {
-        let cor = conv2d_relu_forward(&self.convc2, conv2d_relu_forward(&self.convc1, corr));
-        let flo = conv2d_relu_forward(&self.convf2, conv2d_relu_forward(&self.convf1, flow.clone()));
+        let cor = conv2d_relu_forward(&self.convc2, conv2d_relu_forward(&self.convc1, corr, UPDATE_LOOP), UPDATE_LOOP);
+        let flo = conv2d_relu_forward(
+            &self.convf2,
+            conv2d_relu_forward(&self.convf1, flow.clone(), UPDATE_LOOP),
+            UPDATE_LOOP,
+        );
         let mut parts = vec![cor, flo];
         if let (Some(g1), Some(g2), Some(g)) = (&self.convg1, &self.convg2, guidance) {
-            parts.push(conv2d_relu_forward(g2, conv2d_relu_forward(g1, g.clone())));
+            parts.push(conv2d_relu_forward(g2, conv2d_relu_forward(g1, g.clone(), UPDATE_LOOP), UPDATE_LOOP));
         }
-        [conv2d_relu_forward(&self.conv, Tensor::cat(parts, 1)), flow]
+        [conv2d_relu_forward(&self.conv, Tensor::cat(parts, 1), UPDATE_LOOP), flow]
     }
 }
 

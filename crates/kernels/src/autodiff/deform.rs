@@ -1,6 +1,6 @@
 //! DGIA's deformable convolution with our backward: the forward runs the host kernel on the inner
 //! Flex tensors and registers a node whose backward computes the gradients of the input, the
-//! offsets, the weight and the bias on host buffers ([`crate::host::deform_backward`]).
+//! offsets, the weight and the bias on host buffers (`crate::host::deform_backward`).
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;

@@ -1,6 +1,6 @@
 //! The ConvGRU step's gates `σ(a + b)` and blend `(1 − z)·h + z·tanh(q + c)` with our backward:
 //! one node each in burn's autodiff, forward and backward in parallel host passes
-//! ([`crate::host::gru_backward`]). The step's convolutions are [`super::conv`]'s.
+//! (`crate::host::gru_backward`). The step's convolutions are [`super::conv`]'s.
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;

@@ -14,15 +14,11 @@
 use burn::backend::flex::FlexTensor;
 use burn::tensor::TensorData;
 
-pub mod conv;
-pub mod deform;
-pub mod gru;
-pub mod norm;
-pub mod upsample;
-pub mod winograd_region;
-
-pub use conv::{HostConvBackend, MIN_CHANNELS, conv2d};
-pub use winograd_region::WinogradForward;
+pub(crate) mod conv;
+pub(crate) mod deform;
+pub(crate) mod gru;
+pub(crate) mod norm;
+pub(crate) mod upsample;
 
 /// A float32 Flex tensor's values, row-major (a copy only where it is not contiguous).
 fn values(t: &FlexTensor) -> std::borrow::Cow<'_, [f32]> {

@@ -1,7 +1,7 @@
 //! The instance norm (with its ReLU), the frozen batch norm's per-channel affine (with its ReLU),
 //! the ReLU and the residual `relu(a + b)` with our backward: one node each in burn's autodiff
 //! where burn records a chain of element-wise operations, forward and backward in parallel host
-//! passes ([`crate::host::norm_backward`]).
+//! passes (`crate::host::norm_backward`).
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;

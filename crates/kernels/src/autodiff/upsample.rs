@@ -1,6 +1,6 @@
 //! Convex upsampling with our backward: the forward runs the host pass on the inner Flex
 //! tensors, keeping its softmax weights, and registers a node whose backward computes the
-//! gradients of the flow and the mask from them ([`crate::host::upsample_backward`]).
+//! gradients of the flow and the mask from them (`crate::host::upsample_backward`).
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;

@@ -2,7 +2,7 @@
 
 use burn::tensor::{Tensor, TensorData};
 
-use crate::ops::lookup::taps::tap_offsets;
+use crate::taps::tap_offsets;
 
 /// The looked-up levels of a pyramid side by side, and the per-level constants that let one
 /// lookup sample all of them with two gathers: the lower and the upper integer tap of every

@@ -11,7 +11,7 @@
 //! windows stacked along the channels (`[N, C·kh·kw, H_out·W_out]`), and one product with the
 //! weight as `[O, C·kh·kw]`. It costs the column matrix's memory (`kh·kw` times the input's), which
 //! a GPU has, and it differentiates on every backend, but autodiff would keep every column matrix
-//! for the backward pass, so training keeps burn's convolution ([`matmul_conv_applies`]). The CPU
+//! for the backward pass, so training keeps burn's convolution (the dispatch's `suits_product` names the shapes it takes). The CPU
 //! never takes it: its host kernels are faster there. burn's convolution stays the reference, and
 //! the tests check both agree, gradients included.
 //!
@@ -33,57 +33,17 @@ mod columns;
 mod few_outputs;
 mod shared_columns;
 
-pub use shared_columns::SharedColumns;
+pub(crate) use shared_columns::SharedColumns;
 
+use burn::tensor::Tensor;
 use burn::tensor::ops::{ConvOptions, PadMode};
-use burn::tensor::{Device, Tensor};
 
 #[cfg(test)]
 use columns::window_indices;
 use columns::{EpilogueBias, WindowShape, epilogue_bias, finish, gathered_columns};
 
-use crate::dispatch::{Op, Path, path};
 use crate::geometry::conv_output_size;
 use crate::settings::GpuRoute;
-
-/// Whether a convolution with `options` and a `kh x kw` kernel on `device` takes
-/// [`conv2d_by_matmul`]: GPU inference ([`GpuRoute::MatmulConv`]), groups 1, and either stride 1
-/// with a kernel larger than 1x1, or, with the gathered columns, any stride
-/// ([`GpuRoute::StridedProducts`]: burn's strided convolutions ran its direct kernel, 31 ms of a
-/// 0.2-s KITTI pass on an H200), or an unpadded 1x1 at stride 1 when the
-/// element-wise work after it joins the product's kernel ([`GpuRoute::FusedEpilogue`]; burn runs
-/// those as a product already, with the bias in a kernel of its own).
-pub fn matmul_conv_applies(device: &Device, options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
-    path(device, Op::Conv) == Path::Gpu && suits_product(options, kernel)
-}
-
-/// The shape rule of [`matmul_conv_applies`] under the settings' routes, for a caller that has
-/// asked the dispatch already.
-pub fn suits_product(options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
-    let strided = GpuRoute::GatheredColumns.enabled() && GpuRoute::StridedProducts.enabled();
-    suits(options, kernel, strided, GpuRoute::FusedEpilogue.enabled())
-}
-
-/// Whether convolutions with `options` and a `kh x kw` kernel on `device` share an input part's
-/// columns ([`SharedColumns`]): where they take [`conv2d_by_matmul`] with gathered columns and
-/// the dispatch gives the GRU step the GPU formulation (route `shared-columns`).
-pub fn shared_columns_apply(device: &Device, options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
-    path(device, Op::GruStep) == Path::Gpu
-        && GpuRoute::GatheredColumns.enabled()
-        && matmul_conv_applies(device, options, kernel)
-}
-
-/// The shape rule of [`matmul_conv_applies`], `strided` saying whether strided convolutions take
-/// the product (only the gathered columns take a stride), `pointwise` whether unpadded 1x1
-/// convolutions at stride 1 do.
-fn suits(options: &ConvOptions<2>, kernel: [usize; 2], strided: bool, pointwise: bool) -> bool {
-    options.groups == 1
-        && if options.stride == [1, 1] {
-            kernel != [1, 1] || (pointwise && is_pointwise(options, kernel))
-        } else {
-            strided
-        }
-}
 
 /// An unpadded 1x1 convolution at stride 1: a product with the input as it lies.
 fn is_pointwise(options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
@@ -114,7 +74,7 @@ enum Columns {
 /// # Panics
 /// Where `options` has groups, a stride other than 1 with the windows, the channels do not
 /// match, or the padded input is smaller than the (dilated) kernel.
-pub fn conv2d_by_matmul(
+pub(crate) fn conv2d_by_matmul(
     x: Tensor<4>,
     weight: Tensor<4>,
     bias: Option<Tensor<1>>,
@@ -134,7 +94,7 @@ pub fn conv2d_by_matmul(
 ///
 /// # Shapes
 /// - as [`conv2d_by_matmul`]; `then` maps `[N, O, H_out·W_out]` to the same shape
-pub fn conv2d_by_matmul_then(
+pub(crate) fn conv2d_by_matmul_then(
     x: Tensor<4>,
     weight: Tensor<4>,
     bias: Option<Tensor<1>>,
@@ -329,27 +289,6 @@ mod tests {
                     <= 1e-4 * gb1.abs().max().into_scalar::<f32>()
             );
         }
-    }
-
-    /// Stride-1 kernels larger than 1x1 suit the route, strided ones with the gathered columns,
-    /// unpadded 1x1 ones with the fused epilogue; the CPU never takes it (its host kernels), nor
-    /// training, nor grouped convolutions.
-    #[test]
-    fn only_gpu_inference_takes_the_route() {
-        let opts = options([(1, 1), (1, 1)], 1);
-        let unpadded = options([(0, 0), (0, 0)], 1);
-        for strided in [true, false] {
-            assert!(suits(&opts, [3, 3], strided, false) && suits(&opts, [7, 7], strided, false));
-            assert!(!suits(&opts, [1, 1], strided, true) && !suits(&unpadded, [1, 1], strided, false));
-            assert!(suits(&unpadded, [1, 1], strided, true));
-        }
-        let strided = strided([2, 2], [(1, 1), (1, 1)]);
-        assert!(suits(&strided, [3, 3], true, false) && suits(&strided, [1, 1], true, false));
-        assert!(!suits(&strided, [3, 3], false, true));
-        let grouped = ConvOptions::new_with_padding([1, 1], [(1, 1), (1, 1)], [1, 1], 2);
-        assert!(!suits(&grouped, [3, 3], true, true) && !suits(&grouped, [3, 3], false, true));
-        assert!(!matmul_conv_applies(&Device::flex(), &opts, [3, 3]));
-        assert!(!matmul_conv_applies(&Device::flex().autodiff(), &opts, [3, 3]));
     }
 
     /// The epilogue sees the biased product as `[N, O, H·W]`, with the bias reshaped before the

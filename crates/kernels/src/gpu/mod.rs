@@ -1,4 +1,4 @@
 //! Formulations of burn's operations with fewer kernel launches, for GPU inference.
 
-pub mod gathered_lookup;
-pub mod matmul_conv;
+pub(crate) mod gathered_lookup;
+pub(crate) mod matmul_conv;

@@ -5,8 +5,8 @@
 //! products have a depth of the batch and a few output channels: skinny shapes that ran the `gemm`
 //! crate's narrowest micro-kernels for most of a training step. Here the input gradient of a
 //! stride-1 convolution is the host convolution of the output gradient with the flipped,
-//! transposed weight (Winograd where the layer suits it, as in inference; the forward itself
-//! keeps plain products, see `conv2d_host_direct_slices`). The weight gradient of a 3x3
+//! transposed weight (Winograd where the layer suits it, as in inference; the dispatch may
+//! keep the forward itself on plain products, see `crate::Numerics`). The weight gradient of a 3x3
 //! stride-1 layer with enough channels runs by Winograd's transforms
 //! ([`conv2d_weight_grad_winograd`], 4x fewer multiplications); elsewhere it is `G · Colsᵀ`, the
 //! output gradient (`O x P`) by the forward's own column matrix, tiles of a thousand and more
@@ -18,12 +18,13 @@ use burn::tensor::ops::ConvOptions;
 use dgstereo_core::tensor::reuse_buffer;
 use rayon::prelude::*;
 
-use super::conv::{conv2d_host_slices, image_columns};
+use super::columns::image_columns;
+use super::conv::conv2d_host_slices;
 use super::fresh::{CHUNK, collect_chunks};
-use super::winograd::{WEIGHT_GRAD_BAND_ELEMENTS, winograd_variant, winograd_weight_grad};
-use crate::geometry::conv_output_size;
+use super::winograd::{WEIGHT_GRAD_BAND_ELEMENTS, variant, winograd_weight_grad};
+use crate::algorithm::{ConvAlgorithm, WinogradTile};
+use crate::geometry::{Epilogue, conv_output_size};
 use crate::product::matmul_transposed_accumulate;
-use crate::settings::settings;
 
 /// Column-matrix elements per weight-gradient tile: deep enough (pixels) for a well-shaped
 /// product, small enough for a worker's buffer (16 MiB).
@@ -40,19 +41,21 @@ const MIN_TILE_PIXELS: usize = 384;
 
 /// The gradient of `conv2d(x, wt)` (stride 1, dilation 1, one group) with respect to `x`, given
 /// the output gradient `g`: the convolution of `g` with the weight flipped in both axes and its
-/// channels swapped, padded by `k - 1 - p`. `None` for a stride, dilation, groups or padding of
-/// `k` or more, which burn's transposed convolution takes.
+/// channels swapped, padded by `k - 1 - p`, by `algorithm` (the dispatch's choice for that
+/// convolution). `None` for a stride, dilation, groups or padding of `k` or more, which burn's
+/// transposed convolution takes (the dispatch gives no algorithm there).
 ///
 /// # Shapes
 /// - `g`: `g_dims = [N, O, H_out, W_out]`; `wt`: `w_dims = [O, C, kh, kw]`; output `x_dims = [N,
 ///   C, H, W]`
-pub fn conv2d_input_grad(
+pub(crate) fn conv2d_input_grad(
     g: &[f32],
     g_dims: [usize; 4],
     wt: &[f32],
     w_dims: [usize; 4],
     x_dims: [usize; 4],
     options: &ConvOptions<2>,
+    algorithm: ConvAlgorithm,
 ) -> Option<Vec<f32>> {
     let [o, c, kh, kw] = w_dims;
     let [(pt, pb), (pl, pr)] = options.padding;
@@ -68,7 +71,8 @@ pub fn conv2d_input_grad(
     });
     let padding = [(kh - 1 - pt, kh - 1 - pb), (kw - 1 - pl, kw - 1 - pr)];
     let transposed = ConvOptions::new_with_padding([1, 1], padding, [1, 1], 1);
-    let (out, dims) = conv2d_host_slices(g, g_dims, &flipped, [c, o, kh, kw], None, &transposed);
+    let (out, dims) =
+        conv2d_host_slices(g, g_dims, &flipped, [c, o, kh, kw], None, &transposed, algorithm, Epilogue::Linear);
     assert_eq!(dims, x_dims, "conv2d_input_grad: the output gradient does not match the input");
     Some(out)
 }
@@ -78,7 +82,7 @@ pub fn conv2d_input_grad(
 ///
 /// # Shapes
 /// - `x`: `x_dims = [N, C, H, W]`; `g`: `[N, O, H_out, W_out]`; output `w_dims = [O, C, kh, kw]`
-pub fn conv2d_weight_grad(
+pub(crate) fn conv2d_weight_grad(
     x: &[f32],
     x_dims: [usize; 4],
     g: &[f32],
@@ -138,21 +142,20 @@ pub fn conv2d_weight_grad(
     })
 }
 
-/// [`conv2d_weight_grad`] by Winograd's transforms (`winograd::weight_grad`) where the layer
-/// takes the forward's Winograd variant (3x3, stride 1, enough channels and tiles) and the
-/// settings' `winograd` is on; `None` elsewhere.
+/// [`conv2d_weight_grad`] by Winograd's transforms (`winograd::weight_grad`) with `tile`, for a
+/// layer the dispatch gives them (3x3, stride 1, enough channels and tiles).
 ///
 /// # Shapes
 /// As [`conv2d_weight_grad`].
-pub fn conv2d_weight_grad_winograd(
+pub(crate) fn conv2d_weight_grad_winograd(
     x: &[f32],
     x_dims: [usize; 4],
     g: &[f32],
     w_dims: [usize; 4],
     options: &ConvOptions<2>,
-) -> Option<Vec<f32>> {
-    let variant = winograd_variant(x_dims, w_dims, options).filter(|_| settings().winograd)?;
-    Some(winograd_weight_grad(variant, x, x_dims, g, w_dims[0], options.padding, WEIGHT_GRAD_BAND_ELEMENTS))
+    tile: WinogradTile,
+) -> Vec<f32> {
+    winograd_weight_grad(variant(tile), x, x_dims, g, w_dims[0], options.padding, WEIGHT_GRAD_BAND_ELEMENTS)
 }
 
 /// Output rows per weight-gradient tile of `n` images of `out_h x out_w` pixels with `k`
@@ -179,7 +182,7 @@ thread_local! {
 ///
 /// # Shapes
 /// - `g`: `[N, O, H_out, W_out]` with `plane = H_out·W_out`; output `[O]`
-pub fn conv2d_bias_grad(g: &[f32], [n, o, plane]: [usize; 3]) -> Vec<f32> {
+pub(crate) fn conv2d_bias_grad(g: &[f32], [n, o, plane]: [usize; 3]) -> Vec<f32> {
     (0..o)
         .into_par_iter()
         .map(|oc| {

@@ -1,4 +1,4 @@
-//! The deformable convolution of DGIA on host buffers, for CPU inference ([`crate::ops::deform`]).
+//! The deformable convolution of DGIA on host buffers, for CPU inference (`crate::ops::deform`).
 //!
 //! Design decision: burn Flex's `deform_conv2d` builds a deformable im2col matrix on one thread per
 //! image (its only parallel loop is over the batch, and the model fuses one view at a time),

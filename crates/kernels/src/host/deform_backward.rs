@@ -2,7 +2,7 @@
 //!
 //! Design decision: burn Flex's backward of `deform_conv2d` runs on one thread per image and
 //! took about a sixth of a training step of the paper's model. Here every output pixel walks its
-//! kernel taps with the forward's own walk and corners ([`crate::host::deform`]): per tap the bilinear sample of all
+//! kernel taps with the forward's own walk and corners (`crate::host::deform`): per tap the bilinear sample of all
 //! channels gives the weight's gradient, the sample's gradient (the output gradient through the
 //! tap's weights) is scattered to the four corners and gives the offset's gradient through the
 //! bilinear weights' derivatives. The scatter writes anywhere in the image (the offsets are

@@ -9,27 +9,16 @@
 //! as a strided operand: no copy), and the output is the sum of `kh·kw` shifted planes of `Z`, so
 //! the input is read once instead of `kh·kw` times and nothing of its size is written.
 //!
-//! The products go through [`crate::host_conv::matmul_strided`].
+//! The products go through [`crate::product::matmul_strided`]. The dispatch decides which
+//! convolutions take this path (few outputs from many input channels).
 
 use rayon::prelude::*;
 
 use crate::geometry::{Epilogue, band_jobs};
 use crate::product::matmul_strided;
 
-/// Most output channels for which this path runs (with a 3x3 kernel the product has 9·O rows).
-pub(crate) const MAX_OUTPUTS: usize = 4;
-
-/// Fewest input channels for which it pays: below this the column matrix is small.
-pub(crate) const MIN_CHANNELS: usize = 32;
-
 /// Output rows per band: enough pixels for the product, bands enough for both cores.
 const BAND_PIXELS: usize = 1024;
-
-/// Whether a convolution of `c` input and `o` output channels with stride 1 and groups 1 takes
-/// this path.
-pub(crate) fn suits(c: usize, o: usize, stride: [usize; 2], groups: usize) -> bool {
-    stride == [1, 1] && groups == 1 && o <= MAX_OUTPUTS && c >= MIN_CHANNELS
-}
 
 /// A stride-1 convolution with few outputs; returns the output and its dimensions.
 ///
@@ -175,12 +164,5 @@ mod tests {
         // Several bands per image (BAND_PIXELS / width rows each), a last band shorter.
         case(1, [32, 2], [37, 100], [3, 3], same, 1);
         case(1, [32, 2], [5, 1500], [3, 3], same, 1); // one row per band
-    }
-
-    #[test]
-    fn the_path_takes_only_few_outputs_and_many_channels() {
-        assert!(suits(256, 2, [1, 1], 1) && suits(32, 4, [1, 1], 1));
-        assert!(!suits(256, 5, [1, 1], 1) && !suits(31, 2, [1, 1], 1));
-        assert!(!suits(256, 2, [2, 2], 1) && !suits(256, 2, [1, 1], 2));
     }
 }

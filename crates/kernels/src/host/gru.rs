@@ -10,16 +10,18 @@
 //! convolutions take the Winograd path (the GRUs' sizes), the candidate's `x` channels are not
 //! transformed a second time: the gates' convolution keeps the candidate's products over them
 //! (`conv2d_host_shared_first`) and pass one writes `r·h` alone. Used only where the
-//! host kernels apply (CPU inference, the dispatch's host path, [`crate::ops::gru`]); the updater's
-//! tensor-op step stays the reference and its tests check both agree.
+//! host kernels apply (CPU inference, the dispatch's host path, `crate::ops::gru`); the tensor-op
+//! step there stays the reference and its tests check both agree.
 
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Tensor, TensorData};
 use dgstereo_core::tensor::{host_values, planes_from, zeros_parallel};
 use rayon::prelude::*;
 
+use super::conv::PendingConv;
 use super::conv::{conv2d_host_shared_first, conv2d_host_shared_second, conv2d_host_slices};
-use crate::ops::conv::conv_options;
+use crate::algorithm::{ConvAlgorithm, GruAlgorithm};
+use crate::geometry::{Epilogue, conv_options};
 
 /// `tanh` as a rational function (odd degree-13 numerator, even degree-6 denominator, the
 /// minimax fit Eigen uses for `float`), clamped where `tanh` is ±1 in `f32`. Branch-free, so the
@@ -53,17 +55,17 @@ fn sigmoid(v: f32) -> f32 {
 /// - `h`, `q_ctx`: `[N, C, H, W]`; `zr_ctx`: `[N, 2·C, H, W]`; `inputs[i]`: `[N, C_i, H, W]`;
 ///   output `[N, C, H, W]`
 ///
-/// `None` (nothing computed) when a convolution has options the host kernel does not take.
-pub fn step(
+/// The convolutions run by `algorithm`, the dispatch's choice for the step. `None` (nothing
+/// computed) when a convolution has options the host kernel does not take (the dispatch gives
+/// such a step no host algorithm).
+pub(crate) fn step(
     [convz, convr, convq]: [&Conv2d; 3],
     h: Tensor<4>,
     [zr_ctx, q_ctx]: [&Tensor<4>; 2],
     inputs: &[Tensor<4>],
+    algorithm: GruAlgorithm,
 ) -> Option<Tensor<4>> {
     let (zr_options, q_options) = (conv_options(convz)?, conv_options(convq)?);
-    if conv_options(convr)? != zr_options {
-        return None;
-    }
     let device = h.device();
     let [n, c, hh, ww] = h.dims();
     let plane = hh * ww;
@@ -104,18 +106,20 @@ pub fn step(
     let dims = [n, channels, hh, ww];
     // With Winograd (the GRUs' sizes) the candidate's x channels are transformed once, by the
     // gates' convolution, which keeps the candidate's products over them.
-    let shared = (zr_options == q_options && [kh, kw, qh, qw] == [3; 4])
-        .then(|| {
+    let (gates, candidate) = match algorithm {
+        GruAlgorithm::Shared(tile) => {
             let weights = [&zr_weight[..], &q_weight[..]];
-            conv2d_host_shared_first(&hx, dims, weights, [2 * c, c], channels, cx, zr_bias.as_deref(), &zr_options)
-        })
-        .flatten();
-    let (gates, pending) = match shared {
-        Some((gates, pending)) => (gates, Some(pending)),
-        None => {
-            let (gates, _) =
-                conv2d_host_slices(&hx, dims, &zr_weight, [2 * c, channels, kh, kw], zr_bias.as_deref(), &zr_options);
-            (gates, None)
+            let zr_bias = zr_bias.as_deref();
+            let (gates, pending) =
+                conv2d_host_shared_first(&hx, dims, weights, [2 * c, c], channels, cx, zr_bias, &zr_options, tile);
+            (gates, Candidate::Pending(pending))
+        }
+        GruAlgorithm::Separate { gates, candidate } => {
+            let zr_dims = [2 * c, channels, kh, kw];
+            let zr_bias = zr_bias.as_deref();
+            let linear = Epilogue::Linear;
+            let (gates, _) = conv2d_host_slices(&hx, dims, &zr_weight, zr_dims, zr_bias, &zr_options, gates, linear);
+            (gates, Candidate::Own(candidate))
         }
     };
     let zr_ctx = host_values(zr_ctx.clone());
@@ -133,22 +137,24 @@ pub fn step(
         let at = ((i / c) * 2 * c + c + i % c) * plane;
         (&gates[at..][..plane], &zr_ctx[at..][..plane])
     };
-    let q = match pending {
-        Some(pending) => {
+    let q = match candidate {
+        Candidate::Pending(pending) => {
             let rh = planes_from(n * c, plane, |i| {
                 let ((g, k), h) = (reset(i), &hv[i * plane..][..plane]);
                 h.iter().zip(g).zip(k).map(|((h, g), k)| h * sigmoid(g + k))
             });
             conv2d_host_shared_second(pending, &rh, [n, c, hh, ww], q_bias.as_deref()).0
         }
-        None => {
+        Candidate::Own(algorithm) => {
             hx.par_chunks_mut(plane).enumerate().filter(|(i, _)| i % channels < c).for_each(|(i, dst)| {
                 let (g, k) = reset((i / channels) * c + i % channels);
                 for ((d, g), k) in dst.iter_mut().zip(g).zip(k) {
                     *d *= sigmoid(g + k);
                 }
             });
-            conv2d_host_slices(&hx, dims, &q_weight, [c, channels, qh, qw], q_bias.as_deref(), &q_options).0
+            let q_dims = [c, channels, qh, qw];
+            conv2d_host_slices(&hx, dims, &q_weight, q_dims, q_bias.as_deref(), &q_options, algorithm, Epilogue::Linear)
+                .0
         }
     };
     let q_ctx = host_values(q_ctx.clone());
@@ -160,6 +166,13 @@ pub fn step(
         z.iter().zip(h).zip(q).zip(k).map(|(((z, h), q), k)| (1.0 - z) * h + z * tanh_fast(q + k))
     });
     Some(Tensor::from_data(TensorData::new(out, [n, c, hh, ww]), &device))
+}
+
+/// The candidate's convolution: its products over the shared `x` channels already taken, or its
+/// own algorithm over the whole `[r·h, x]`.
+enum Candidate {
+    Pending(PendingConv),
+    Own(ConvAlgorithm),
 }
 
 #[cfg(test)]

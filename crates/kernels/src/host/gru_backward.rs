@@ -1,5 +1,5 @@
 //! The ConvGRU step's element-wise parts, forward and backward on host buffers, for training
-//! ([`crate::autodiff::gru`]): the gates `σ(a + b)` and the blend
+//! (`crate::autodiff::gru`): the gates `σ(a + b)` and the blend
 //! `(1 − z)·h + z·tanh(q + c)`, each one parallel pass where burn's autodiff records four to
 //! six serial operations and as many again backward.
 

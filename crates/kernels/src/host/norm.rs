@@ -7,7 +7,7 @@
 //! full-resolution layers (2 images x 64 channels x 192 x 224 at 384x448) that is most of the
 //! time outside the convolutions. Here each `(image, channel)` plane is one rayon task: its
 //! statistics in `f64`, then normalisation, affine and ReLU in the same pass. Only for plain CPU
-//! tensors without autodiff (the dispatch's host path, [`crate::ops::norm`]); the tensor operations
+//! tensors without autodiff (the dispatch's host path, `crate::ops::norm`); the tensor operations
 //! stay the reference and the path for training and the GPU, and the tests check both agree.
 
 use burn::tensor::{Tensor, TensorData};

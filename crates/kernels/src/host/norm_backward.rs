@@ -1,5 +1,5 @@
 //! The instance norm's and the ReLU's forward and backward on host buffers, for training
-//! ([`crate::autodiff::norm`]).
+//! (`crate::autodiff::norm`).
 //!
 //! Design decision: burn's autodiff of an instance norm records six element-wise operations and
 //! its ReLU a seventh, each a serial pass over the activation on burn Flex's calling thread, and

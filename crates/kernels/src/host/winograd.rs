@@ -63,23 +63,24 @@ mod weight_grad;
 
 use dgstereo_core::tensor::reuse_buffer;
 
+use crate::algorithm::WinogradTile;
 use crate::product::matmul_strided;
+pub(crate) use blocks::available as blocks_available;
 pub(crate) use split::{Pending, first as split_first, second as split_second};
-#[cfg(test)]
-pub(crate) use transforms::MIN_F4_TILES;
-pub(crate) use transforms::{Conv3x3, Variant, split_row, winograd_variant};
+pub(crate) use transforms::{Conv3x3, Variant, split_row, variant};
 use transforms::{Plan, transform_inputs, transform_outputs};
 pub use weight_cache::UpdateLoop;
 use weight_cache::transformed_weights;
 pub(crate) use weight_grad::{BAND_ELEMENTS as WEIGHT_GRAD_BAND_ELEMENTS, winograd_weight_grad};
 
-/// `conv` by Winograd `variant`: F(4x4) with few channels in blocks of tiles ([`blocks`]),
-/// otherwise in bands. Returns the output and its dimensions.
-pub(crate) fn winograd_conv(variant: &Variant, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
-    if let Some(isa) = blocks::instruction_set(conv.x_dims[1], conv.o).filter(|_| variant.m == 4) {
-        return blocks::blocked_conv(isa, conv);
+/// `conv` by Winograd with `tile`: F(4x4) in blocks of tiles ([`blocks`]) where the dispatch
+/// says `blocks` (and the processor runs them), otherwise in bands. Returns the output and its
+/// dimensions.
+pub(crate) fn winograd_conv(tile: WinogradTile, blocks: bool, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
+    match blocks::Isa::detect().filter(|_| blocks && tile == WinogradTile::F4) {
+        Some(isa) => blocks::blocked_conv(isa, conv),
+        None => band_conv(variant(tile), conv),
     }
-    band_conv(variant, conv)
 }
 
 /// [`winograd_conv`] in bands of whole tile rows (the module's doc).
@@ -277,7 +278,7 @@ mod tests {
                 padding,
                 epilogue: Epilogue::Relu,
             };
-            let want1 = winograd_conv(variant, &conv1);
+            let want1 = band_conv(variant, &conv1);
             let conv2 = Conv3x3 {
                 x: &x2,
                 x_dims: [n, c2, h, w],
@@ -287,7 +288,7 @@ mod tests {
                 padding,
                 epilogue: Epilogue::Linear,
             };
-            let want2 = winograd_conv(variant, &conv2);
+            let want2 = band_conv(variant, &conv2);
             for ((got, want), which) in [(got1, want1), (got2, want2)].into_iter().zip(["first", "second"]) {
                 assert_eq!(got.1, want.1, "F({}) {which}", variant.m);
                 let worst = got.0.iter().zip(&want.0).map(|(g, w)| (g - w).abs()).fold(0.0, f32::max);

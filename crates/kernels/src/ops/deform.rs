@@ -1,29 +1,30 @@
-//! The deformable convolution: the host kernel for CPU inference ([`crate::host::deform`]) and a
-//! node with our backward in training ([`crate::autodiff::deform`]) where the convolution suits
+//! The deformable convolution: the host kernel for CPU inference (`crate::host::deform`) and a
+//! node with our backward in training (`crate::autodiff::deform`) where the convolution suits
 //! them, burn's `DeformConv2d` (the reference) everywhere else.
 
 use burn::nn::conv::DeformConv2d;
 use burn::tensor::Tensor;
 
 use crate::autodiff::deform::{DeformOptions, deform_conv2d};
-use crate::dispatch::{Op, Path, path};
-use crate::host::deform::deform_conv2d_host;
+use crate::dispatch::{DeformCall, Plan, plan};
+use crate::host::deform::{Geometry, deform_conv2d_host};
 
 /// `conv.forward(input, offset, None)`: without a modulation mask.
 ///
 /// # Shapes
 /// - `input`: `[N, C, H, W]`; `offset`: `[N, 2·kh·kw, H_out, W_out]`; output `[N, O, H_out, W_out]`
 pub fn deform_conv2d_forward(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<4>) -> Tensor<4> {
-    let device = input.device();
-    let host = match path(&device, Op::Deform) {
-        Path::Host if device.is_autodiff() => DeformOptions::of(conv).map(|options| {
+    let options = DeformOptions::of(conv);
+    let host = options.filter(|&o| Geometry::new(input.dims(), conv.weight.dims(), o).is_some());
+    let ours = match plan(&input.device(), &DeformCall { host, training: options }) {
+        Plan::HostTraining(options) => {
             let bias = conv.bias.as_ref().map(|b| b.val());
-            deform_conv2d(input.clone(), offset.clone(), conv.weight.val(), bias, options)
-        }),
-        Path::Host => deform_conv2d_host(conv, input.clone(), offset.clone()),
-        Path::Gpu | Path::Stock => None,
+            Some(deform_conv2d(input.clone(), offset.clone(), conv.weight.val(), bias, options))
+        }
+        Plan::HostInference(_) => deform_conv2d_host(conv, input.clone(), offset.clone()),
+        Plan::Gpu(()) | Plan::Stock => None,
     };
-    host.unwrap_or_else(|| conv.forward(input, offset, None))
+    ours.unwrap_or_else(|| conv.forward(input, offset, None))
 }
 
 #[cfg(test)]

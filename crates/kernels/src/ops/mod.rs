@@ -1,10 +1,11 @@
-//! The face: operations on burn tensors that stages call, each dispatched once
-//! ([`crate::dispatch::path`]) to a host kernel, a GPU formulation or burn's operation.
+//! The face: operations on burn tensors that stages call (re-exported at the crate root), each
+//! planned once by the dispatch (`crate::dispatch::plan`) and carried out: a host kernel with
+//! its algorithm, a training node, a GPU formulation or burn's operation.
 
-pub mod conv;
-pub mod deform;
-pub mod gru;
-pub mod lookup;
-pub mod norm;
-pub mod resample;
-pub mod upsample;
+pub(crate) mod conv;
+pub(crate) mod deform;
+pub(crate) mod gru;
+pub(crate) mod lookup;
+pub(crate) mod norm;
+pub(crate) mod resample;
+pub(crate) mod upsample;

@@ -1,101 +1,110 @@
 //! Per-channel norms with an optional ReLU, and the residual `relu(a + b)`: one parallel host
-//! pass per plane for CPU inference ([`crate::host::norm`]); in training the instance norm, the
-//! frozen batch norm's affine and `relu(a + b)` are nodes with our backward
-//! ([`crate::autodiff::norm`]); burn's operations elsewhere.
+//! pass per plane for CPU inference (`crate::host::norm`); in training the instance norm, the
+//! frozen batch norm's affine, the ReLU and `relu(a + b)` are nodes with our backward
+//! (`crate::autodiff::norm`); burn's operations, the reference, elsewhere.
 
 use burn::tensor::Tensor;
 use burn::tensor::activation::relu;
-use dgstereo_core::tensor::to_vec;
+use dgstereo_core::tensor::{instance_norm, to_vec};
 
 use crate::autodiff;
-use crate::dispatch::{Op, Path, path};
-use crate::host::norm;
-pub use crate::host::norm::PlaneNorm;
+use crate::dispatch::{ADD_RELU, NormCall, NormKind, Plan, RECTIFY, plan};
+use crate::host::norm::{self, PlaneNorm};
 
-/// `norm()` applied to every `(n, c)` plane of `x`, then `max(0, ·)` when `relu`, where the
-/// dispatch takes the host pass (`norm` is called only there); `stock(x)` (burn's norm module and
-/// ReLU, the reference) elsewhere. Under autodiff the host path takes the instance norm and the
-/// ReLU only: an affine norm's `scale` and `shift` come here as plain values, without the
-/// gradient their parameters need, so it keeps `stock` ([`affine_planes_or`] is the frozen batch
-/// norm's way in, with tensors).
+/// A norm over each `(n, c)` plane that [`normalize_planes`] applies.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Normalization {
+    /// Instance norm: subtract the plane's mean, divide by `sqrt(var + epsilon)` (biased
+    /// variance), no affine (PyTorch's `InstanceNorm2d` default).
+    Instance {
+        /// Added to the variance.
+        epsilon: f64,
+    },
+    /// Nothing (only the ReLU, if asked).
+    Identity,
+}
+
+/// `norm` applied to every `(n, c)` plane of `x`, then `max(0, ·)` when `relu`.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output: the same
-pub fn normalize_planes_or(
-    x: Tensor<4>,
-    norm: impl FnOnce() -> PlaneNorm,
-    relu: bool,
-    stock: impl FnOnce(Tensor<4>) -> Tensor<4>,
-) -> Tensor<4> {
-    let device = x.device();
-    match path(&device, Op::Norm) {
-        Path::Host if device.is_autodiff() => match norm() {
-            PlaneNorm::Instance { epsilon } => autodiff::norm::instance_norm(x, epsilon, relu),
-            PlaneNorm::Identity if relu => autodiff::norm::relu(x),
-            PlaneNorm::Affine { .. } | PlaneNorm::Identity => stock(x),
+pub fn normalize_planes(x: Tensor<4>, norm: Normalization, relu: bool) -> Tensor<4> {
+    let kind = match norm {
+        Normalization::Instance { .. } => NormKind::Instance,
+        Normalization::Identity => NormKind::Identity,
+    };
+    match plan(&x.device(), &NormCall { kind, relu }) {
+        Plan::HostInference(()) => {
+            let host = match norm {
+                Normalization::Instance { epsilon } => PlaneNorm::Instance { epsilon },
+                Normalization::Identity => PlaneNorm::Identity,
+            };
+            norm::normalize_planes(x, &host, relu)
+        }
+        Plan::HostTraining(()) => match norm {
+            Normalization::Instance { epsilon } => autodiff::norm::instance_norm(x, epsilon, relu),
+            Normalization::Identity => autodiff::norm::relu(x),
         },
-        Path::Host => norm::normalize_planes(x, &norm(), relu),
-        Path::Gpu | Path::Stock => stock(x),
+        Plan::Gpu(()) | Plan::Stock => {
+            let y = match norm {
+                Normalization::Instance { epsilon } => instance_norm(x, epsilon),
+                Normalization::Identity => x,
+            };
+            if relu { rectify(y) } else { y }
+        }
     }
 }
 
-/// A frozen batch norm, `x · scale[c] + shift[c]` per channel `c` with `(scale, shift)` from
-/// `scale_shift()`, then `max(0, ·)` when `relu`: in training on the host path one node with our
-/// backward (the gradients reach `scale` and `shift`, and through them the norm's parameters),
-/// for CPU inference the host pass, `stock(x)` elsewhere.
+/// A frozen batch norm, `x · scale[c] + shift[c]` per channel `c`, then `max(0, ·)` when
+/// `relu`: in training one node with our backward (the gradients reach `scale` and `shift`, and
+/// through them the norm's parameters), for CPU inference the host pass, burn's operations
+/// elsewhere.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `scale`, `shift`: `[C]`; output: as `x`
-pub fn affine_planes_or(
-    x: Tensor<4>,
-    scale_shift: impl FnOnce() -> (Tensor<1>, Tensor<1>),
-    relu: bool,
-    stock: impl FnOnce(Tensor<4>) -> Tensor<4>,
-) -> Tensor<4> {
-    let device = x.device();
-    match path(&device, Op::Norm) {
-        Path::Host if device.is_autodiff() => {
-            let (scale, shift) = scale_shift();
-            autodiff::norm::channel_affine(x, scale, shift, relu)
-        }
-        Path::Host => {
-            let (scale, shift) = scale_shift();
+pub fn affine_planes(x: Tensor<4>, scale: Tensor<1>, shift: Tensor<1>, relu: bool) -> Tensor<4> {
+    match plan(&x.device(), &NormCall { kind: NormKind::AffineTensors, relu }) {
+        Plan::HostTraining(()) => autodiff::norm::channel_affine(x, scale, shift, relu),
+        Plan::HostInference(()) => {
             norm::normalize_planes(x, &PlaneNorm::Affine { scale: to_vec(scale), shift: to_vec(shift) }, relu)
         }
-        Path::Gpu | Path::Stock => stock(x),
+        Plan::Gpu(()) | Plan::Stock => {
+            let c = scale.dims()[0];
+            let y = x * scale.reshape([1, c, 1, 1]) + shift.reshape([1, c, 1, 1]);
+            if relu { rectify(y) } else { y }
+        }
     }
 }
 
-/// `max(0, x)`: in training on the host path one node with our backward, burn's ReLU elsewhere
-/// (CPU inference folds its ReLUs into the kernels before).
+/// `max(0, x)`: in training one node with our backward, burn's ReLU elsewhere (CPU inference
+/// folds its ReLUs into the kernels before).
 pub fn rectify<const D: usize>(x: Tensor<D>) -> Tensor<D> {
-    let device = x.device();
-    match path(&device, Op::Norm) {
-        Path::Host if device.is_autodiff() => autodiff::norm::relu(x),
-        _ => relu(x),
+    match plan(&x.device(), &RECTIFY) {
+        Plan::HostTraining(()) => autodiff::norm::relu(x),
+        Plan::HostInference(()) | Plan::Gpu(()) | Plan::Stock => relu(x),
     }
 }
 
-/// `max(0, a + b)`: one parallel host pass for CPU inference, burn's operations elsewhere.
+/// `max(0, a + b)`: one parallel host pass for CPU inference, a node with our backward in
+/// training, burn's operations elsewhere.
 ///
 /// # Shapes
 /// - `a`, `b`: `[N, C, H, W]`, equal; output: the same
 pub fn add_relu(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
-    let device = a.device();
-    match path(&device, Op::Norm) {
-        Path::Host if device.is_autodiff() => autodiff::norm::add_relu(a, b),
-        Path::Host => norm::add_relu(a, b),
-        Path::Gpu | Path::Stock => relu(a + b),
+    match plan(&a.device(), &ADD_RELU) {
+        Plan::HostTraining(()) => autodiff::norm::add_relu(a, b),
+        Plan::HostInference(()) => norm::add_relu(a, b),
+        Plan::Gpu(()) | Plan::Stock => relu(a + b),
     }
 }
 
 #[cfg(test)]
 mod tests {
     use burn::tensor::{Device, Distribution};
-    use dgstereo_core::tensor::{instance_norm, max_abs_diff, to_vec};
+    use dgstereo_core::tensor::max_abs_diff;
 
     use super::*;
-    use crate::dispatch::with_path;
+    use crate::dispatch::{Path, with_path};
 
     fn operands() -> [Tensor<4>; 2] {
         let device = Device::flex();
@@ -108,9 +117,7 @@ mod tests {
         fn every_path_agrees_with_the_tensor_operations(pinned) {
             let [x, b] = operands();
             let expected = relu(instance_norm(x.clone(), 1e-5));
-            let got = normalize_planes_or(x.clone(), || PlaneNorm::Instance { epsilon: 1e-5 }, true, |x| {
-                relu(instance_norm(x, 1e-5))
-            });
+            let got = normalize_planes(x.clone(), Normalization::Instance { epsilon: 1e-5 }, true);
             assert!(max_abs_diff(expected, got) < 1e-5, "{pinned:?}");
             assert!(max_abs_diff(relu(x.clone() + b.clone()), add_relu(x, b)) < 1e-6, "{pinned:?}");
         }
@@ -127,15 +134,7 @@ mod tests {
         let run = |pinned: Path, relu_after: bool| {
             let (x, b) = (x.clone().detach().require_grad(), b.clone().detach().require_grad());
             let norm = with_path(pinned, || {
-                normalize_planes_or(
-                    x.clone(),
-                    || PlaneNorm::Instance { epsilon: 1e-5 },
-                    relu_after,
-                    |x| {
-                        let y = instance_norm(x, 1e-5);
-                        if relu_after { relu(y) } else { y }
-                    },
-                )
+                normalize_planes(x.clone(), Normalization::Instance { epsilon: 1e-5 }, relu_after)
             });
             let sum = with_path(pinned, || add_relu(norm.clone(), b.clone()));
             let rectified = with_path(pinned, || rectify(b.clone().add_scalar(0.3)));
@@ -179,14 +178,8 @@ mod tests {
                 weight.clone().detach().require_grad(),
                 bias.clone().detach().require_grad(),
             );
-            let scale_shift = || (w.clone().mul_scalar(0.7), b.clone() - w.clone().mul_scalar(0.2));
-            let y = with_path(pinned, || {
-                affine_planes_or(x.clone(), scale_shift, relu_after, |x| {
-                    let (scale, shift) = scale_shift();
-                    let y = x * scale.reshape([1, c, 1, 1]) + shift.reshape([1, c, 1, 1]);
-                    if relu_after { relu(y) } else { y }
-                })
-            });
+            let (scale, shift) = (w.clone().mul_scalar(0.7), b.clone() - w.clone().mul_scalar(0.2));
+            let y = with_path(pinned, || affine_planes(x.clone(), scale, shift, relu_after));
             let grads = (y.clone() * r.clone()).sum().backward();
             let gx = x.grad(&grads).expect("the input's gradient");
             let (gw, gb) =

@@ -6,40 +6,17 @@
 //! way the resize is two matrix products, whose gradients every burn backend has (the GPU backends
 //! lack bilinear-resize backward), and it is exact to PyTorch's formula. For CPU inference
 //! (the dispatch's host path) the same interpolation runs as a host pass with the two taps of each
-//! output row and column, in parallel over channel planes: the products spend most of their work
-//! on the matrices' zeros (the GRUs' resizes between levels were 4 % of a CPU forward pass). GPU
+//! output row and column, in parallel over channel planes (`crate::host::resample`): the products
+//! spend most of their work on the matrices' zeros. GPU
 //! inference (route `resize`) takes burn's `interpolate`, one kernel where the products
 //! take two and upload their matrices on every call; training keeps the products everywhere.
 
 use burn::tensor::module::{avg_pool2d, interpolate};
 use burn::tensor::ops::{AvgPoolOptions, InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor, TensorData};
-use rayon::prelude::*;
 
-use dgstereo_core::tensor::{host_values, zeros_parallel};
-
-use crate::dispatch::{Op, Path, path};
-
-/// The two taps of each output sample of 1-D linear interpolation: `(x0, x1, w)`, the output
-/// being `(1 - w)·in[x0] + w·in[x1]` (`x1 == x0` at the last sample).
-///
-/// With `align_corners` the end samples coincide (`x = i · (n_in-1)/(n_out-1)`), otherwise
-/// pixel centres are aligned (`x = (i + 0.5) · n_in/n_out - 0.5`, clamped at 0), as PyTorch and
-/// OpenCV's `INTER_LINEAR` do.
-fn linear_taps(n_in: usize, n_out: usize, align_corners: bool) -> Vec<(usize, usize, f32)> {
-    (0..n_out)
-        .map(|i| {
-            let x = if align_corners {
-                if n_out > 1 { i as f64 * (n_in as f64 - 1.0) / (n_out as f64 - 1.0) } else { 0.0 }
-            } else {
-                ((i as f64 + 0.5) * n_in as f64 / n_out as f64 - 0.5).max(0.0)
-            };
-            let x0 = (x.floor() as usize).min(n_in - 1);
-            let x1 = (x0 + 1).min(n_in - 1);
-            (x0, x1, (x - x0 as f64) as f32)
-        })
-        .collect()
-}
+use crate::dispatch::{Op, PlainCall, Plan, plan};
+use crate::host::resample::{average_pool_half_host, linear_taps, resize_bilinear_host};
 
 /// The `n_out x n_in` matrix of 1-D linear interpolation, row-major (the taps of
 /// `linear_taps`).
@@ -68,10 +45,10 @@ pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2], align_corners: bool) -> T
     if [h, w] == size {
         return x;
     }
-    match path(&x.device(), Op::Resize) {
-        Path::Host => resize_bilinear_host(x, size, align_corners),
-        Path::Gpu => resize_bilinear_by_interpolate(x, size, align_corners),
-        Path::Stock => resize_bilinear_by_matrices(x, size, align_corners),
+    match plan(&x.device(), &PlainCall(Op::Resize)) {
+        Plan::HostInference(()) => resize_bilinear_host(x, size, align_corners),
+        Plan::Gpu(()) => resize_bilinear_by_interpolate(x, size, align_corners),
+        Plan::HostTraining(()) | Plan::Stock => resize_bilinear_by_matrices(x, size, align_corners),
     }
 }
 
@@ -99,88 +76,21 @@ fn resize_bilinear_by_matrices(x: Tensor<4>, size: [usize; 2], align_corners: bo
     y
 }
 
-/// [`resize_bilinear`] on the host: rows, then columns, two taps each, per channel plane.
-fn resize_bilinear_host(x: Tensor<4>, [ho, wo]: [usize; 2], align_corners: bool) -> Tensor<4> {
-    let (device, [n, c, h, w]) = (x.device(), x.dims());
-    let (rows, columns) = (linear_taps(h, ho, align_corners), linear_taps(w, wo, align_corners));
-    let values = host_values(x);
-    let mut out = zeros_parallel(n * c * ho * wo);
-    if !out.is_empty() && h * w > 0 {
-        // A row step blends two whole rows (vector operations); a column step gathers two taps
-        // per output value. Upsampling rows, the columns go first, on the `h` input rows rather
-        // than the `ho` output rows: half the gathers at the GRUs' 2x upsampling (the 1/8 state to
-        // 1/4 of 384x448, one process alternating both orders, median of 57: 2.49 -> 1.97 ms; 1/16
-        // to 1/8 0.61 -> 0.45 ms). Either order is the same interpolation up to rounding.
-        let columns_first = ho > h;
-        out.par_chunks_mut(ho * wo).zip(values.par_chunks(h * w)).for_each_init(Vec::new, |tmp, (dst, src)| {
-            let blend_rows = |dst: &mut [f32], src: &[f32], width: usize| {
-                for (line, &(y0, y1, t)) in dst.chunks_exact_mut(width).zip(&rows) {
-                    let (a, b) = (&src[y0 * width..][..width], &src[y1 * width..][..width]);
-                    for ((d, a), b) in line.iter_mut().zip(a).zip(b) {
-                        *d = (1.0 - t) * a + t * b;
-                    }
-                }
-            };
-            let blend_columns = |dst: &mut [f32], src: &[f32]| {
-                for (line, src) in dst.chunks_exact_mut(wo).zip(src.chunks_exact(w)) {
-                    for (d, &(x0, x1, t)) in line.iter_mut().zip(&columns) {
-                        *d = (1.0 - t) * src[x0] + t * src[x1];
-                    }
-                }
-            };
-            if columns_first {
-                tmp.resize(h * wo, 0.0);
-                blend_columns(tmp, src);
-                blend_rows(dst, tmp, wo);
-            } else {
-                tmp.resize(ho * w, 0.0);
-                blend_rows(tmp, src, w);
-                blend_columns(dst, tmp);
-            }
-        });
-    }
-    Tensor::from_data(TensorData::new(out, [n, c, ho, wo]), &device)
-}
-
 /// `F.avg_pool2d(x, 3, stride=2, padding=1)`: the mean of each 3x3 window at stride 2, the zero
 /// padding counted in the mean (PyTorch's default `count_include_pad`), so every output is its
-/// window's sum over 9. For CPU inference (the dispatch's host path) a host pass per channel plane
-/// (the three rows summed, then the three columns); elsewhere burn's `avg_pool2d`. burn Flex's
-/// pooling took 9.2 ms for the GRUs' 1/4 state at 384x448 (128 x 96 x 112), ~4 % of an update
-/// iteration on the Xeon; the host pass 1.2 ms.
+/// window's sum over 9. For CPU inference (the dispatch's host path) a host pass per channel
+/// plane (`crate::host::resample`); elsewhere burn's `avg_pool2d`.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output `[N, C, (H - 1) / 2 + 1, (W - 1) / 2 + 1]`
 pub fn average_pool_half(x: Tensor<4>) -> Tensor<4> {
-    if path(&x.device(), Op::Pool) != Path::Host {
-        let options = AvgPoolOptions::new([3, 3]).with_stride([2, 2]).with_padding([1, 1]);
-        return avg_pool2d(x, options);
+    match plan(&x.device(), &PlainCall(Op::Pool)) {
+        Plan::HostInference(()) => average_pool_half_host(x),
+        Plan::HostTraining(()) | Plan::Gpu(()) | Plan::Stock => {
+            let options = AvgPoolOptions::new([3, 3]).with_stride([2, 2]).with_padding([1, 1]);
+            avg_pool2d(x, options)
+        }
     }
-    let (device, [n, c, h, w]) = (x.device(), x.dims());
-    let (ho, wo) = ((h.max(1) - 1) / 2 + 1, (w.max(1) - 1) / 2 + 1);
-    let values = host_values(x);
-    let mut out = zeros_parallel(n * c * ho * wo);
-    if h * w > 0 {
-        out.par_chunks_mut(ho * wo).zip(values.par_chunks(h * w)).for_each_init(Vec::new, |sums, (dst, src)| {
-            // One row of vertical window sums, with a zero column on each side (the padding).
-            sums.resize(w + 2, 0.0);
-            for (oy, line) in dst.chunks_exact_mut(wo).enumerate() {
-                let row = |y: usize| &src[y * w..][..w];
-                let (centre, below) = (row(2 * oy), (2 * oy + 1 < h).then(|| row(2 * oy + 1)));
-                let above = oy.checked_sub(1).map(|_| row(2 * oy - 1));
-                let inner = &mut sums[1..=w];
-                inner.copy_from_slice(centre);
-                for r in [above, below].into_iter().flatten() {
-                    inner.iter_mut().zip(r).for_each(|(s, v)| *s += v);
-                }
-                // Output column ox covers padded columns 2·ox .. 2·ox + 2.
-                for (ox, d) in line.iter_mut().enumerate() {
-                    *d = (sums[2 * ox] + sums[2 * ox + 1] + sums[2 * ox + 2]) / 9.0;
-                }
-            }
-        });
-    }
-    Tensor::from_data(TensorData::new(out, [n, c, ho, wo]), &device)
 }
 
 #[cfg(test)]

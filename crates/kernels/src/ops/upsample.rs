@@ -2,18 +2,18 @@
 //!
 //! Design decision: burn's operations are the reference and run wherever the host kernels do not
 //! (the GPU, `stock` settings); the CPU (the dispatch's host path) takes a host pass instead
-//! ([`crate::host::upsample`]; in training with its own backward, [`crate::autodiff::upsample`]),
+//! (`crate::host::upsample`; in training with its own backward, `crate::autodiff::upsample`),
 //! one parallel sweep that computes each coarse pixel's softmax weights once and writes its
-//! `factor x factor` block of every channel. The stock composition (softmax over a reshaped mask, `unfold`, a broadcast
-//! product, a sum and a permute) ran mostly on one core: 35-90 ms of a 384x448 pass on the
-//! Xeon, as much as one update iteration.
+//! `factor x factor` block of every channel. The stock composition (softmax over a reshaped
+//! mask, `unfold`, a broadcast product, a sum and a permute) is several passes that burn's CPU
+//! backend runs mostly on one core.
 
 use burn::tensor::Tensor;
 use burn::tensor::activation::softmax;
 use burn::tensor::module::unfold4d;
 use burn::tensor::ops::UnfoldOptions;
 
-use crate::dispatch::{Op, Path, path};
+use crate::dispatch::{Op, PlainCall, Plan, plan};
 use crate::host::upsample::convex_upsample_host;
 
 /// Upsamples `[N, D, H, W]` by `factor` as a convex combination of each coarse pixel's 3x3
@@ -24,12 +24,12 @@ use crate::host::upsample::convex_upsample_host;
 /// # Shapes
 /// - `flow`: `[N, D, H, W]`, `mask`: `[N, 9·factor², H, W]`; output `[N, D, factor·H, factor·W]`
 pub fn convex_upsample(flow: Tensor<4>, mask: Tensor<4>, factor: usize) -> Tensor<4> {
-    let device = flow.device();
-    match (path(&device, Op::Upsample), path(&mask.device(), Op::Upsample)) {
-        (Path::Host, Path::Host) if device.is_autodiff() => {
+    let call = PlainCall(Op::Upsample);
+    match (plan(&flow.device(), &call), plan(&mask.device(), &call)) {
+        (Plan::HostTraining(()), Plan::HostTraining(())) => {
             crate::autodiff::upsample::convex_upsample(flow, mask, factor)
         }
-        (Path::Host, Path::Host) => convex_upsample_host(flow, mask, factor),
+        (Plan::HostInference(()), Plan::HostInference(())) => convex_upsample_host(flow, mask, factor),
         _ => convex_upsample_stock(flow, mask, factor),
     }
 }
@@ -52,7 +52,7 @@ mod tests {
     use dgstereo_core::tensor::{max_abs_diff, to_vec};
 
     use super::*;
-    use crate::dispatch::with_path;
+    use crate::dispatch::{Path, with_path};
 
     /// The host pass against burn's composition, two images, two channels, a mask with large
     /// logits, factors 2 and 4, grids down to one pixel (every tap of the border padding).

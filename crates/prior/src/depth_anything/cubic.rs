@@ -6,7 +6,7 @@
 //! `scale_factor` uses `1 / scale_factor`, which is what DINOv2's position-embedding trick relies
 //! on (the `+0.1` makes the output size round down to the patch grid while the ratio stays
 //! `sqrt(N) / (grid + 0.1)`). The resize is separable, so it is written as two products with fixed
-//! `n_out x n_in` matrices, like [`dgstereo_kernels::ops::resample::resize_bilinear`].
+//! `n_out x n_in` matrices, like [`dgstereo_kernels::resize_bilinear`].
 
 use burn::tensor::{Device, Tensor, TensorData};
 

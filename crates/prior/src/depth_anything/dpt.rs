@@ -17,7 +17,7 @@ use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfi
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 use dgstereo_kernels::resize_bilinear;
-use dgstereo_kernels::{conv2d_forward, conv2d_relu_forward};
+use dgstereo_kernels::{Numerics, conv2d_forward, conv2d_relu_forward};
 
 use super::dinov2::{IntermediateLayer, PATCH_SIZE};
 
@@ -55,7 +55,11 @@ impl ResidualConvUnit {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = conv2d_forward(&self.conv2, conv2d_relu_forward(&self.conv1, relu(x.clone())));
+        let y = conv2d_forward(
+            &self.conv2,
+            conv2d_relu_forward(&self.conv1, relu(x.clone()), Numerics::Sensitive),
+            Numerics::Sensitive,
+        );
         y + x
     }
 }
@@ -92,7 +96,7 @@ impl FeatureFusionBlock {
         let x = self.res_conf_unit2.forward(x);
         let [_, _, h, w] = x.dims();
         let x = resize_bilinear(x, size.unwrap_or([2 * h, 2 * w]), true);
-        conv2d_forward(&self.out_conv, x)
+        conv2d_forward(&self.out_conv, x, Numerics::Sensitive)
     }
 }
 
@@ -177,15 +181,19 @@ impl DptHead {
             .map(|(layer, project)| {
                 let [b, n, c] = layer.tokens.dims();
                 assert_eq!(n, h * w, "token count {n} does not match the {h}x{w} patch grid");
-                conv2d_forward(project, layer.tokens.clone().swap_dims(1, 2).reshape([b, c, h, w]))
+                conv2d_forward(project, layer.tokens.clone().swap_dims(1, 2).reshape([b, c, h, w]), Numerics::Sensitive)
             })
             .collect();
         let [l1, l2, l3, l4]: [Tensor<4>; 4] = maps.try_into().expect("four maps");
         let s = &self.scratch;
-        let l1 = conv2d_forward(&s.layer1_rn, self.upsample_4x.forward(l1));
-        let l2 = conv2d_forward(&s.layer2_rn, self.upsample_2x.forward(l2));
-        let l3 = conv2d_forward(&s.layer3_rn, l3);
-        let l4 = conv2d_forward(&s.layer4_rn, conv2d_forward(&self.downsample_2x, l4));
+        let l1 = conv2d_forward(&s.layer1_rn, self.upsample_4x.forward(l1), Numerics::Sensitive);
+        let l2 = conv2d_forward(&s.layer2_rn, self.upsample_2x.forward(l2), Numerics::Sensitive);
+        let l3 = conv2d_forward(&s.layer3_rn, l3, Numerics::Sensitive);
+        let l4 = conv2d_forward(
+            &s.layer4_rn,
+            conv2d_forward(&self.downsample_2x, l4, Numerics::Sensitive),
+            Numerics::Sensitive,
+        );
         let size = |t: &Tensor<4>| {
             let [_, _, th, tw] = t.dims();
             [th, tw]
@@ -194,9 +202,9 @@ impl DptHead {
         let path = s.refinenet3.forward(path, Some(l3.clone()), Some(size(&l2)));
         let path = s.refinenet2.forward(path, Some(l2.clone()), Some(size(&l1)));
         let path = s.refinenet1.forward(path, Some(l1), None);
-        let out = conv2d_forward(&s.output_conv1, path);
+        let out = conv2d_forward(&s.output_conv1, path, Numerics::Sensitive);
         let out = resize_bilinear(out, [h * PATCH_SIZE, w * PATCH_SIZE], true);
-        let out = conv2d_relu_forward(&s.output_conv2_hidden, out);
-        conv2d_relu_forward(&s.output_conv2_out, out)
+        let out = conv2d_relu_forward(&s.output_conv2_hidden, out, Numerics::Sensitive);
+        conv2d_relu_forward(&s.output_conv2_out, out, Numerics::Sensitive)
     }
 }

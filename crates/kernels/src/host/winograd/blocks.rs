@@ -39,7 +39,6 @@ use super::simd::{self, Simd};
 use super::transforms::*;
 use super::weight_cache::transformed_weights;
 use crate::geometry::Epilogue;
-use crate::settings::settings;
 
 /// Tiles per block: the vectors of the transforms and the kernel's columns, three AVX-512 vectors
 /// a kernel step (48 beat 32 on the AMD EPYC; docs/performance.md).
@@ -58,21 +57,13 @@ const ROWS: usize = 8;
 /// Positions of the transformed tile, α² of F(4x4).
 const K2: usize = 36;
 
-/// The largest `C·O` the blocks take: they beat the bands on the encoders' 64- to 128-channel
-/// layers and the flow and mask heads' 128->256 first layers, and lose on the GRUs' 384->128
-/// (figures in docs/performance.md, "Blocked Winograd").
-const MAX_CHANNEL_PRODUCT: usize = 128 * 256;
-
-/// The instruction set for the blocked path to take an F(4x4) convolution of `c` input and
-/// `o` output channels: AVX-512 where the processor has it and `C·O` is at most
-/// [`MAX_CHANNEL_PRODUCT`]; `None` (the band path) otherwise, or where the settings say
-/// `no-winograd-blocks`.
-pub(crate) fn instruction_set(c: usize, o: usize) -> Option<Isa> {
-    Isa::detect().filter(|_| settings().winograd_blocks && c * o <= MAX_CHANNEL_PRODUCT)
+/// Whether the processor runs the blocked path (AVX-512 with FMA).
+pub(crate) fn available() -> bool {
+    Isa::detect().is_some()
 }
 
-/// `conv` by F(4x4, 3x3) in cache-resident blocks of tiles, compiled for `isa` (from
-/// [`instruction_set`]); the same contract as `winograd_conv`.
+/// `conv` by F(4x4, 3x3) in cache-resident blocks of tiles, compiled for `isa`; the same
+/// contract as `winograd_conv`.
 pub(crate) fn blocked_conv(isa: Isa, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
     let &Conv3x3 { x, x_dims, wt, o, bias, padding, epilogue } = conv;
     let c = conv.channels();
@@ -128,7 +119,7 @@ pub(crate) enum Isa {
 
 impl Isa {
     /// The set the processor runs that the blocked path uses, if any.
-    fn detect() -> Option<Self> {
+    pub(crate) fn detect() -> Option<Self> {
         #[cfg(target_arch = "x86_64")]
         if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("fma") {
             return Some(Self::Avx512);

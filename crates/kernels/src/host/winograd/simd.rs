@@ -29,7 +29,7 @@ pub(super) trait Simd: Copy {
     /// The four phases of `4·WIDTH` values: `phases[j]` lane `l` is `src[4·l + j]`.
     fn deinterleave4(src: &[f32]) -> [Self; 4];
     /// The inverse of [`Simd::deinterleave4`]: writes `dst[4·l + j] = phases[j]` lane `l`, all
-    /// `4·WIDTH` values (into an output not yet written, [`crate::tensor::unwritten`]).
+    /// `4·WIDTH` values (into an output not yet written, `dgstereo_core::tensor::unwritten`).
     fn interleave4(phases: [Self; 4], dst: &mut [MaybeUninit<f32>]);
 }
 

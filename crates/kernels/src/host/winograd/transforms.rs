@@ -8,46 +8,15 @@ use burn::tensor::ops::ConvOptions;
 use dgstereo_core::tensor::{reuse_buffer, unwritten, written, zeros_parallel};
 use rayon::prelude::*;
 
+use crate::algorithm::WinogradTile;
 use crate::geometry::{Epilogue, band_jobs, conv_output_size};
 
-/// Fewest input and output channels for which the Winograd path pays. Measured with F(2x2)
-/// against the im2col path at 96x112 (time im2col / time Winograd, two runs): C = O = 8: 0.75
-/// to 0.8, 16: 0.9, 32: 1.0 to 1.2; C = 2 or 4, O = 64: 0.3 to 0.5; C = 256, O = 2: 1.05.
-pub(crate) const MIN_CHANNELS: usize = 32;
-
-/// Fewest 2x2 tiles (over the batch) for which the Winograd path pays: the weight transform and
-/// the per-band products' fixed costs need enough tiles. Measured with F(2x2): C = O = 64 at
-/// 4x4 (4 tiles): 0.4 to 0.5; C = O = 128 at 6x7 (12 tiles): 0.5; C = O = 64 at 12x14 (42
-/// tiles): 0.8 to 1.1; C = 384, O = 128 at 24x28 (168 tiles): 1.0 to 1.4.
-pub(crate) const MIN_TILES: usize = 64;
-
-/// Fewest 4x4 tiles (over the batch) for F(4x4) rather than F(2x2): its weight transform is
-/// 2.25x larger and its bands coarser. Measured (F(2x2) ms / F(4x4) ms, two runs, shared load):
-/// C=384, O=128 at 12x14 (12 tiles): 0.2 to 0.4; 24x28 (42): 0.65 to 1.1; 48x56 (168): 1.05 to
-/// 1.7; C = O = 64 at 32x64 (128): 0.8 to 1.35; C = O = 96 at 24x24 (36): 0.55 to 0.75.
-pub(crate) const MIN_F4_TILES: usize = 128;
-
-/// The Winograd variant for a convolution of an `x_dims = [N, C, H, W]` input with an
-/// `w_dims = [O, C, kh, kw]` weight, `None` where the im2col path should run: 3x3, stride 1,
-/// dilation 1, groups 1, at least [`MIN_CHANNELS`] input and output channels and [`MIN_TILES`]
-/// 2x2 output tiles; F(4x4) from [`MIN_F4_TILES`] 4x4 tiles.
-pub(crate) fn winograd_variant(
-    x_dims: [usize; 4],
-    w_dims: [usize; 4],
-    options: &ConvOptions<2>,
-) -> Option<&'static Variant> {
-    let [n, c, h, w] = x_dims;
-    let [o, _, kh, kw] = w_dims;
-    let [(ph, ph_end), (pw, pw_end)] = options.padding;
-    let (out_h, out_w) = ((h + ph + ph_end).saturating_sub(2), (w + pw + pw_end).saturating_sub(2));
-    let tiles = |m: usize| out_h.div_ceil(m) * out_w.div_ceil(m);
-    let suits = [kh, kw] == [3, 3]
-        && options.stride == [1, 1]
-        && options.dilation == [1, 1]
-        && options.groups == 1
-        && c.min(o) >= MIN_CHANNELS
-        && n * tiles(2) >= MIN_TILES;
-    suits.then_some(if n * tiles(4) >= MIN_F4_TILES { &F4 } else { &F2 })
+/// The variant of a tile the dispatch chose.
+pub(crate) fn variant(tile: WinogradTile) -> &'static Variant {
+    match tile {
+        WinogradTile::F2 => &F2,
+        WinogradTile::F4 => &F4,
+    }
 }
 
 /// A Winograd variant F(m x m, 3 x 3): m x m output tiles from α x α input tiles (α = m + 2)

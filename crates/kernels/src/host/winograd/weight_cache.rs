@@ -20,7 +20,6 @@
 use std::sync::{Arc, Mutex};
 
 use super::transforms::{Variant, transform_weights};
-use crate::autodiff::winograd_region::WinogradForward;
 
 /// Bytes of transformed and raw weights the process-wide cache keeps: the update loop of the
 /// default RAFT-Stereo needs ~65 MB (the GRU pairs at 1/4 and 1/8 with F(4x4) 20 MB each and
@@ -131,25 +130,20 @@ pub(crate) fn transformed_weights(variant: &Variant, wt: &[f32], o: usize, c: us
     WeightCache::get(&CACHE, variant, wt, o, c)
 }
 
-/// A running update loop, held by the model around its iterations. While alive:
-/// - the host Winograd convolutions keep the weights they transform for the next call with the
-///   same weights (see the module's doc), freed when the last guard drops; this never changes
-///   results;
-/// - the training forward takes Winograd for every layer that suits it (a
-///   [`WinogradForward`] region): the update block's heads feed no instance norm that would
-///   magnify the rounding (the official training step's check passes either way, its update
-///   agreement 93.13 -> 93.34 %).
-#[must_use = "the loop's kernels apply only while the guard is alive"]
+/// A running update loop, held by the model around its iterations: while alive, the host
+/// Winograd convolutions keep the weights they transform for the next call with the same weights
+/// (see the module's doc), freed when the last guard drops. This never changes results (the
+/// numerics of the loop's convolutions are their calls' [`crate::Numerics`]).
+#[must_use = "the loop's weights are kept only while the guard is alive"]
 pub struct UpdateLoop {
-    _winograd: WinogradForward,
+    _scope: (),
 }
 
 impl UpdateLoop {
-    /// Opens a scope of the process-wide cache and a Winograd region: the loop begins, on the
-    /// calling thread (the guard stays on it: not `Send`).
+    /// Opens a scope of the process-wide cache: the loop begins.
     pub fn new() -> Self {
         WeightCache::open(&CACHE);
-        Self { _winograd: WinogradForward::new() }
+        Self { _scope: () }
     }
 }
 

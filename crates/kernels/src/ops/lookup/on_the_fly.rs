@@ -4,9 +4,9 @@ use burn::tensor::module::avg_pool2d;
 use burn::tensor::ops::AvgPoolOptions;
 use burn::tensor::{Device, Tensor, TensorData};
 
-use super::taps::{interpolate_taps, taps};
-use crate::dispatch::{Op, Path, path};
+use crate::dispatch::{Op, Path, PlainCall, Plan, plan};
 use crate::host::on_the_fly_lookup::{self, ChannelLastFeatures};
+use crate::taps::{interpolate_taps, taps};
 
 #[derive(Debug, Clone)]
 enum Storage {
@@ -22,7 +22,7 @@ enum Storage {
 /// Pooling the volume along `x2` equals correlating with right features pooled along `x`
 /// (the dot product is linear), so the pyramid levels come from pooled `f2`. Memory is
 /// `O(C·H·W)` instead of `O(H·W²)`; each lookup costs `O(levels·r·C·H·W)`. On the CPU without
-/// autodiff the features live on the host and [`crate::host::on_the_fly_lookup`] looks them up
+/// autodiff the features live on the host and `crate::host::on_the_fly_lookup` looks them up
 /// ([`Path::Host`]); elsewhere the tensor-op lookup below runs.
 ///
 /// # Shapes
@@ -41,8 +41,8 @@ impl OnTheFlyCorrelation {
     /// where the dispatch's path looks it up (host buffers or burn tensors).
     pub fn new(fmap1: Tensor<4>, fmap2: Tensor<4>, levels: usize, radius: usize) -> Self {
         let dims = fmap1.dims();
-        let storage = match path(&fmap1.device(), Op::Lookup) {
-            Path::Gpu | Path::Stock => {
+        let storage = match plan(&fmap1.device(), &PlainCall(Op::Lookup)) {
+            Plan::Gpu(()) | Plan::HostTraining(()) | Plan::Stock => {
                 let mut pooled = vec![fmap2];
                 for _ in 1..levels {
                     let last = pooled.last().expect("level 0").clone();
@@ -56,7 +56,7 @@ impl OnTheFlyCorrelation {
                 }
                 Storage::Tensors { fmap1, pooled }
             }
-            Path::Host => {
+            Plan::HostInference(()) => {
                 let device = fmap1.device();
                 let fmap2_dims = fmap2.dims();
                 let mut pooled = vec![ChannelLastFeatures::from_channel_first(&host_values(fmap2), fmap2_dims)];

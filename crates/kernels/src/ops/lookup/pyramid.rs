@@ -2,10 +2,10 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 
-use super::taps::{interpolate_taps, taps};
-use crate::dispatch::{Op, Path, path};
+use crate::dispatch::{Op, Path, PlainCall, Plan, plan};
 use crate::gpu::gathered_lookup::GatheredLevels;
 use crate::host::pyramid_lookup::{self, HostLevel};
+use crate::taps::{interpolate_taps, taps};
 
 #[derive(Debug, Clone)]
 enum Storage {
@@ -45,21 +45,21 @@ impl CorrelationPyramid {
         let device = fmap1.device();
         let corr = all_pairs(fmap1, fmap2).reshape([n * h * w1, w2]);
         let rows = n * h * w1;
-        let pyramid = match path(&device, Op::Lookup) {
-            Path::Gpu | Path::Stock => {
+        let pyramid = match plan(&device, &PlainCall(Op::Lookup)) {
+            plan @ (Plan::Gpu(()) | Plan::HostTraining(()) | Plan::Stock) => {
                 let mut pyramid = vec![corr];
                 for _ in 0..levels {
                     let last = pyramid.last().expect("level 0").clone();
                     pyramid.push(pool_pairs(last));
                 }
-                if path(&device, Op::Lookup) == Path::Gpu {
+                if plan == Plan::Gpu(()) {
                     let gathered = Box::new(GatheredLevels::new(&pyramid[..levels], radius));
                     Storage::Gathered(pyramid, gathered)
                 } else {
                     Storage::Tensors(pyramid)
                 }
             }
-            Path::Host => {
+            Plan::HostInference(()) => {
                 let values = corr.into_data().convert::<f32>().try_into_vec::<f32>().expect("float correlation");
                 let mut host = vec![HostLevel { values: values.into(), width: w2 }];
                 for _ in 0..levels {

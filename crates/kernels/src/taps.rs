@@ -1,4 +1,5 @@
-//! Linear sampling along a row with zero padding, the 1-D `grid_sample` of the reference.
+//! Linear sampling along a row with zero padding, the 1-D `grid_sample` of the reference: the
+//! taps the stock lookups and the GPU's gathered lookup share.
 
 use burn::tensor::{DType, Device, FloatDType, Int, Tensor, TensorData};
 use dgstereo_core::tensor::cast_float;

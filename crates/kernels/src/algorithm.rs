@@ -1,0 +1,58 @@
+//! The algorithms a plan of the dispatch names, as the kernels that carry them out take them.
+//!
+//! The dispatch (`crate::dispatch`) chooses them; the host kernels and the training nodes only
+//! read them. They live below both, so neither layer imports the other.
+
+/// Winograd's output tile.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) enum WinogradTile {
+    /// F(2x2, 3x3).
+    F2,
+    /// F(4x4, 3x3).
+    F4,
+}
+
+/// How the host convolution computes one convolution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) enum ConvAlgorithm {
+    /// Winograd with `tile`, in cache-resident blocks of tiles (AVX-512) when `blocks`, else in
+    /// bands of tile rows.
+    Winograd {
+        /// The output tile.
+        tile: WinogradTile,
+        /// Blocks rather than bands.
+        blocks: bool,
+    },
+    /// The product first over the unshifted input, then shifted sums (few outputs).
+    FewOutputs,
+    /// im2col tiles and the `gemm` crate.
+    Im2col,
+}
+
+/// The training node's algorithms: its forward's, its input gradient's (a host convolution of
+/// the output gradient; `None`: burn's transposed convolution) and its weight gradient's
+/// (Winograd's transforms with a tile, or `None`: the products with the forward's columns).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) struct ConvTraining {
+    /// The forward.
+    pub(crate) forward: ConvAlgorithm,
+    /// The input gradient's host convolution.
+    pub(crate) input_grad: Option<ConvAlgorithm>,
+    /// The weight gradient's Winograd tile.
+    pub(crate) weight_grad: Option<WinogradTile>,
+}
+
+/// The fused host ConvGRU step's convolutions: both by Winograd with the candidate's `x`
+/// channels transformed once (`shared`), or each by its own algorithm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) enum GruAlgorithm {
+    /// Both convolutions by Winograd with this tile, sharing the `x` channels' transforms.
+    Shared(WinogradTile),
+    /// The gates' and the candidate's convolutions each by its own algorithm.
+    Separate {
+        /// `[convz, convr]` fused.
+        gates: ConvAlgorithm,
+        /// `convq`.
+        candidate: ConvAlgorithm,
+    },
+}
