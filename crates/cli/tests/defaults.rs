@@ -131,7 +131,7 @@ fn small_pairs_are_upscaled_for_the_eighth_resolution_default() {
     // A lower bound above the cap is refused before any work, naming both.
     let o = dgstereo(&[&pair[..], &["--min-size", "300", "--max-size", "200"]].concat());
     assert!(!o.status.success());
-    assert!(text(&o).contains("--min-size 300 is larger than --max-size 200"), "{}", text(&o));
+    assert!(text(&o).contains("--min-size: 300 is larger than --max-size 200"), "{}", text(&o));
 }
 
 #[test]
