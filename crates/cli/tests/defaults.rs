@@ -178,7 +178,7 @@ fn the_left_right_check_fills_what_the_right_view_cannot_see() {
     // Wrong uses are refused before any pair runs.
     for (args, message) in [
         (&["--save", "rejected"][..], "--save rejected writes the pixels the left-right check replaced"),
-        (&["--lr-check", "0"][..], "--lr-check 0: the threshold must be a positive number"),
+        (&["--lr-check", "0"][..], "--lr-check: 0: the threshold must be a positive number"),
     ] {
         let o = infer_cones(args);
         assert!(!o.status.success());
