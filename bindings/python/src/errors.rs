@@ -3,11 +3,12 @@
 //! The classes live in the pure-Python layer (`dgstereo/errors.py`): [`Error`] derives from
 //! `Exception`, `InputError` also from `ValueError` (bad arrays and options) and `FileError`
 //! also from `OSError` (files that cannot be read, written or parsed). Which one an error
-//! becomes follows its cause chain: a [`dgstereo_core::Error`] of a file or a `std::io::Error`
-//! makes a `FileError`; the caller names the kind of the rest.
+//! becomes follows the library's [`Error`]: a file's error (`Io`, `Format`, `Checkpoint`) makes
+//! a `FileError`; the caller names the kind of the rest.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
+use dgstereo_core::Error;
 use pyo3::prelude::*;
 
 /// The exception class an error becomes.
@@ -52,35 +53,25 @@ pub fn input(message: impl Into<String>) -> PyErr {
     raise(Kind::Input, message)
 }
 
-/// Whether a cause of `e` is a file that could not be read, written or parsed.
-fn is_file_error(e: &anyhow::Error) -> bool {
-    e.chain().any(|cause| {
-        cause.downcast_ref::<std::io::Error>().is_some()
-            || matches!(
-                cause.downcast_ref::<dgstereo_core::Error>(),
-                Some(
-                    dgstereo_core::Error::Io { .. }
-                        | dgstereo_core::Error::Format { .. }
-                        | dgstereo_core::Error::Checkpoint { .. }
-                )
-            )
-    })
+/// Whether `e` is about a file that could not be read, written or parsed.
+fn is_file_error(e: &Error) -> bool {
+    matches!(e, Error::Io { .. } | Error::Format { .. } | Error::Checkpoint { .. })
 }
 
 /// `e` as an exception: a `FileError` when a file is at fault, else of class `kind`.
-pub fn convert(e: anyhow::Error, kind: Kind) -> PyErr {
+pub fn convert(e: Error, kind: Kind) -> PyErr {
     let kind = if is_file_error(&e) { Kind::File } else { kind };
     raise(kind, dgstereo_inference::error_chain(&e))
 }
 
 /// A library result as a Python one (see [`convert`]).
-pub fn from_library<T>(result: anyhow::Result<T>, kind: Kind) -> PyResult<T> {
+pub fn from_library<T>(result: Result<T, Error>, kind: Kind) -> PyResult<T> {
     result.map_err(|e| convert(e, kind))
 }
 
 /// Runs `f`, turning a panic into a `dgstereo.Error` ("internal error: ...") instead of letting
 /// it cross into the interpreter.
-pub fn guarded<T>(f: impl FnOnce() -> anyhow::Result<T>) -> anyhow::Result<T> {
+pub fn guarded<T>(f: impl FnOnce() -> Result<T, Error>) -> Result<T, Error> {
     match catch_unwind(AssertUnwindSafe(f)) {
         Ok(result) => result,
         Err(panic) => {
@@ -89,7 +80,7 @@ pub fn guarded<T>(f: impl FnOnce() -> anyhow::Result<T>) -> anyhow::Result<T> {
                 .cloned()
                 .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
                 .unwrap_or_else(|| "unknown panic".into());
-            Err(anyhow::anyhow!("internal error: {message}"))
+            Err(Error::Other(format!("internal error: {message}")))
         }
     }
 }

@@ -26,7 +26,7 @@ pub fn metrics<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let (p, g) = (arrays::map(pred, "pred")?, arrays::map(gt, "gt")?);
     let m = mask.map(|m| arrays::mask(m, "mask")).transpose()?;
-    let result = evaluate(&p, &g, m.as_ref(), ValidOptions { max_disp }).map_err(anyhow::Error::from);
+    let result = evaluate(&p, &g, m.as_ref(), ValidOptions { max_disp });
     let values = from_library(result, Kind::Input)?;
     let out = PyDict::new(py);
     for (name, v) in METRIC_NAMES.iter().zip(values.values()) {
@@ -77,7 +77,7 @@ pub fn depth<'py>(
 /// Reads a PFM file (see `dgstereo.read_pfm`).
 #[pyfunction]
 pub fn read_pfm<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>> {
-    let pfm = from_library(read_pfm_file(&path).map_err(anyhow::Error::from), Kind::File)?;
+    let pfm = from_library(read_pfm_file(&path), Kind::File)?;
     if pfm.channels == 1 {
         let map = dgstereo_data::DisparityMap { width: pfm.width, height: pfm.height, data: pfm.data };
         return Ok(arrays::map_to_array(py, map)?.into_any());
@@ -103,12 +103,12 @@ pub fn write_pfm(path: PathBuf, array: &Bound<'_, PyAny>) -> PyResult<()> {
         }
         Err(_) => return Err(input("`array`: expected a float32 NumPy array")),
     };
-    from_library(write_pfm_file(&path, &pfm, Endian::Little).map_err(anyhow::Error::from), Kind::File)
+    from_library(write_pfm_file(&path, &pfm, Endian::Little), Kind::File)
 }
 
 /// Reads an image file as `HxWx3` `float32` in 0..255 (see `dgstereo.read_image`).
 #[pyfunction]
 pub fn read_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>> {
-    let img = from_library(dgstereo_data::load_rgb(&path).map_err(anyhow::Error::from), Kind::File)?;
+    let img = from_library(dgstereo_data::load_rgb(&path), Kind::File)?;
     Ok(arrays::image_to_array(py, &img)?.into_any())
 }

@@ -1,14 +1,17 @@
-//! The model options shared by `infer`, `eval` and `demo` ([`ModelArgs`]) and the [`Engine`]
-//! they build: the inference crate's engine with the options the command line chose.
+//! The model options shared by `infer`, `eval` and `demo` ([`ModelArgs`]) and what they build
+//! ([`load_engine`]): the inference crate's [`Engine`] and the [`PredictOptions`] the command
+//! line chose, which each command passes to [`Engine::predict`].
 //!
 //! The flags map one to one onto [`EngineConfig`] and [`PredictOptions`]; an experiment file
 //! (`--experiment`, `--run`) gives the model and prior configurations, and `--prior` /
-//! `--prior-weights` override its prior. The library's errors name option fields
-//! (`` `min_size` ``); [`flag_names`] turns them into the flags that set them (`--min-size`).
+//! `--prior-weights` override its prior. The library's errors name option fields (an invalid
+//! option is a configuration error keyed by its field, `min_size`); [`with_flags`] names the
+//! flag that sets it instead (`--min-size`), from one explicit table of fields and flags.
 //!
 //! Design decision: every whole-run problem (weights that do not load or do not match the
-//! experiment, a prior that cannot be built, a device that does not exist) is found here, once,
-//! before any pair is read, so `infer` can fail fast on those and keep going on per-pair ones.
+//! experiment, a prior that cannot be built, a device that does not exist) is found by
+//! [`load_engine`], once, before any pair is read, so `infer` can fail fast on those and keep
+//! going on per-pair ones.
 
 use std::path::PathBuf;
 
@@ -16,8 +19,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 use dgstereo_core::DeviceChoice;
 use dgstereo_core::device::Precision;
-use dgstereo_data::{DisparityMap, RgbImage};
-use dgstereo_inference::{CorrChoice, EngineConfig, MinSize, PredictOptions, RunInfo, experiment_configs, parse_prior};
+use dgstereo_inference::{CorrChoice, Engine, EngineConfig, MinSize, PredictOptions, experiment_configs, parse_prior};
 use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig};
 
 /// The threshold of `--lr-check` given without a value, in pixels
@@ -103,7 +105,7 @@ impl ModelArgs {
 /// An error and its causes on one line ([`dgstereo_inference::error_chain`]), line breaks
 /// included.
 pub fn error_line(e: &anyhow::Error) -> String {
-    dgstereo_inference::error_chain(e).replace(['\n', '\r'], " ")
+    dgstereo_inference::error_chain(e.as_ref()).replace(['\n', '\r'], " ")
 }
 
 /// Parses a byte size: a number with an optional `B`, `KB`/`KiB`, `MB`/`MiB`, `GB`/`GiB`, `TB`/`TiB`.
@@ -145,7 +147,8 @@ fn with_prior_weights(config: PriorConfig, weights: &std::path::Path) -> PriorCo
     }
 }
 
-/// The option fields the library's errors name, and the flags that set them.
+/// The option fields the library's errors name, and the flags that set them, written out one
+/// by one (a flag is not always its field's name: `run` is set by `--run NAME`).
 const FLAGS: [(&str, &str); 11] = [
     ("iters", "--iters"),
     ("run", "--run NAME"),
@@ -160,89 +163,90 @@ const FLAGS: [(&str, &str); 11] = [
     ("precision", "--precision"),
 ];
 
-/// `message` with each option field the library names (`` `min_size` ``) written as the flag
-/// that sets it (`--min-size`).
-pub fn flag_names(message: &str) -> String {
-    FLAGS.iter().fold(message.to_string(), |m, (field, flag)| m.replace(&format!("`{field}`"), flag))
+/// The flag that sets the option field `field`.
+fn flag(field: &str) -> Option<&'static str> {
+    FLAGS.iter().find(|(f, _)| *f == field).map(|(_, flag)| *flag)
 }
 
-/// A library error on one line, its option fields written as flags.
-fn with_flags(e: anyhow::Error) -> anyhow::Error {
-    anyhow::anyhow!(flag_names(&error_line(&e)))
+/// `text` with each option field it quotes (`` `min_size` ``) written as the flag that sets it
+/// (`--min-size`).
+pub fn flag_names(text: &str) -> String {
+    FLAGS.iter().fold(text.to_string(), |m, (field, flag)| m.replace(&format!("`{field}`"), flag))
 }
 
-/// A loaded model with the per-pair options of the command line.
-pub struct Engine {
-    inner: dgstereo_inference::Engine,
-    options: PredictOptions,
-    /// Pairs whose longer side is under this are upscaled to it (`--min-size`, resolved).
-    pub min_size: Option<usize>,
-    /// The weights file.
-    pub weights: PathBuf,
-    /// Update iterations per pair.
-    pub iters: usize,
-    /// The model configuration chosen, on one line, with where it came from.
-    pub configuration: String,
+/// The option field and the reason of a library configuration error
+/// ([`dgstereo_core::Error::config`] writes them as `field: reason`).
+fn config_field(e: &dgstereo_core::Error) -> Option<(&str, &str)> {
+    match e {
+        dgstereo_core::Error::Config(message) => message.split_once(": "),
+        _ => None,
+    }
 }
 
-impl Engine {
-    /// Loads the weights (into the experiment's model when given) and builds the prior.
-    pub fn new(a: &ModelArgs) -> anyhow::Result<Self> {
-        let options = PredictOptions {
-            iters: a.iters.unwrap_or(DEFAULT_ITERS),
-            max_size: a.max_size,
-            min_size: a.min_size,
-            corr: a.corr,
-            lr_check: a.lr_check,
-            ..PredictOptions::default()
-        };
-        // Checked before the weights load.
-        options.validate().map_err(with_flags)?;
-        let options = PredictOptions { memory_budget: parse_bytes(&a.memory_budget)?, ..options };
-        let device: DeviceChoice = a.device.parse()?;
-        let (model, experiment_prior) = match &a.experiment {
-            Some(p) => {
-                let (m, pr) = experiment_configs(p, a.run.as_deref()).map_err(with_flags)?;
-                (Some(m), pr)
-            }
-            None => (None, PriorConfig::None),
-        };
-        let prior = match (&a.prior, &a.prior_weights) {
-            (Some(spec), _) => parse_prior(spec).map_err(with_flags)?,
-            (None, Some(w)) => with_prior_weights(experiment_prior, w),
-            (None, None) => experiment_prior,
-        };
-        let config = EngineConfig {
-            weights: a.weights.clone(),
-            model,
-            prior,
-            device,
-            precision: a.precision,
-            slow_fast_gru: a.slow_fast_gru,
-        };
-        let inner = dgstereo_inference::Engine::load(&config).map_err(|e| match &a.experiment {
-            Some(experiment) => with_flags(e.context(experiment.display().to_string())),
-            None => with_flags(e),
-        })?;
-        for note in inner.notes() {
-            eprintln!("note: {}", flag_names(note));
+/// A library error on one line as the command line says it: an invalid option names the flag
+/// that sets it (`--min-size: ...`), and every option field quoted in the message is written as
+/// its flag.
+pub fn with_flags(e: dgstereo_core::Error) -> anyhow::Error {
+    let line = match config_field(&e).and_then(|(field, reason)| Some((flag(field)?, reason))) {
+        Some((flag, reason)) => format!("{flag}: {reason}"),
+        None => dgstereo_inference::error_chain(&e),
+    };
+    anyhow::anyhow!(flag_names(&line).replace(['\n', '\r'], " "))
+}
+
+/// The inference crate's [`Engine`] the model flags describe, and the per-pair options they
+/// chose (iterations resolved: `--iters`, else a `.pth` checkpoint's preset, else
+/// [`DEFAULT_ITERS`]).
+pub fn load_engine(a: &ModelArgs) -> anyhow::Result<(Engine, PredictOptions)> {
+    let options = PredictOptions {
+        iters: a.iters.unwrap_or(DEFAULT_ITERS),
+        max_size: a.max_size,
+        min_size: a.min_size,
+        corr: a.corr,
+        lr_check: a.lr_check,
+        ..PredictOptions::default()
+    };
+    // Checked before the weights load.
+    options.validate().map_err(with_flags)?;
+    let options = PredictOptions { memory_budget: parse_bytes(&a.memory_budget)?, ..options };
+    let device: DeviceChoice = a.device.parse()?;
+    let (model, experiment_prior) = match &a.experiment {
+        Some(p) => {
+            let (m, pr) = experiment_configs(p, a.run.as_deref()).map_err(with_flags)?;
+            (Some(m), pr)
         }
-        let iters = a.iters.or(inner.preset_iters()).unwrap_or(DEFAULT_ITERS);
-        let options = PredictOptions { iters, ..options };
-        inner.check(&options).map_err(with_flags)?;
-        let min_size = inner.min_size(&options);
-        let weights = inner.weights().to_path_buf();
-        let configuration =
-            format!("{}, {iters} iterations ({})", inner.configuration_summary(), inner.configuration_source());
-        Ok(Self { inner, options, min_size, weights, iters, configuration })
+        None => (None, PriorConfig::None),
+    };
+    let prior = match (&a.prior, &a.prior_weights) {
+        (Some(spec), _) => parse_prior(spec).map_err(with_flags)?,
+        (None, Some(w)) => with_prior_weights(experiment_prior, w),
+        (None, None) => experiment_prior,
+    };
+    let config = EngineConfig {
+        weights: a.weights.clone(),
+        model,
+        prior,
+        device,
+        precision: a.precision,
+        slow_fast_gru: a.slow_fast_gru,
+    };
+    let engine = Engine::load(&config).map_err(|e| match &a.experiment {
+        Some(experiment) => with_flags(e).context(experiment.display().to_string()),
+        None => with_flags(e),
+    })?;
+    for note in engine.notes() {
+        eprintln!("note: {}", flag_names(note));
     }
+    let iters = a.iters.or(engine.preset_iters()).unwrap_or(DEFAULT_ITERS);
+    let options = PredictOptions { iters, ..options };
+    engine.check(&options).map_err(with_flags)?;
+    Ok((engine, options))
+}
 
-    /// The disparity of a rectified pair at the left image's size (with `--lr-check`, the pixels
-    /// the right view does not confirm filled, and named in [`RunInfo::rejected`]).
-    pub fn disparity(&self, left: &RgbImage, right: &RgbImage, name: &str) -> anyhow::Result<(DisparityMap, RunInfo)> {
-        let p = self.inner.predict(left, right, name, &self.options)?;
-        Ok((p.disparity, p.info))
-    }
+/// The model configuration on one line, with the iterations and where the configuration came
+/// from.
+pub fn describe(engine: &Engine, options: &PredictOptions) -> String {
+    format!("{}, {} iterations ({})", engine.configuration_summary(), options.iters, engine.configuration_source())
 }
 
 #[cfg(test)]
@@ -266,17 +270,18 @@ mod tests {
 
     #[test]
     fn library_fields_become_flags() {
-        assert_eq!(
-            flag_names("`min_size` 300 is larger than `max_size` 200"),
-            "--min-size 300 is larger than --max-size 200"
-        );
+        let e = dgstereo_core::Error::config("min_size", "300 is larger than `max_size` 200");
+        assert_eq!(with_flags(e).to_string(), "--min-size: 300 is larger than --max-size 200");
+        let e = PredictOptions { iters: 0, ..PredictOptions::default() }.validate().unwrap_err();
+        assert_eq!(with_flags(e).to_string(), "--iters: must be at least 1");
         assert_eq!(flag_names("the depth prior runs in f32 only"), "the depth prior runs in f32 only");
+        assert_eq!(flag("run"), Some("--run NAME"));
         assert_eq!(DEFAULT_LR_CHECK.parse::<f32>().unwrap(), dgstereo_inference::consistency::DEFAULT_THRESHOLD);
     }
 
     #[test]
     fn prior_specs_parse() {
         let e = with_flags(parse_prior("magic").unwrap_err()).to_string();
-        assert!(e.starts_with("--prior 'magic': expected none"), "{e}");
+        assert!(e.starts_with("--prior: 'magic': expected none"), "{e}");
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! Pairs come from `-l/-r` files or glob patterns (each side sorted, then zipped, as the
 //! reference demo does), from a folder (`--pairs DIR`: `*left*`/`*right*` or `im0`/`im1` names,
-//! searched recursively) or from a list file (`--list FILE`: one `LEFT RIGHT` pair per line).
+//! searched recursively, by the same rule as `eval --dataset folder`) or from a list file (`--list FILE`: one `LEFT RIGHT` pair per line).
 //! Problems that concern one pair (a left image without its right image) become a
 //! [`PairProblem`] so the other pairs still run; problems that concern the whole request (a
 //! pattern matching nothing, an unreadable list) are errors.
@@ -16,6 +16,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
+use dgstereo_data::datasets::pair_finder::find_folder_pairs;
 
 /// One stereo pair to process.
 #[derive(Clone, Debug, PartialEq)]
@@ -44,12 +45,6 @@ pub struct PairList {
     pub pairs: Vec<PairPaths>,
     /// Incomplete pairs.
     pub problems: Vec<PairProblem>,
-}
-
-const IMAGE_EXTENSIONS: [&str; 8] = ["png", "jpg", "jpeg", "bmp", "tif", "tiff", "ppm", "pgm"];
-
-fn is_image(p: &Path) -> bool {
-    p.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
 fn has_glob_chars(s: &str) -> bool {
@@ -122,70 +117,28 @@ pub fn from_left_right(left: &[String], right: &[String]) -> anyhow::Result<Pair
     Ok(named(pairs, problems))
 }
 
-fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
-    let entries = std::fs::read_dir(dir).with_context(|| format!("{}: cannot list the folder", dir.display()))?;
-    let mut paths: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
-    paths.sort();
-    for p in paths {
-        if p.is_dir() {
-            walk(&p, out)?;
-        } else {
-            out.push(p);
-        }
-    }
-    Ok(())
-}
-
-/// The right image's stem for a left image's stem, if the stem names a left image.
-fn right_stem(stem: &str) -> Option<String> {
-    let lower = stem.to_ascii_lowercase();
-    if lower == "im0" {
-        return Some(stem[..stem.len() - 1].to_string() + "1");
-    }
-    let at = lower.find("left")?;
-    let right = if stem[at..].starts_with("Left") {
-        "Right"
-    } else if stem[at..].starts_with("LEFT") {
-        "RIGHT"
-    } else {
-        "right"
-    };
-    Some(format!("{}{right}{}", &stem[..at], &stem[at + 4..]))
-}
-
-/// The pairs of a folder (recursive): `<x>left<y>.<ext>` with `<x>right<y>.<ext>` (any image
-/// extension) and `im0.<ext>` with `im1.<ext>`. Names holding `disp`, `occ`, `mask`, `depth` are
-/// not images of pairs. A left image without its right image is a problem.
+/// The pairs of a folder (recursive), by the data crate's one pair rule
+/// ([`dgstereo_data::datasets::pair_finder`], which `eval --dataset folder` follows too):
+/// `<x>left<y>.<ext>` with `<x>right<y>.<ext>` and `im0.<ext>` with `im1.<ext>`, names holding
+/// `disp`, `occ`, `mask` or `depth` not being views. A left image without its right image is a
+/// problem.
 pub fn from_folder(dir: &Path) -> anyhow::Result<PairList> {
     if !dir.is_dir() {
         bail!("{}: --pairs needs a folder", dir.display());
     }
-    let mut files = Vec::new();
-    walk(dir, &mut files)?;
-    let images: Vec<&PathBuf> = files.iter().filter(|p| is_image(p)).collect();
-    let mut pairs = Vec::new();
-    let mut problems = Vec::new();
-    for left in &images {
-        let stem = left.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let lower = stem.to_ascii_lowercase();
-        if ["disp", "occ", "mask", "depth"].iter().any(|w| lower.contains(w)) {
-            continue;
-        }
-        let Some(want) = right_stem(&stem) else { continue };
-        let right = images.iter().find(|q| {
-            q.parent() == left.parent() && q.file_stem().is_some_and(|s| s.to_string_lossy() == want.as_str())
-        });
-        match right {
-            Some(r) => pairs.push(((*left).clone(), (*r).clone())),
-            None => problems.push(PairProblem {
-                path: (*left).clone(),
-                message: format!("missing right image (expected {want}.* beside it)"),
-            }),
-        }
-    }
-    if pairs.is_empty() && problems.is_empty() {
+    let found = find_folder_pairs(dir)?;
+    if found.pairs.is_empty() && found.unpaired.is_empty() {
         bail!("{}: no stereo pairs found (expected *left*/*right* or im0/im1 image names)", dir.display());
     }
+    let pairs = found.pairs.into_iter().map(|p| (p.left, p.right)).collect();
+    let problems = found
+        .unpaired
+        .into_iter()
+        .map(|u| PairProblem {
+            path: u.left,
+            message: format!("missing right image (expected {}.* beside it)", u.expected_right_stem),
+        })
+        .collect();
     Ok(named(pairs, problems))
 }
 
@@ -313,11 +266,40 @@ mod tests {
     }
 
     #[test]
-    fn right_stems_follow_left_stems() {
-        assert_eq!(right_stem("desk_left").as_deref(), Some("desk_right"));
-        assert_eq!(right_stem("Left_0001").as_deref(), Some("Right_0001"));
-        assert_eq!(right_stem("im0").as_deref(), Some("im1"));
-        assert_eq!(right_stem("image"), None);
+    fn infer_and_eval_pair_a_folder_alike() {
+        let dir = tempfile::tempdir().unwrap();
+        for sub in ["scene", "seq"] {
+            std::fs::create_dir(dir.path().join(sub)).unwrap();
+        }
+        let files = [
+            "desk_left.png",
+            "desk_right.jpg",
+            "desk_disp.pfm",
+            "depth_left.png",
+            "depth_right.png",
+            "scene/im0.png",
+            "scene/im1.png",
+            "scene/disp0GT.pfm",
+            "seq/Left_0001.png",
+            "seq/Right_0001.png",
+            "seq/LEFT_0002.pgm",
+            "seq/RIGHT_0002.pgm",
+            "lonely_left.png",
+        ];
+        for f in files {
+            std::fs::write(dir.path().join(f), b"").unwrap();
+        }
+        let infer = from_folder(dir.path()).unwrap();
+        let eval = dgstereo_data::datasets::folder_pairs(dir.path()).unwrap();
+        let infer_pairs: Vec<(PathBuf, PathBuf)> =
+            infer.pairs.iter().map(|p| (p.left.clone(), p.right.clone())).collect();
+        let eval_pairs: Vec<(PathBuf, PathBuf)> =
+            eval.files.iter().map(|f| (f.left.clone(), f.right.clone())).collect();
+        assert_eq!(infer_pairs, eval_pairs);
+        assert_eq!(infer_pairs.len(), 4, "{infer_pairs:?}");
+        // The left view without its right view: a problem for infer, absent from the data set.
+        assert_eq!(infer.problems.len(), 1);
+        assert!(infer.problems[0].path.ends_with("lonely_left.png"));
     }
 
     #[test]

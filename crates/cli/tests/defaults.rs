@@ -131,7 +131,7 @@ fn small_pairs_are_upscaled_for_the_eighth_resolution_default() {
     // A lower bound above the cap is refused before any work, naming both.
     let o = dgstereo(&[&pair[..], &["--min-size", "300", "--max-size", "200"]].concat());
     assert!(!o.status.success());
-    assert!(text(&o).contains("--min-size 300 is larger than --max-size 200"), "{}", text(&o));
+    assert!(text(&o).contains("--min-size: 300 is larger than --max-size 200"), "{}", text(&o));
 }
 
 #[test]
@@ -178,7 +178,7 @@ fn the_left_right_check_fills_what_the_right_view_cannot_see() {
     // Wrong uses are refused before any pair runs.
     for (args, message) in [
         (&["--save", "rejected"][..], "--save rejected writes the pixels the left-right check replaced"),
-        (&["--lr-check", "0"][..], "--lr-check 0: the threshold must be a positive number"),
+        (&["--lr-check", "0"][..], "--lr-check: 0: the threshold must be a positive number"),
     ] {
         let o = infer_cones(args);
         assert!(!o.status.success());

@@ -17,9 +17,9 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, bail};
 use burn::tensor::Device;
 use dgstereo_core::device::Precision;
+use dgstereo_core::{Error, Result};
 use dgstereo_costvolume::CorrelationImplementation;
 use dgstereo_data::resize::{disparity_to_size, resize_rgb};
 use dgstereo_data::{DisparityMap, Mask, RgbImage};
@@ -93,13 +93,14 @@ impl PriorMaps {
         DepthPrior { left: tensor(&self.left), right: tensor(&self.right) }
     }
 
-    fn check(&self) -> anyhow::Result<()> {
+    fn check(&self) -> Result<()> {
         for (view, m) in [("left", &self.left), ("right", &self.right)] {
             if m.width == 0 || m.height == 0 || m.data.len() != m.width * m.height {
-                bail!("`prior`: the {view} map is {}x{} with {} values", m.width, m.height, m.data.len());
+                let reason = format!("the {view} map is {}x{} with {} values", m.width, m.height, m.data.len());
+                return Err(Error::config("prior", reason));
             }
             if let Some(bad) = m.data.iter().find(|v| !v.is_finite()) {
-                bail!("`prior`: the {view} map holds a non-finite value ({bad})");
+                return Err(Error::config("prior", format!("the {view} map holds a non-finite value ({bad})")));
             }
         }
         Ok(())
@@ -107,17 +108,28 @@ impl PriorMaps {
 }
 
 /// Checks that the two views of a pair have one size.
-pub fn check_same_size(left: &RgbImage, right: &RgbImage) -> anyhow::Result<()> {
+pub fn check_same_size(left: &RgbImage, right: &RgbImage) -> Result<()> {
     if (left.width, left.height) != (right.width, right.height) {
-        bail!(
+        return Err(Error::Shape(format!(
             "left image is {}x{} but right image is {}x{}: the views of a rectified pair have one size",
-            left.width,
-            left.height,
-            right.width,
-            right.height
-        );
+            left.width, left.height, right.width, right.height
+        )));
     }
     Ok(())
+}
+
+/// `e` with `context` written before its message, its kind kept (a file's error stays a file's
+/// error, so a caller that sorts errors by kind sorts it the same).
+fn within(e: Error, context: &str) -> Error {
+    match e {
+        Error::Format { path, message } => Error::Format { path, message: format!("{context}: {message}") },
+        Error::Checkpoint { path, message } => Error::Checkpoint { path, message: format!("{context}: {message}") },
+        // The path already names the file that could not be read.
+        io @ Error::Io { .. } => io,
+        Error::Shape(m) => Error::Shape(format!("{context}: {m}")),
+        Error::Other(m) => Error::Other(format!("{context}: {m}")),
+        other => Error::Other(format!("{context}: {other}")),
+    }
 }
 
 /// A loaded model with its prior.
@@ -141,24 +153,24 @@ pub struct Engine {
 
 impl Engine {
     /// Loads the weights into the configured model (see [`EngineConfig`]) and builds the prior.
-    pub fn load(config: &EngineConfig) -> anyhow::Result<Self> {
+    pub fn load(config: &EngineConfig) -> Result<Self> {
         Self::load_inner(config, false)
     }
 
     /// As [`Engine::load`], except that a model with a depth prior may load without `prior`:
     /// each pair's prior maps then come with [`Engine::predict_with_prior`].
-    pub fn load_with_given_priors(config: &EngineConfig) -> anyhow::Result<Self> {
+    pub fn load_with_given_priors(config: &EngineConfig) -> Result<Self> {
         Self::load_inner(config, true)
     }
 
-    fn load_inner(config: &EngineConfig, priors_given: bool) -> anyhow::Result<Self> {
+    fn load_inner(config: &EngineConfig, priors_given: bool) -> Result<Self> {
         let device = config.device.device_with_precision(config.precision)?;
         let prior_config = &config.prior;
         if config.precision != Precision::F32 && prior_config.gives_prior() {
-            bail!(
-                "`precision` {}: the depth prior runs in f32 only; leave out `precision` or the prior",
-                config.precision
-            );
+            return Err(Error::config(
+                "precision",
+                format!("{}: the depth prior runs in f32 only; leave out `precision` or the prior", config.precision),
+            ));
         }
         let mut notes = Vec::new();
         let weights = match &config.weights {
@@ -171,9 +183,9 @@ impl Engine {
         };
         let from_experiment = config.model.is_some();
         let (mut model, detected) =
-            load_model(&weights, config.model.clone(), &device).with_context(|| match &config.model {
-                Some(_) => format!("weights {} do not fit the model configuration", weights.display()),
-                None => format!("cannot load weights {}", weights.display()),
+            load_model(&weights, config.model.clone(), &device).map_err(|e| match &config.model {
+                Some(_) => within(e, &format!("weights {} do not fit the model configuration", weights.display())),
+                None => within(e, &format!("cannot load weights {}", weights.display())),
             })?;
         if let Some(on) = config.slow_fast_gru {
             model.network.update_block.slow_fast_gru = on;
@@ -187,20 +199,26 @@ impl Engine {
         };
         let prior = if prior_config.gives_prior() {
             if prior_config.uses_ground_truth() {
-                bail!("`prior`: a simulated prior needs ground truth and cannot be used for inference");
+                return Err(Error::config(
+                    "prior",
+                    "a simulated prior needs ground truth and cannot be used for inference",
+                ));
             }
             if !model.config.needs_prior() {
                 notes.push("this model uses no depth prior; `prior` is ignored".into());
                 None
             } else {
-                Some(prior_config.init(&device).context("`prior`")?)
+                Some(prior_config.init(&device).map_err(|e| within(e, "`prior`"))?)
             }
         } else {
             None
         };
         let prior_per_call = priors_given && model.config.needs_prior() && prior.is_none();
         if model.config.needs_prior() && prior.is_none() && !prior_per_call {
-            bail!("this model uses a depth prior (fusion or guidance): set `prior` (Depth Anything V2 or files)");
+            return Err(Error::config(
+                "prior",
+                "this model uses a depth prior (fusion or guidance): set `prior` (Depth Anything V2 or files)",
+            ));
         }
         let file_prior = prior.is_some() && matches!(prior_config, PriorConfig::File { .. });
         Ok(Self { model, prior, file_prior, weights, device, notes, preset_iters, source, prior_per_call })
@@ -252,12 +270,13 @@ impl Engine {
 
     /// Checks `options` for this engine: [`PredictOptions::validate`], and that a left-right
     /// check has a prior of mirrored views.
-    pub fn check(&self, options: &PredictOptions) -> anyhow::Result<()> {
+    pub fn check(&self, options: &PredictOptions) -> Result<()> {
         options.validate()?;
         if options.lr_check.is_some() && self.file_prior {
-            bail!(
-                "`lr_check` runs the mirrored pair, and a precomputed (file) prior has no mirrored views: use a Depth Anything V2 prior or leave out `lr_check`"
-            );
+            return Err(Error::config(
+                "lr_check",
+                "runs the mirrored pair, and a precomputed (file) prior has no mirrored views: use a Depth Anything V2 prior or leave out `lr_check`",
+            ));
         }
         Ok(())
     }
@@ -281,9 +300,12 @@ impl Engine {
         right: &RgbImage,
         name: &str,
         options: &PredictOptions,
-    ) -> anyhow::Result<Prediction> {
+    ) -> Result<Prediction> {
         if self.prior_per_call {
-            bail!("this model uses a depth prior and none was configured: pass the pair's prior maps (`prior`)");
+            return Err(Error::config(
+                "prior",
+                "this model uses a depth prior and none was configured: pass the pair's prior maps (`prior`)",
+            ));
         }
         self.predict_inner(left, right, name, None, options)
     }
@@ -297,9 +319,9 @@ impl Engine {
         right: &RgbImage,
         prior: &PriorMaps,
         options: &PredictOptions,
-    ) -> anyhow::Result<Prediction> {
+    ) -> Result<Prediction> {
         if !self.model.config.needs_prior() {
-            bail!("`prior`: this model uses no depth prior; leave the prior maps out");
+            return Err(Error::config("prior", "this model uses no depth prior; leave the prior maps out"));
         }
         prior.check()?;
         self.predict_inner(left, right, "pair", Some(prior), options)
@@ -312,7 +334,7 @@ impl Engine {
         name: &str,
         given: Option<&PriorMaps>,
         options: &PredictOptions,
-    ) -> anyhow::Result<Prediction> {
+    ) -> Result<Prediction> {
         self.check(options)?;
         check_same_size(left, right)?;
         let (disparity, info) = self.network_disparity(left, right, name, given, options)?;
@@ -337,7 +359,7 @@ impl Engine {
         name: &str,
         given: Option<&PriorMaps>,
         options: &PredictOptions,
-    ) -> anyhow::Result<(DisparityMap, RunInfo)> {
+    ) -> Result<(DisparityMap, RunInfo)> {
         let (w, h) = (left.width, left.height);
         let scale = working_scale(w, h, self.min_size(options), options.max_size);
         let (l, r) = if scale != 1.0 {
@@ -406,7 +428,7 @@ mod tests {
         let tight = PredictOptions { memory_budget: 1, ..quick.clone() };
         assert_eq!(engine.predict(&left, &right, "ramp", &tight).unwrap().info.corr, CorrelationImplementation::Alt);
         let e = engine.predict(&left, &right, "ramp", &PredictOptions { iters: 0, ..quick }).unwrap_err();
-        assert!(e.to_string().contains("`iters`"), "{e}");
+        assert!(e.to_string().contains("iters: must be at least 1"), "{e}");
     }
 
     #[test]

@@ -15,8 +15,10 @@
 //! which a binding fills from and turns into NumPy arrays without knowing burn. The engine is
 //! `Send + Sync` (a test checks it) and `predict` takes `&self`, so a binding may release the
 //! interpreter's lock around it. The library never prints: what loading chose on the caller's
-//! behalf comes back as [`Engine::notes`], and errors name files and option fields (written
-//! `` `min_size` ``), never command-line flags.
+//! behalf comes back as [`Engine::notes`], and its errors are [`dgstereo_core::Error`]s naming
+//! files ([`dgstereo_core::Error::Io`], [`dgstereo_core::Error::Format`]) or option fields (an
+//! invalid option is [`dgstereo_core::Error::config`]`("min_size", reason)`), never command-line
+//! flags; each front end spells the field its own way (`--min-size`, a keyword argument).
 //!
 //! Beside the engine: [`working_size`] (the min/max size policy), [`cost_volume`] (materialised
 //! or on-the-fly volume within a memory budget), [`consistency`] (the left-right check),

@@ -3,14 +3,14 @@
 //!
 //! Design decision: the two are apart because they change at different rates: loading reads the
 //! weights and builds the prior (seconds), while the per-pair policy is free to change from one
-//! call to the next. Problems with the options are errors naming the field (`` `min_size` ``),
-//! which a front end translates into its own spelling (a flag, a keyword argument).
+//! call to the next. Problems with the options are configuration errors keyed by the field
+//! ([`Error::config`]`("min_size", ..)`), which a front end translates into its own spelling (a
+//! flag, a keyword argument).
 
 use std::path::PathBuf;
 
-use anyhow::bail;
-use dgstereo_core::DeviceChoice;
 use dgstereo_core::device::Precision;
+use dgstereo_core::{DeviceChoice, Error, Result};
 use dgstereo_model::ModelConfig;
 use dgstereo_prior::PriorConfig;
 
@@ -87,25 +87,30 @@ impl Default for PredictOptions {
 
 impl PredictOptions {
     /// Checks the options on their own (an engine adds what depends on its model and prior).
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> Result<()> {
         if self.iters == 0 {
-            bail!("`iters` must be at least 1");
+            return Err(Error::config("iters", "must be at least 1"));
         }
         if self.max_size.is_some_and(|m| m < MIN_WORKING_SIZE) {
-            bail!("`max_size` must be at least {MIN_WORKING_SIZE} pixels");
+            return Err(Error::config("max_size", format!("must be at least {MIN_WORKING_SIZE} pixels")));
         }
         // `Auto` never conflicts: it is off with a `max_size`.
         match (self.min_size, self.max_size) {
-            (MinSize::Pixels(lo), Some(hi)) if lo > hi => bail!("`min_size` {lo} is larger than `max_size` {hi}"),
+            (MinSize::Pixels(lo), Some(hi)) if lo > hi => {
+                return Err(Error::config("min_size", format!("{lo} is larger than `max_size` {hi}")));
+            }
             (MinSize::Pixels(lo), _) if lo < MIN_WORKING_SIZE => {
-                bail!("`min_size` must be at least {MIN_WORKING_SIZE} pixels (or `off`)")
+                return Err(Error::config(
+                    "min_size",
+                    format!("must be at least {MIN_WORKING_SIZE} pixels (or `off`)"),
+                ));
             }
             _ => {}
         }
         if let Some(t) = self.lr_check
             && !(t.is_finite() && t > 0.0)
         {
-            bail!("`lr_check` {t}: the threshold must be a positive number of pixels");
+            return Err(Error::config("lr_check", format!("{t}: the threshold must be a positive number of pixels")));
         }
         Ok(())
     }
@@ -119,14 +124,14 @@ mod tests {
     fn bad_options_name_their_fields() {
         assert!(PredictOptions::default().validate().is_ok());
         for (options, message) in [
-            (PredictOptions { iters: 0, ..Default::default() }, "`iters` must be at least 1"),
-            (PredictOptions { max_size: Some(16), ..Default::default() }, "`max_size` must be at least 32"),
+            (PredictOptions { iters: 0, ..Default::default() }, "iters: must be at least 1"),
+            (PredictOptions { max_size: Some(16), ..Default::default() }, "max_size: must be at least 32"),
             (
                 PredictOptions { min_size: MinSize::Pixels(300), max_size: Some(200), ..Default::default() },
-                "`min_size` 300 is larger than `max_size` 200",
+                "min_size: 300 is larger than `max_size` 200",
             ),
-            (PredictOptions { min_size: MinSize::Pixels(8), ..Default::default() }, "`min_size` must be at least"),
-            (PredictOptions { lr_check: Some(0.0), ..Default::default() }, "`lr_check` 0: the threshold"),
+            (PredictOptions { min_size: MinSize::Pixels(8), ..Default::default() }, "min_size: must be at least"),
+            (PredictOptions { lr_check: Some(0.0), ..Default::default() }, "lr_check: 0: the threshold"),
         ] {
             let e = options.validate().unwrap_err().to_string();
             assert!(e.contains(message), "{e}");

@@ -13,7 +13,7 @@
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-use anyhow::Context;
+use dgstereo_core::{Error, Result};
 use dgstereo_data::{DisparityMap, RgbImage};
 
 use crate::calibration::Calibration;
@@ -52,25 +52,15 @@ pub fn keeps(z: f32, max_depth: f64) -> bool {
 /// # Shapes
 /// `depth` and `image` have the same width and height (that of `calib`, see
 /// [`Calibration::for_size`]).
-pub fn point_cloud(
-    depth: &DisparityMap,
-    image: &RgbImage,
-    calib: &Calibration,
-    max_depth: f64,
-) -> anyhow::Result<PointCloud> {
+pub fn point_cloud(depth: &DisparityMap, image: &RgbImage, calib: &Calibration, max_depth: f64) -> Result<PointCloud> {
     if (depth.width, depth.height) != (image.width, image.height) {
-        anyhow::bail!(
+        return Err(Error::Shape(format!(
             "depth map is {}x{} but the image is {}x{}",
-            depth.width,
-            depth.height,
-            image.width,
-            image.height
-        );
+            depth.width, depth.height, image.width, image.height
+        )));
     }
-    let k_inv = calib
-        .intrinsics
-        .try_inverse()
-        .with_context(|| format!("{}: intrinsics are not invertible", calib.source.display()))?;
+    let k_inv =
+        calib.intrinsics.try_inverse().ok_or_else(|| Error::format(&calib.source, "intrinsics are not invertible"))?;
     let mut cloud = PointCloud::default();
     for y in 0..depth.height {
         for x in 0..depth.width {
@@ -87,8 +77,8 @@ pub fn point_cloud(
 }
 
 /// Writes a point cloud as PLY (see the module doc for the layout).
-pub fn write_ply(path: &Path, cloud: &PointCloud, encoding: PlyEncoding) -> anyhow::Result<()> {
-    let file = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
+pub fn write_ply(path: &Path, cloud: &PointCloud, encoding: PlyEncoding) -> Result<()> {
+    let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
     let mut w = BufWriter::new(file);
     let format = match encoding {
         PlyEncoding::Binary => "binary_little_endian",
@@ -115,7 +105,7 @@ pub fn write_ply(path: &Path, cloud: &PointCloud, encoding: PlyEncoding) -> anyh
         }
         w.flush()
     };
-    write(&mut w).with_context(|| format!("{}: cannot write", path.display()))
+    write(&mut w).map_err(|e| Error::io(path, e))
 }
 
 #[cfg(test)]

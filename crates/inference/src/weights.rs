@@ -6,9 +6,9 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
 use burn::tensor::Device;
 use dgstereo_core::device::{cast_float_params, float_dtype};
+use dgstereo_core::{Error, Result};
 use dgstereo_model::checkpoint_config::{self, CheckpointConfig};
 use dgstereo_model::{ModelConfig, StereoModel, checkpoint};
 
@@ -29,9 +29,11 @@ fn asset_roots() -> Vec<PathBuf> {
 }
 
 /// A file under `assets/`, wherever the assets are.
-pub fn asset(relative: &str) -> anyhow::Result<PathBuf> {
-    asset_roots().into_iter().map(|r| r.join(relative)).find(|p| p.exists()).with_context(|| {
-        format!("bundled asset '{relative}' not found (set DGSTEREO_ASSETS to the repository's assets/ folder)")
+pub fn asset(relative: &str) -> Result<PathBuf> {
+    asset_roots().into_iter().map(|r| r.join(relative)).find(|p| p.exists()).ok_or_else(|| {
+        Error::Other(format!(
+            "bundled asset '{relative}' not found (set DGSTEREO_ASSETS to the repository's assets/ folder)"
+        ))
     })
 }
 
@@ -45,11 +47,16 @@ pub const DEFAULT_WITH_PRIOR: &str = "weights/paper-default.safetensors";
 /// `with_prior` (the user gave a prior) the bundled paper model. Without bundled weights, the
 /// reference checkpoint of `../shared/golden` (random weights) stands in for the plain model,
 /// and the second value is a note saying so.
-pub fn default_weights(with_prior: bool) -> anyhow::Result<(PathBuf, Option<String>)> {
+pub fn default_weights(with_prior: bool) -> Result<(PathBuf, Option<String>)> {
     if with_prior {
-        let p = asset(DEFAULT_WITH_PRIOR).context(
-            "no bundled default for a model with a depth prior: set `weights` (a model trained with a prior), or leave out `prior`",
-        )?;
+        let p = asset(DEFAULT_WITH_PRIOR).map_err(|e| {
+            Error::config(
+                "weights",
+                format!(
+                    "no bundled default for a model with a depth prior: set `weights` (a model trained with a prior), or leave out `prior` ({e})"
+                ),
+            )
+        })?;
         return Ok((p, None));
     }
     if let Ok(p) = asset(DEFAULT_PLAIN) {
@@ -65,7 +72,10 @@ pub fn default_weights(with_prior: bool) -> anyhow::Result<(PathBuf, Option<Stri
             return Ok((p, Some(note)));
         }
     }
-    bail!("no default weights found: set `weights` (an official RAFT-Stereo .pth or a dgstereo .safetensors)")
+    Err(Error::config(
+        "weights",
+        "no default weights found: set `weights` (an official RAFT-Stereo .pth or a dgstereo .safetensors)",
+    ))
 }
 
 /// Loads weights (`.pth` official layout or our `.safetensors`) into a model of `config`.
@@ -76,7 +86,7 @@ pub fn load_model(
     weights: &Path,
     config: Option<ModelConfig>,
     device: &Device,
-) -> anyhow::Result<(StereoModel, Option<CheckpointConfig>)> {
+) -> Result<(StereoModel, Option<CheckpointConfig>)> {
     let ext = weights.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     let (network, config, detected) = match (config, ext.as_str()) {
         (None, "pth" | "pt") => {
@@ -87,8 +97,9 @@ pub fn load_model(
             let config = match (config, ext.as_str()) {
                 (Some(c), _) => c,
                 (None, "safetensors") => match checkpoint::safetensors_metadata(weights, "model_config")? {
-                    Some(json) => serde_json::from_str(&json)
-                        .with_context(|| format!("{}: its model_config metadata does not parse", weights.display()))?,
+                    Some(json) => serde_json::from_str(&json).map_err(|e| {
+                        Error::format(weights, format!("its model_config metadata does not parse: {e}"))
+                    })?,
                     None => ModelConfig::default(),
                 },
                 (None, _) => ModelConfig::default(),
@@ -98,15 +109,19 @@ pub fn load_model(
                 "pth" | "pt" => checkpoint::load_pytorch(network, weights).map_err(|e| {
                     // Name what the file holds, when its tensors show it.
                     match checkpoint_config::detect(weights, device) {
-                        Ok(d) => anyhow::anyhow!(
+                        Ok(d) => Error::Other(format!(
                             "{e}; the checkpoint's tensors show: {}",
                             checkpoint_config::summary(&d.model)
-                        ),
-                        Err(_) => e.into(),
+                        )),
+                        Err(_) => e,
                     }
                 })?,
                 "safetensors" => checkpoint::load_safetensors(network, weights)?,
-                _ => bail!("{}: unknown weights format (expected .pth or .safetensors)", weights.display()),
+                _ => {
+                    let reason =
+                        format!("{}: unknown weights format (expected .pth or .safetensors)", weights.display());
+                    return Err(Error::config("weights", reason));
+                }
             };
             (network, config, None)
         }

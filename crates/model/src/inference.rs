@@ -22,17 +22,19 @@ pub struct StereoModel {
     pub device: Device,
 }
 
-/// What [`StereoModel::predict`] returns.
+/// What [`StereoModel::predict`] returns: the network's disparity tensors, one per iteration
+/// kept. (A caller's finished prediction of a pair, at its size with what was done on the way,
+/// is the inference crate's `Prediction`.)
 ///
 /// # Shapes
 /// - each disparity: `[N, 1, H, W]`, the input's size
 #[derive(Debug, Clone)]
-pub struct Prediction {
+pub struct IterationDisparities {
     /// Disparity after each iteration (or only the last, see `all_iterations`).
     pub disparities: Vec<Tensor<4>>,
 }
 
-impl Prediction {
+impl IterationDisparities {
     /// The final disparity.
     pub fn last(&self) -> Tensor<4> {
         self.disparities.last().expect("at least one iteration").clone()
@@ -57,7 +59,7 @@ impl StereoModel {
         iters: usize,
         all_iterations: bool,
         implementation: Option<CorrelationImplementation>,
-    ) -> Result<Prediction> {
+    ) -> Result<IterationDisparities> {
         let [n, c, h, w] = left.dims();
         if right.dims() != [n, c, h, w] {
             return Err(Error::Shape(format!(
@@ -79,7 +81,7 @@ impl StereoModel {
         }
         let disparities =
             padded_disparities(&self.network, &self.config, left, right, prior, iters, implementation, all_iterations);
-        Ok(Prediction { disparities })
+        Ok(IterationDisparities { disparities })
     }
 }
 

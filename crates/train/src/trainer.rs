@@ -86,29 +86,31 @@ pub struct StepInternals<'a> {
 }
 
 /// A run in progress: the network on the autodiff device, the optimiser and the step counter.
+///
+/// Its public face is what a run does ([`Trainer::step`], [`Trainer::step_on`], the models it
+/// ships) and what a caller reads about it; its state is the crate's own (the checkpoint and the
+/// run loop read and restore it), so no caller can put a run out of step with its optimiser.
 pub struct Trainer {
     /// The run's parts.
-    pub parts: TrainParts,
+    pub(crate) parts: TrainParts,
     /// The network (autodiff device, training mode).
-    pub model: RaftStereo,
+    pub(crate) model: RaftStereo,
     /// AdamW and its per-parameter state.
-    pub optimizer: ModuleOptimizer,
+    pub(crate) optimizer: ModuleOptimizer,
     /// The learning-rate schedule.
-    pub schedule: OneCycleLr,
+    pub(crate) schedule: OneCycleLr,
     /// Steps taken so far (the index of the next step).
-    pub step: usize,
+    pub(crate) step: usize,
     /// The moving average of the weights, when `train.ema_decay` is set.
-    pub ema: Option<Ema>,
+    pub(crate) ema: Option<Ema>,
     /// The plain device (validation, data).
-    pub device: Device,
+    pub(crate) device: Device,
     /// The autodiff device.
-    pub autodiff: Device,
-    /// What the user should know about how the trainer was set up (weights that kept their
-    /// initialisation, a moving average that restarts): the caller shows them, a library never
-    /// prints.
-    pub notices: Vec<String>,
+    pub(crate) autodiff: Device,
+    /// What the user should know about how the trainer was set up (see [`Trainer::notices`]).
+    pub(crate) notices: Vec<String>,
     /// What the parts of the last step took.
-    pub last_step_seconds: StepSeconds,
+    last_step_seconds: StepSeconds,
     data: TrainingData,
     prior: Prior,
 }
@@ -340,6 +342,45 @@ impl Trainer {
     /// The prior provider of the run.
     pub fn prior(&self) -> &Prior {
         &self.prior
+    }
+
+    /// The run's parts.
+    pub fn parts(&self) -> &TrainParts {
+        &self.parts
+    }
+
+    /// Steps completed so far (the index of the next step).
+    pub fn completed_steps(&self) -> usize {
+        self.step
+    }
+
+    /// The plain device (validation, data).
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The autodiff device the network trains on (where a caller builds its batches for
+    /// [`Trainer::step_on`]).
+    pub fn autodiff_device(&self) -> &Device {
+        &self.autodiff
+    }
+
+    /// What the user should know about how the trainer was set up (weights that kept their
+    /// initialisation, a moving average that restarts): the caller shows them, a library never
+    /// prints.
+    pub fn notices(&self) -> &[String] {
+        &self.notices
+    }
+
+    /// The decay of the weights' moving average, when the run keeps one (`train.ema_decay`; a
+    /// run resumed without it keeps none).
+    pub fn moving_average_decay(&self) -> Option<f64> {
+        self.ema.as_ref().map(Ema::decay)
+    }
+
+    /// What the parts of the last step took.
+    pub fn last_step_seconds(&self) -> StepSeconds {
+        self.last_step_seconds
     }
 
     /// The trained weights without autodiff (not averaged; see [`Trainer::shipped_model`]).

@@ -18,7 +18,7 @@ fn tiny_model_overfits_one_synthetic_pair() {
     parts.train.schedule_extra_steps = 0;
     let device = default_device();
     let mut trainer = Trainer::new(parts, &device).unwrap();
-    let bn_before = dgstereo_core::tensor::to_vec(match &trainer.model.encoder.context_encoder().norm1 {
+    let bn_before = dgstereo_core::tensor::to_vec(match &trainer.inference_model().encoder.context_encoder().norm1 {
         dgstereo_encoder::norm::Norm::Batch(bn) => bn.running_var.val(),
         _ => panic!("the context encoder uses batch norm"),
     });
@@ -33,12 +33,12 @@ fn tiny_model_overfits_one_synthetic_pair() {
     let (first, last) = (first.unwrap(), last.unwrap());
     // Evaluate the trained weights (no autodiff) on the pair it saw.
     let model = trainer.inference_model();
-    let pair = dgstereo_train::batch::TrainingData::new(&trainer.parts.data, &trainer.parts.train)
+    let pair = dgstereo_train::batch::TrainingData::new(&trainer.parts().data, &trainer.parts().train)
         .unwrap()
         .pair(0, 0)
         .unwrap();
     let batch = to_tensors(&[pair], &device).unwrap();
-    let out = forward_disparities(&model, &trainer.parts.model, batch.left, batch.right, None, iters, false);
+    let out = forward_disparities(&model, &trainer.parts().model, batch.left, batch.right, None, iters, false);
     let m = batch_metrics(out[0].clone(), batch.target.disparity_bilinear, batch.target.valid).unwrap().metrics();
     eprintln!(
         "overfit: {steps} steps in {:.1} s; loss {:.3} -> {:.3}, train EPE {:.3} -> {:.3}; final EPE {:.3} px, bad-3 {:.2} %",

@@ -62,7 +62,7 @@ fn stopped_and_resumed_run_equals_uninterrupted_run() {
         load_checkpoint(parts.clone(), &path, &device).unwrap()
     };
     let (a, b) = (load(&full), load(&split));
-    assert_eq!((a.step, b.step), (6, 6));
+    assert_eq!((a.completed_steps(), b.completed_steps()), (6, 6));
     let diff = max_diff(&weights(&a.inference_model()), &weights(&b.inference_model()));
     eprintln!("max |w_resumed - w_uninterrupted| = {diff:e}");
     assert!(diff <= 1e-6, "resumed weights differ by {diff}");
@@ -116,7 +116,7 @@ fn interrupted_write_leaves_previous_checkpoint_readable() {
     let listed = list_checkpoints(dir.path()).unwrap();
     assert_eq!(listed, vec![(1, good.clone())], "only complete checkpoints are listed");
     let restored = load_checkpoint(parts.clone(), &good, &device).unwrap();
-    assert_eq!(restored.step, 1);
+    assert_eq!(restored.completed_steps(), 1);
     assert_eq!(max_diff(&weights(&restored.inference_model()), &good_weights), 0.0);
     // A truncated file under a checkpoint name is refused with a clear error, not a panic.
     let broken = dir.path().join("broken.safetensors");

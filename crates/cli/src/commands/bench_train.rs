@@ -53,15 +53,15 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     parts.train.batch_size = a.batch;
     parts.train.crop = [h, w];
     let mut trainer = Trainer::new(parts, device)?;
-    let batch = random_batch(a.batch, [h, w], (w / 4) as f32, &trainer.autodiff);
-    let kernels = match path(&trainer.autodiff, Op::Conv) {
+    let batch = random_batch(a.batch, [h, w], (w / 4) as f32, trainer.autodiff_device());
+    let kernels = match path(trainer.autodiff_device(), Op::Conv) {
         Path::Host => "host convolution backward",
         Path::Gpu | Path::Stock => "stock",
     };
     let mut step = || -> anyhow::Result<(f64, StepSeconds)> {
         let start = Instant::now();
         trainer.step_on(&batch, None)?;
-        Ok((start.elapsed().as_secs_f64(), trainer.last_step_seconds))
+        Ok((start.elapsed().as_secs_f64(), trainer.last_step_seconds()))
     };
     for _ in 0..a.warmup {
         step()?;
@@ -72,13 +72,13 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     let (forward, backward, optimizer) = (part(|s| s.forward), part(|s| s.backward), part(|s| s.optimizer));
     let min = times.iter().copied().fold(f64::INFINITY, f64::min);
     let med = median(&mut times);
-    let padded = InputPadder::new(h, w, trainer.parts.model.pad_divisor()).padded();
-    let macs = StageMacs::new(&trainer.parts.model, padded).forward(a.iters, a.batch);
+    let padded = InputPadder::new(h, w, trainer.parts().model.pad_divisor()).padded();
+    let macs = StageMacs::new(&trainer.parts().model, padded).forward(a.iters, a.batch);
     println!(
         "training step: batch {} of {h}x{w}, {} iterations, loss {:?}, device {}, {kernels}, {} threads",
         a.batch,
         a.iters,
-        trainer.parts.loss,
+        trainer.parts().loss,
         a.device,
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );

@@ -12,7 +12,7 @@ use dgstereo_eval::{ValidOptions, evaluate};
 use dgstereo_inference::MinSize;
 use dgstereo_inference::weights::asset;
 
-use crate::engine::{DEFAULT_LR_CHECK, Engine, ModelArgs};
+use crate::engine::{DEFAULT_LR_CHECK, ModelArgs, load_engine, with_flags};
 use crate::visualize::{colorize, error_image, side_by_side};
 
 /// Options of the demo.
@@ -45,24 +45,25 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     let right = load_rgb(dir.join("right_rgb.png"))?;
     let gt = read_disparity(dir.join("disp_left.pfm"))?;
     let visible = load_mask(dir.join("occlusion.png"))?;
-    let engine = Engine::new(&ModelArgs {
+    let (engine, options) = load_engine(&ModelArgs {
         weights: a.weights,
         iters: a.iters,
         min_size: a.min_size,
         lr_check: a.lr_check,
         ..ModelArgs::defaults()
     })?;
-    println!("weights: {}", engine.weights.display());
+    println!("weights: {}", engine.weights().display());
 
     let start = Instant::now();
-    let (disp, info) = engine.disparity(&left, &right, "cones")?;
+    let prediction = engine.predict(&left, &right, "cones", &options).map_err(with_flags)?;
+    let (disp, info) = (prediction.disparity, prediction.info);
     let seconds = start.elapsed().as_secs_f64();
     let (nw, nh) = info.network_size;
     let network = if (nw, nh) == (left.width, left.height) { String::new() } else { format!(" (network {nw}x{nh})") };
     let checked = info
         .rejected_share()
         .map_or(String::new(), |s| format!(", left-right check replaced {:.1} % of the pixels", 100.0 * s));
-    println!("Cones {}x{}{network}, {} iterations{checked}: {seconds:.2} s", left.width, left.height, engine.iters);
+    println!("Cones {}x{}{network}, {} iterations{checked}: {seconds:.2} s", left.width, left.height, options.iters);
 
     std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create {}", a.out.display()))?;
     write_disparity(a.out.join("cones_disparity.pfm"), &disp)?;

@@ -1,6 +1,6 @@
 //! `dgstereo eval`: runs a model over a data set and scores it under the benchmark's protocol.
 //!
-//! The data set's layout is read by the data crate, the model runs through the same [`Engine`] as
+//! The data set's layout is read by the data crate, the model runs through the same [`dgstereo_inference::Engine`] as
 //! `infer`, and the eval crate's driver scores each sample (all valid pixels, and non-occluded
 //! ones where a mask exists) into a table printed as text and written as `eval.csv` and
 //! `eval.json` in `--out`. The protocol follows the data set (KITTI: bad-3 pooled; Middlebury:
@@ -23,7 +23,7 @@ use dgstereo_data::Dataset;
 use dgstereo_data::datasets::{DrivingStereoWeather, FlyingThingsTestSubset, MiddleburySplit, middeval3_splits_in};
 use dgstereo_eval::{BenchmarkConfig, DatasetKind, evaluate_dataset};
 
-use crate::engine::{Engine, ModelArgs, error_line};
+use crate::engine::{ModelArgs, describe, error_line, load_engine, with_flags};
 
 /// Options of `dgstereo eval`.
 #[derive(Args)]
@@ -88,8 +88,8 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
     }
     let n = a.limit.unwrap_or(usize::MAX).min(dataset.len());
     let protocol = a.dataset.protocol();
-    let engine = Engine::new(&a.model)?;
-    eprintln!("configuration: {}", engine.configuration);
+    let (engine, options) = load_engine(&a.model)?;
+    eprintln!("configuration: {}", describe(&engine, &options));
     std::fs::create_dir_all(&a.out)
         .map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", a.out.display()))?;
     eprintln!(
@@ -97,9 +97,9 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
         a.dataset,
         dataset.len(),
         protocol.name(),
-        engine.weights.display(),
-        engine.iters,
-        match (a.model.max_size, engine.min_size) {
+        engine.weights().display(),
+        options.iters,
+        match (a.model.max_size, engine.min_size(&options)) {
             (Some(m), _) => format!(", downscaled to at most {m} px (not the benchmark's protocol)"),
             (None, Some(m)) => format!(", pairs under {m} px upscaled to it (--min-size)"),
             (None, None) => String::new(),
@@ -113,9 +113,9 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
         protocol,
         |sample| {
             engine
-                .disparity(&sample.left, &sample.right, &sample.name)
-                .map(|(d, _)| d)
-                .map_err(|e| dgstereo_core::Error::Other(error_line(&e)))
+                .predict(&sample.left, &sample.right, &sample.name, &options)
+                .map(|p| p.disparity)
+                .map_err(|e| dgstereo_core::Error::Other(error_line(&with_flags(e))))
         },
         |outcome| {
             k += 1;

@@ -15,11 +15,11 @@ use anyhow::{Context, bail};
 use clap::Args;
 use dgstereo_data::load_rgb;
 use dgstereo_inference::calibration::Calibration;
-use dgstereo_inference::check_same_size;
 use dgstereo_inference::pointcloud::PlyEncoding;
+use dgstereo_inference::{Engine, PredictOptions, check_same_size};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::engine::{Engine, ModelArgs, error_line};
+use crate::engine::{ModelArgs, describe, error_line, load_engine, with_flags};
 use crate::inputs::{PairList, PairPaths, from_folder, from_left_right, from_list};
 use crate::outputs::{OutputOptions, SaveKind, calibration_beside, write_outputs};
 
@@ -120,7 +120,7 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
             );
         }
     }
-    let engine = Engine::new(&a.model)?;
+    let (engine, options) = load_engine(&a.model)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the output folder", a.out.display()))?;
     let opts = OutputOptions { dir: a.out.clone(), kinds, max_depth: a.max_depth, ply: a.ply_encoding };
 
@@ -130,11 +130,11 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
         eprintln!("error: {}", f.line());
     }
     let total = list.pairs.len();
-    eprintln!("configuration: {}", engine.configuration);
+    eprintln!("configuration: {}", describe(&engine, &options));
     eprintln!(
         "{total} pair(s), weights {}, {} iterations, output {}",
-        engine.weights.display(),
-        engine.iters,
+        engine.weights().display(),
+        options.iters,
         a.out.display()
     );
     let bar = ProgressBar::new(total as u64);
@@ -149,7 +149,7 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
     for pair in &list.pairs {
         bar.set_message(pair.name.clone());
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            process_pair(&engine, pair, &opts, global_calib.as_ref())
+            process_pair(&engine, &options, pair, &opts, global_calib.as_ref())
         }));
         match outcome {
             Ok(Ok(line)) => {
@@ -210,6 +210,7 @@ fn dedup(kinds: &[SaveKind]) -> Vec<SaveKind> {
 /// Reads, predicts and writes one pair; returns the line reporting it.
 fn process_pair(
     engine: &Engine,
+    options: &PredictOptions,
     pair: &PairPaths,
     opts: &OutputOptions,
     global_calib: Option<&Calibration>,
@@ -217,15 +218,15 @@ fn process_pair(
     let t0 = Instant::now();
     let left = load_rgb(&pair.left)?;
     let right = load_rgb(&pair.right)?;
-    check_same_size(&left, &right).with_context(|| format!("{} + {}", pair.left.display(), pair.right.display()))?;
+    let both = || format!("{} + {}", pair.left.display(), pair.right.display());
+    check_same_size(&left, &right).map_err(|e| anyhow::Error::from(e).context(both()))?;
     let calib = if opts.kinds.iter().any(|k| k.needs_calibration()) {
         Some(calibration_for(&pair.left, global_calib)?.for_size(left.width, left.height))
     } else {
         None
     };
-    let (disp, info) = engine
-        .disparity(&left, &right, &pair.name)
-        .with_context(|| format!("{} + {}", pair.left.display(), pair.right.display()))?;
+    let prediction = engine.predict(&left, &right, &pair.name, options).map_err(|e| with_flags(e).context(both()))?;
+    let (disp, info) = (prediction.disparity, prediction.info);
     let written = write_outputs(opts, &pair.name, &left, &disp, calib.as_ref(), info.rejected.as_ref())?;
     let files: Vec<String> =
         written.iter().map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()).collect();
@@ -250,7 +251,7 @@ fn calibration_for(left: &Path, global: Option<&Calibration>) -> anyhow::Result<
         return Ok(c.clone());
     }
     match calibration_beside(left) {
-        Some(p) => Calibration::load(&p),
+        Some(p) => Ok(Calibration::load(&p)?),
         None => bail!(
             "{}: depth and ply outputs need a calibration: pass --calib FILE (or put calib.txt beside the image)",
             left.display()

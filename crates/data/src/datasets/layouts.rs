@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use dgstereo_core::{Error, Result};
 
-use super::sceneflow::walk;
+use super::pair_finder::{find_folder_pairs, replace_side_word};
 use super::{FileDataset, SampleFiles, ValidRule};
 
 fn subdirs(dir: &Path) -> Result<Vec<PathBuf>> {
@@ -118,59 +118,39 @@ pub fn kitti(root: &Path, version: KittiVersion) -> Result<FileDataset> {
     Ok(FileDataset { files, rule: ValidRule::Positive })
 }
 
-fn is_image(p: &Path) -> bool {
-    p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
-        matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg" | "bmp" | "tif" | "tiff" | "ppm")
-    })
-}
-
-/// A folder (searched recursively) of pairs, named either `<x>left<y>.<ext>` / `<x>right<y>.<ext>`
-/// (e.g. `desk_left.png`, `left_rgb.png`) or `im0.<ext>` / `im1.<ext>`.
+/// A folder (searched recursively) of pairs, found by the one pair rule of
+/// [`super::pair_finder`] (`<x>left<y>.<ext>` / `<x>right<y>.<ext>`, e.g. `desk_left.png`,
+/// `left_rgb.png`, or `im0.<ext>` / `im1.<ext>`); a left view without its right view is skipped.
 ///
 /// Ground truth and masks are looked up beside the left image: `<x>disp<y>.{pfm,png,npy}`
-/// (the image name with `left` replaced by `disp`), `disp0GT.pfm`/`disp0.pfm` for `im0`, and
-/// `mask0nocc.png` or `<x>occ<y>.png`; in a folder holding a single pair also `disp_left.*`
-/// and `occlusion.png`. Files whose name contains `disp`, `occ` or `mask` are never images.
-/// Valid ground truth: finite and `> 0`.
+/// (the image name with its side word `left` replaced by `disp`), `disp0GT.pfm`/`disp0.pfm` for
+/// `im0`, and `mask0nocc.png` or `<x>occ<y>.png`; in a folder holding a single pair also
+/// `disp_left.*` and `occlusion.png`. Valid ground truth: finite and `> 0`.
 pub fn folder_pairs(root: &Path) -> Result<FileDataset> {
-    let mut all = Vec::new();
-    walk(root, &mut all)?;
-    let mut pairs: Vec<(PathBuf, PathBuf, String)> = Vec::new();
-    for p in &all {
-        let name = file_name(p);
-        let lower = name.to_ascii_lowercase();
-        if !is_image(p) || ["disp", "occ", "mask"].iter().any(|k| lower.contains(k)) {
-            continue;
-        }
-        let stem = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let right_stem = if stem == "im0" {
-            "im1".to_string()
-        } else if stem.contains("left") {
-            stem.replacen("left", "right", 1)
-        } else {
-            continue;
-        };
-        let dir = p.parent().unwrap_or(Path::new(""));
-        let right = all.iter().find(|q| {
-            q.parent() == Some(dir) && q.file_stem().is_some_and(|s| s.to_string_lossy() == right_stem) && is_image(q)
-        });
-        if let Some(right) = right {
-            pairs.push((p.clone(), right.clone(), stem));
-        }
-    }
+    let pairs: Vec<(PathBuf, PathBuf, String)> = find_folder_pairs(root)?
+        .pairs
+        .into_iter()
+        .map(|p| {
+            let stem = p.left.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            (p.left, p.right, stem)
+        })
+        .collect();
     let mut files = Vec::new();
     for (left, right, stem) in &pairs {
         let dir = left.parent().unwrap_or(Path::new(""));
         let alone = pairs.iter().filter(|(l, _, _)| l.parent() == Some(dir)).count() == 1;
         let mut disp_names: Vec<String> = Vec::new();
         let mut mask_names: Vec<String> = Vec::new();
-        if stem == "im0" {
-            disp_names.extend(["disp0GT.pfm", "disp0.pfm", "disp0GT.png", "disp0.npy"].map(String::from));
-            mask_names.push("mask0nocc.png".into());
-        } else {
-            let d = stem.replacen("left", "disp", 1);
-            disp_names.extend(["pfm", "png", "npy"].map(|e| format!("{d}.{e}")));
-            mask_names.push(format!("{}.png", stem.replacen("left", "occ", 1)));
+        match (replace_side_word(stem, "disp"), replace_side_word(stem, "occ")) {
+            (Some(disp), Some(occ)) => {
+                disp_names.extend(["pfm", "png", "npy"].map(|e| format!("{disp}.{e}")));
+                mask_names.push(format!("{occ}.png"));
+            }
+            // `im0`, the only left stem without a side word.
+            _ => {
+                disp_names.extend(["disp0GT.pfm", "disp0.pfm", "disp0GT.png", "disp0.npy"].map(String::from));
+                mask_names.push("mask0nocc.png".into());
+            }
         }
         if alone {
             disp_names.extend(["disp_left.pfm", "disp_left.png", "disp_left.npy"].map(String::from));

@@ -4,13 +4,15 @@
 //! Layout functions ([`middlebury2014`], [`middeval3`], [`eth3d`], [`sceneflow`],
 //! [`flyingthings_test`], [`drivingstereo`], [`kitti`], [`folder_pairs`]) only walk folders, so
 //! listing is cheap and reading can happen on worker threads ([`crate::loader`]).
-//! [`SyntheticDataset`] renders samples instead of reading.
+//! [`SyntheticDataset`] renders samples instead of reading. Which files of a plain folder are
+//! pairs is one rule, [`pair_finder`], shared with `dgstereo infer --pairs`.
 
 mod drivingstereo;
 mod flyingthings_subset;
 mod layouts;
 mod middeval3;
 mod numpy_permutation;
+pub mod pair_finder;
 mod sceneflow;
 
 pub use drivingstereo::{DrivingStereoWeather, drivingstereo};

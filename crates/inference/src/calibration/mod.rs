@@ -18,7 +18,7 @@ pub mod middlebury;
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use dgstereo_core::{Error, Result};
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
 
@@ -43,9 +43,8 @@ pub struct Calibration {
 
 impl Calibration {
     /// Reads a calibration file, its layout chosen by content (see the module doc).
-    pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read the calibration", path.display()))?;
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         let calib = if text.trim_start().starts_with('{') {
             from_json(path, &text)?
         } else if text.contains("cam0") {
@@ -57,9 +56,9 @@ impl Calibration {
         Ok(calib)
     }
 
-    fn check(&self) -> anyhow::Result<()> {
+    fn check(&self) -> Result<()> {
         let k = &self.intrinsics;
-        let bad = |m: String| anyhow::anyhow!("{}: calibration {m}", self.source.display());
+        let bad = |m: String| Error::format(&self.source, format!("calibration {m}"));
         if k.iter().any(|v| !v.is_finite()) || k[(0, 0)] <= 0.0 || k[(1, 1)] <= 0.0 {
             return Err(bad(format!("has invalid focal lengths (fx = {}, fy = {})", k[(0, 0)], k[(1, 1)])));
         }
@@ -110,7 +109,7 @@ impl Calibration {
     }
 }
 
-fn from_middlebury(path: &Path) -> anyhow::Result<Calibration> {
+fn from_middlebury(path: &Path) -> Result<Calibration> {
     let c = read_middlebury_calib(path)?;
     let k = Matrix3::from_fn(|r, col| c.cam0[r][col]);
     Ok(Calibration {
@@ -123,14 +122,14 @@ fn from_middlebury(path: &Path) -> anyhow::Result<Calibration> {
     })
 }
 
-fn from_json(path: &Path, text: &str) -> anyhow::Result<Calibration> {
+fn from_json(path: &Path, text: &str) -> Result<Calibration> {
     let v: Value =
-        serde_json::from_str(text).with_context(|| format!("{}: calibration JSON does not parse", path.display()))?;
+        serde_json::from_str(text).map_err(|e| Error::format(path, format!("calibration JSON does not parse: {e}")))?;
     let num = |key: &str| v.get(key).and_then(Value::as_f64);
-    let need = |keys: &[&str]| -> anyhow::Result<f64> {
+    let need = |keys: &[&str]| -> Result<f64> {
         keys.iter()
             .find_map(|k| num(k))
-            .with_context(|| format!("{}: calibration JSON lacks a number '{}'", path.display(), keys.join("' or '")))
+            .ok_or_else(|| Error::format(path, format!("calibration JSON lacks a number '{}'", keys.join("' or '"))))
     };
     let fx = need(&["fx"])?;
     let fy = num("fy").unwrap_or(fx);
@@ -149,7 +148,7 @@ fn from_json(path: &Path, text: &str) -> anyhow::Result<Calibration> {
         None => None,
         Some(r) => match r.as_array().map(|a| a.iter().filter_map(Value::as_f64).collect::<Vec<_>>()).as_deref() {
             Some([near, far]) if near < far => Some((*near, *far)),
-            _ => bail!("{}: calibration depth_range must be [near, far] in metres", path.display()),
+            _ => return Err(Error::format(path, "calibration depth_range must be [near, far] in metres")),
         },
     };
     Ok(Calibration {
@@ -162,27 +161,29 @@ fn from_json(path: &Path, text: &str) -> anyhow::Result<Calibration> {
     })
 }
 
-fn from_k_txt(path: &Path, text: &str) -> anyhow::Result<Calibration> {
+fn from_k_txt(path: &Path, text: &str) -> Result<Calibration> {
     let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
-    let numbers = |line: Option<&str>, what: &str| -> anyhow::Result<Vec<f64>> {
-        let line = line.with_context(|| format!("{}: calibration lacks {what}", path.display()))?;
+    let numbers = |line: Option<&str>, what: &str| -> Result<Vec<f64>> {
+        let line = line.ok_or_else(|| Error::format(path, format!("calibration lacks {what}")))?;
         line.split([' ', '\t', ','])
             .filter(|t| !t.is_empty())
             .map(|t| t.parse::<f64>())
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(|_| anyhow::anyhow!("{}: calibration {what} is not a list of numbers: '{line}'", path.display()))
+            .collect::<std::result::Result<Vec<_>, _>>()
+            .map_err(|_| Error::format(path, format!("calibration {what} is not a list of numbers: '{line}'")))
     };
     let k = numbers(lines.next(), "line 1 (the 9 numbers of the intrinsics K)")?;
     if k.len() != 9 {
-        bail!(
-            "{}: not a calibration file (expected Middlebury calib.txt, JSON, or K.txt whose line 1 has the 9 numbers of K; found {} numbers)",
-            path.display(),
-            k.len()
-        );
+        return Err(Error::format(
+            path,
+            format!(
+                "not a calibration file (expected Middlebury calib.txt, JSON, or K.txt whose line 1 has the 9 numbers of K; found {} numbers)",
+                k.len()
+            ),
+        ));
     }
     let b = numbers(lines.next(), "line 2 (the baseline in metres)")?;
     let [baseline_m] = b[..] else {
-        bail!("{}: calibration line 2 must be one number (the baseline in metres)", path.display())
+        return Err(Error::format(path, "calibration line 2 must be one number (the baseline in metres)"));
     };
     Ok(Calibration {
         source: path.to_path_buf(),
@@ -245,7 +246,7 @@ mod tests {
             ("c.txt", "cam0=[1 0 0; 0 1 0]\n", "cam0"),
         ] {
             let (_d, p) = write(name, text);
-            let e = format!("{:#}", Calibration::load(&p).unwrap_err());
+            let e = Calibration::load(&p).unwrap_err().to_string();
             assert!(e.contains(name) && e.contains(needle), "{e}");
         }
     }
