@@ -20,6 +20,7 @@ pub mod ops;
 pub mod product;
 pub mod settings;
 mod test_paths;
+mod work;
 
 pub use autodiff::WinogradForward;
 pub use dispatch::{Op, Path, path, with_path};
@@ -34,3 +35,4 @@ pub use ops::norm::{PlaneNorm, add_relu, affine_planes_or, normalize_planes_or, 
 pub use ops::resample::{average_pool_half, resize_bilinear};
 pub use ops::upsample::convex_upsample;
 pub use settings::{GpuRoute, Settings, configure};
+pub use work::{WorkCount, count_work, macs_so_far};

@@ -23,6 +23,7 @@ use crate::host::conv::{conv2d_host, conv2d_host_rectified};
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output `[N, O, H_out, W_out]`
 pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::conv_module_macs(conv, x.dims()));
     match conv_options(conv) {
         Some(options) => conv2d_op(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), options),
         None => conv.forward(x),
@@ -35,6 +36,7 @@ pub fn conv2d_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output `[N, O, H_out, W_out]`
 pub fn conv2d_relu_forward(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::conv_module_macs(conv, x.dims()));
     match conv_options(conv) {
         Some(options) if host_inference(&x.device()) => {
             conv2d_host_rectified(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), &options, true)
@@ -58,6 +60,7 @@ pub fn conv2d_affine_or(
     relu: bool,
     stock: impl FnOnce(Tensor<4>) -> Tensor<4>,
 ) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::conv_module_macs(conv, x.dims()));
     match conv_options(conv) {
         Some(options) if host_inference(&x.device()) => {
             let (scale, shift) = affine();
@@ -79,6 +82,7 @@ pub fn conv2d_affine_or(
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; output `[N, O, H_out, W_out]`
 pub fn conv2d_forward_then(conv: &Conv2d, x: Tensor<4>, then: impl FnOnce(Tensor<3>) -> Tensor<3>) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::conv_module_macs(conv, x.dims()));
     match conv_options(conv) {
         Some(options) => conv2d_op_then(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), options, then),
         None => pixels_then(conv.forward(x), then),
@@ -100,6 +104,7 @@ pub fn conv2d_op_then(
     options: ConvOptions<2>,
     then: impl FnOnce(Tensor<3>) -> Tensor<3>,
 ) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::conv_macs(x.dims(), weight.dims(), &options));
     let [_, _, kh, kw] = weight.dims();
     match conv_path(&x.device(), &options, [kh, kw]) {
         Path::Gpu => conv2d_by_matmul_then(x, weight, bias, &options, then),
@@ -137,6 +142,7 @@ pub fn conv_options(conv: &Conv2d) -> Option<ConvOptions<2>> {
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`; output `[N, O, H_out, W_out]`
 pub fn conv2d_op(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>, options: ConvOptions<2>) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::conv_macs(x.dims(), weight.dims(), &options));
     let [_, _, kh, kw] = weight.dims();
     match conv_path(&x.device(), &options, [kh, kw]) {
         Path::Host if x.device().is_autodiff() && weight.dims()[1] >= autodiff::MIN_CHANNELS => {

@@ -25,6 +25,7 @@ pub fn conv_gru_step_or(
     inputs: &[Tensor<4>],
     stock: impl FnOnce(Tensor<4>) -> Tensor<4>,
 ) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::gru_step_macs(convs, h.dims()));
     let device = h.device();
     if path(&device, Op::GruStep) == Path::Host
         && !device.is_autodiff()
