@@ -219,7 +219,7 @@ mod tests {
         for pinned in [Path::Host, Path::Stock] {
             let step = || {
                 let convs = [&convs[0], &convs[1], &convs[2]];
-                crate::ops::gru::conv_gru_step_or(convs, h.clone(), [&ctx, &q], &[x.clone()], stock)
+                crate::ops::gru::conv_gru_step_or(convs, h.clone(), [&ctx, &q], std::slice::from_ref(&x), stock)
             };
             let (_, work) = count_work(|| with_path(pinned, step));
             assert_eq!(work.macs, (3 * (hidden + input) * hidden * 9 * 8 * 9) as u64, "{pinned:?}");
