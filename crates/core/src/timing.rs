@@ -6,6 +6,8 @@
 //! several times (the update iterations) accumulates its seconds and counts its calls. A GPU
 //! backend queues operations and returns at once, so a clock made with [`StageClock::synced`]
 //! waits for the device before and after each stage: slower, but each stage's time is its own.
+//! A clock given a meter ([`StageClock::metered`], e.g. the kernels' operation count) also
+//! attributes to each stage what the meter advanced over its spans.
 
 use std::time::Instant;
 
@@ -22,6 +24,8 @@ pub struct StageSeconds {
     pub cpu_seconds: f64,
     /// How many times it ran.
     pub calls: usize,
+    /// How far the clock's meter advanced over the stage's spans (0 without a meter).
+    pub work: u64,
 }
 
 /// Stages in order of their first call, with their accumulated times.
@@ -29,6 +33,7 @@ pub struct StageSeconds {
 pub struct StageClock {
     stages: Vec<StageSeconds>,
     sync: Option<burn::tensor::Device>,
+    meter: Option<fn() -> u64>,
 }
 
 impl StageClock {
@@ -40,7 +45,13 @@ impl StageClock {
     /// A clock that waits for `device` to finish its queued work before and after each stage
     /// (needed on a GPU, harmless on the CPU).
     pub fn synced(device: burn::tensor::Device) -> Self {
-        Self { stages: Vec::new(), sync: Some(device) }
+        Self { sync: Some(device), ..Self::default() }
+    }
+
+    /// This clock, also adding to each stage the advance of `meter` (a monotonic reading, such
+    /// as the operations counted so far) over its spans.
+    pub fn metered(self, meter: fn() -> u64) -> Self {
+        Self { meter: Some(meter), ..self }
     }
 
     fn wait(&self) {
@@ -54,17 +65,20 @@ impl StageClock {
     pub fn time<T>(&mut self, name: &'static str, f: impl FnOnce() -> T) -> T {
         self.wait();
         let (start, cpu_start) = (Instant::now(), process_cpu_seconds());
+        let work_start = self.meter.map_or(0, |meter| meter());
         let out = f();
         self.wait();
         let seconds = start.elapsed().as_secs_f64();
         let cpu_seconds = process_cpu_seconds().zip(cpu_start).map_or(f64::NAN, |(end, start)| end - start);
+        let work = self.meter.map_or(0, |meter| meter().wrapping_sub(work_start));
         match self.stages.iter_mut().find(|s| s.name == name) {
             Some(s) => {
                 s.seconds += seconds;
                 s.cpu_seconds += cpu_seconds;
                 s.calls += 1;
+                s.work += work;
             }
-            None => self.stages.push(StageSeconds { name, seconds, cpu_seconds, calls: 1 }),
+            None => self.stages.push(StageSeconds { name, seconds, cpu_seconds, calls: 1, work }),
         }
         out
     }
@@ -134,6 +148,20 @@ mod tests {
         }
         let mut none: Option<&mut StageClock> = None;
         assert_eq!(timed(&mut none, "a", || 3), 3);
+    }
+
+    #[test]
+    fn a_metered_clock_adds_the_meter_per_stage() {
+        use std::sync::atomic::{AtomicU64, Ordering};
+        static METER: AtomicU64 = AtomicU64::new(0);
+        let mut clock = StageClock::new().metered(|| METER.load(Ordering::Relaxed));
+        let mut advance = |name, by| clock.time(name, || METER.fetch_add(by, Ordering::Relaxed));
+        advance("a", 5);
+        advance("b", 7);
+        advance("a", 1);
+        METER.fetch_add(100, Ordering::Relaxed); // outside every stage
+        let work: Vec<(&str, u64)> = clock.stages().iter().map(|s| (s.name, s.work)).collect();
+        assert_eq!(work, [("a", 6), ("b", 7)]);
     }
 
     #[test]

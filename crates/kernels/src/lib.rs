@@ -25,6 +25,7 @@ mod product;
 pub mod settings;
 mod taps;
 mod test_paths;
+mod work;
 #[doc(hidden)]
 pub mod testing;
 
@@ -41,3 +42,4 @@ pub use ops::norm::{Normalization, add_relu, affine_planes, normalize_planes, re
 pub use ops::resample::{average_pool_half, linear_matrix, linear_weights, resize_bilinear};
 pub use ops::upsample::convex_upsample;
 pub use settings::{GpuRoute, Settings, configure};
+pub use work::{WorkCount, count_work, macs_so_far};

@@ -13,7 +13,6 @@ pub mod checkpoint;
 pub mod checkpoint_config;
 pub mod config;
 pub mod file_keys;
-pub mod flops;
 pub mod grown_inputs;
 pub mod inference;
 pub mod network;

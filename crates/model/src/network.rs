@@ -4,6 +4,12 @@
 //! schedule are chosen in their crates' configs and built there, so the forward pass below only
 //! wires them in RAFT-Stereo's order. It reports intermediate tensors and stage times through
 //! one [`Probe`].
+//!
+//! The pass is written once, as stage functions that [`RaftStereo::forward_flow`] calls in
+//! sequence: `encode` (fusion, encoders, the GRUs' initial states and context), then
+//! `correlation_volume` and `update_grid` once, per iteration `lookup` and `update`, and
+//! `upsample_weights` with `upsample` where a flow is returned. The per-stage backward profile
+//! ([`crate::stage_backward`]) runs the same functions, one stage at a time.
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
@@ -68,6 +74,40 @@ pub struct ForwardOptions<'a> {
     pub probe: Probe<'a>,
 }
 
+/// What the encoders give the update loop ([`RaftStereo::encode`]).
+#[derive(Debug)]
+pub(crate) struct Encodings {
+    /// Left features `[N, C, H/f, W/f]`.
+    pub fmap1: Tensor<4>,
+    /// Right features, as `fmap1`.
+    pub fmap2: Tensor<4>,
+    /// Per GRU level, finest first, the initial hidden state.
+    pub hidden: Vec<Tensor<4>>,
+    /// Per GRU level, finest first, the gates' context terms.
+    pub gates: Vec<GateContext>,
+}
+
+/// The fixed inputs of the update loop at the update grid `[N, 1, H/f, W/f]`
+/// ([`RaftStereo::update_grid`]).
+#[derive(Debug)]
+pub(crate) struct UpdateGrid {
+    /// Each pixel's own x position (f32): the match of a zero flow.
+    coords0: Tensor<4>,
+    /// The y flow, zero (RAFT-Stereo's update block reads a two-channel flow).
+    zeros: Tensor<4>,
+    /// The GRU's guidance feature (`None` without guidance or prior).
+    guidance: Option<Tensor<4>>,
+    /// The update block's dtype (the device's).
+    dtype: FloatDType,
+}
+
+impl UpdateGrid {
+    /// A zero x flow (f32), the loop's start without an initial flow.
+    pub(crate) fn zero_flow(&self) -> Tensor<4> {
+        Tensor::zeros(self.coords0.dims(), (&self.coords0.device(), DType::F32))
+    }
+}
+
 /// The result of [`RaftStereo::forward_flow`].
 #[derive(Debug, Clone)]
 pub struct FlowOutput {
@@ -128,55 +168,24 @@ impl RaftStereo {
     ) -> FlowOutput {
         let ForwardOptions { flow_init, implementation, all_iterations, mut probe } = options;
         let probe = &mut probe;
-        let Encoded { fmap1, fmap2, context } =
-            self.encoder.encode(self.fuse(left, right, prior, probe), self.n_gru_layers, probe);
-        probe.record("fnet.left", &fmap1);
-        probe.record("fnet.right", &fmap2);
-        let (mut hidden, gates) = self.gru_context(context, probe);
-
-        // In half precision the correlation, its lookup, the match positions and the upsampling
-        // stay in f32, as in the reference's mixed precision (its `fmap1.float()` before the
-        // volume, its lookup and `coords1 + delta_flow` outside `autocast`): a half-precision
-        // position has a spacing of 1/4 pixel beyond 256, which the lookup's interpolation
-        // weights would inherit. The encoders and the update block run in the device's dtype.
-        let dtype = float_dtype(&fmap1.device());
-        let (fmap1, fmap2) = (cast_float(fmap1, FloatDType::F32), cast_float(fmap2, FloatDType::F32));
+        let Encodings { fmap1, fmap2, mut hidden, gates } = self.encode(left, right, prior, probe);
         let implementation = implementation.unwrap_or(self.correlation.implementation);
-        let corr_fn = probe.time("correlation build", || self.correlation.build_with(implementation, fmap1, fmap2));
-        if let (true, Correlation::Reg(p)) = (probe.tracing(), &corr_fn) {
-            for (i, level) in p.levels().iter().enumerate() {
-                let [m, w] = level.dims();
-                probe.record(format_args!("corr.pyramid.{i}"), &level.clone().reshape([m, 1, 1, w]));
-            }
-        }
-
-        let [n, _, h, w] = hidden[0].dims();
-        let device = hidden[0].device();
-        let grid = [h, w];
-        let guidance = probe.time("guidance", || prior.and_then(|p| self.guidance.feature(p.left.clone(), grid)));
-        let f32_on = (&device, DType::F32);
-        let coords0 =
-            Tensor::<1>::from_data(TensorData::new((0..w).map(|x| x as f32).collect::<Vec<_>>(), [w]), f32_on)
-                .reshape([1, 1, 1, w])
-                .expand([n, 1, h, w]);
+        let corr_fn = self.correlation_volume(fmap1, fmap2, implementation, probe);
+        let grid = self.update_grid(&hidden[0], prior, probe);
         let mut flow_x = match flow_init {
             Some(flow) => cast_float(flow, FloatDType::F32),
-            None => Tensor::zeros([n, 1, h, w], f32_on),
+            None => grid.zero_flow(),
         };
-        let zeros = Tensor::<4>::zeros([n, 1, h, w], &device);
-        let factor = 1usize << self.n_downsample;
         let mut flow_up = Vec::new();
         // The iterations run the same convolutions: their transformed weights are kept until the
         // loop ends, and the training forward takes Winograd in it (see `UpdateLoop`).
         let _update_loop = UpdateLoop::new();
         for k in 0..iters {
             flow_x = flow_x.detach();
-            let corr = probe
-                .time("correlation lookup", || cast_float(corr_fn.lookup(coords0.clone() + flow_x.clone()), dtype));
+            let corr = self.lookup(&corr_fn, &grid, flow_x.clone(), probe);
             probe.record(format_args!("iter.{k}.corr"), &corr);
-            let flow = Tensor::cat(vec![cast_float(flow_x.clone(), dtype), zeros.clone()], 1);
-            let out = self.update_block.step(&mut hidden, &gates, corr, flow, guidance.as_ref(), probe);
-            flow_x = flow_x + cast_float(out.delta_x, FloatDType::F32);
+            let delta_x = self.update(&mut hidden, &gates, corr, &grid, flow_x.clone(), probe);
+            flow_x = flow_x + cast_float(delta_x, FloatDType::F32);
             for (i, hi) in hidden.iter().enumerate() {
                 probe.record(format_args!("iter.{k}.hidden.{i}"), hi);
             }
@@ -184,19 +193,119 @@ impl RaftStereo {
             // The mask never feeds back into the state: computed only where it is used.
             let upsampled = all_iterations || k + 1 == iters;
             if upsampled || probe.tracing() {
-                let up_mask = probe.time("mask head", || self.update_block.upsample_mask(&hidden));
+                let up_mask = self.upsample_weights(&hidden, probe);
                 probe.record(format_args!("iter.{k}.up_mask"), &up_mask);
                 if !upsampled {
                     continue;
                 }
-                let up = probe.time("convex upsample", || {
-                    convex_upsample(flow_x.clone(), cast_float(up_mask, FloatDType::F32), factor)
-                });
+                let up = self.upsample(flow_x.clone(), up_mask, probe);
                 probe.record(format_args!("iter.{k}.flow_up"), &up);
                 flow_up.push(up);
             }
         }
         FlowOutput { flow_up, flow_lowres: flow_x }
+    }
+
+    /// Stage 1, fusion and encoders: both views' features, and per GRU level the initial hidden
+    /// state and the gates' context terms.
+    pub(crate) fn encode(
+        &self,
+        left: Tensor<4>,
+        right: Tensor<4>,
+        prior: Option<&DepthPrior>,
+        probe: &mut Probe<'_>,
+    ) -> Encodings {
+        let Encoded { fmap1, fmap2, context } =
+            self.encoder.encode(self.fuse(left, right, prior, probe), self.n_gru_layers, probe);
+        probe.record("fnet.left", &fmap1);
+        probe.record("fnet.right", &fmap2);
+        let (hidden, gates) = self.gru_context(context, probe);
+        Encodings { fmap1, fmap2, hidden, gates }
+    }
+
+    /// Stage 2, the cost volume of `fmap1` against `fmap2` (`[N, C, H/f, W/f]`) by
+    /// `implementation`, built once per pass.
+    ///
+    /// In half precision the correlation, its lookup, the match positions and the upsampling stay
+    /// in f32, as in the reference's mixed precision (its `fmap1.float()` before the volume, its
+    /// lookup and `coords1 + delta_flow` outside `autocast`): a half-precision position has a
+    /// spacing of 1/4 pixel beyond 256, which the lookup's interpolation weights would inherit.
+    /// The encoders and the update block run in the device's dtype.
+    pub(crate) fn correlation_volume(
+        &self,
+        fmap1: Tensor<4>,
+        fmap2: Tensor<4>,
+        implementation: CorrelationImplementation,
+        probe: &mut Probe<'_>,
+    ) -> Correlation {
+        let (fmap1, fmap2) = (cast_float(fmap1, FloatDType::F32), cast_float(fmap2, FloatDType::F32));
+        let corr_fn = probe.time("correlation build", || self.correlation.build_with(implementation, fmap1, fmap2));
+        if let (true, Correlation::Reg(p)) = (probe.tracing(), &corr_fn) {
+            for (i, level) in p.levels().iter().enumerate() {
+                let [m, w] = level.dims();
+                probe.record(format_args!("corr.pyramid.{i}"), &level.clone().reshape([m, 1, 1, w]));
+            }
+        }
+        corr_fn
+    }
+
+    /// The update loop's fixed inputs at the grid of the finest hidden state `hidden_fine`
+    /// (`[N, C, H/f, W/f]`): the positions, the zero y flow and the guidance feature from the left
+    /// prior (computed once per pass).
+    pub(crate) fn update_grid(
+        &self,
+        hidden_fine: &Tensor<4>,
+        prior: Option<&DepthPrior>,
+        probe: &mut Probe<'_>,
+    ) -> UpdateGrid {
+        let [n, _, h, w] = hidden_fine.dims();
+        let device = hidden_fine.device();
+        let guidance = probe.time("guidance", || prior.and_then(|p| self.guidance.feature(p.left.clone(), [h, w])));
+        let f32_on = (&device, DType::F32);
+        let coords0 =
+            Tensor::<1>::from_data(TensorData::new((0..w).map(|x| x as f32).collect::<Vec<_>>(), [w]), f32_on)
+                .reshape([1, 1, 1, w])
+                .expand([n, 1, h, w]);
+        let zeros = Tensor::<4>::zeros([n, 1, h, w], &device);
+        UpdateGrid { coords0, zeros, guidance, dtype: float_dtype(&device) }
+    }
+
+    /// Stage 3, one iteration's lookup: the cost volume sampled around each pixel's match at
+    /// `x + flow_x` (`flow_x`: `[N, 1, H/f, W/f]`, f32), in the update block's dtype.
+    pub(crate) fn lookup(
+        &self,
+        corr_fn: &Correlation,
+        grid: &UpdateGrid,
+        flow_x: Tensor<4>,
+        probe: &mut Probe<'_>,
+    ) -> Tensor<4> {
+        probe.time("correlation lookup", || cast_float(corr_fn.lookup(grid.coords0.clone() + flow_x), grid.dtype))
+    }
+
+    /// Stage 4, one update step: advances `hidden` from the lookup `corr` and the current
+    /// `flow_x` (f32) and returns the x flow's update, in the update block's dtype.
+    pub(crate) fn update(
+        &self,
+        hidden: &mut [Tensor<4>],
+        gates: &[GateContext],
+        corr: Tensor<4>,
+        grid: &UpdateGrid,
+        flow_x: Tensor<4>,
+        probe: &mut Probe<'_>,
+    ) -> Tensor<4> {
+        let flow = Tensor::cat(vec![cast_float(flow_x, grid.dtype), grid.zeros.clone()], 1);
+        self.update_block.step(hidden, gates, corr, flow, grid.guidance.as_ref(), probe).delta_x
+    }
+
+    /// Stage 5a, the mask head: the convex upsampling's weights from the finest state.
+    pub(crate) fn upsample_weights(&self, hidden: &[Tensor<4>], probe: &mut Probe<'_>) -> Tensor<4> {
+        probe.time("mask head", || self.update_block.upsample_mask(hidden))
+    }
+
+    /// Stage 5b, convex upsampling of `flow_x` (f32) to full resolution by `mask`.
+    pub(crate) fn upsample(&self, flow_x: Tensor<4>, mask: Tensor<4>, probe: &mut Probe<'_>) -> Tensor<4> {
+        let factor = 1usize << self.n_downsample;
+        probe.time("convex upsample", || convex_upsample(flow_x, cast_float(mask, FloatDType::F32), factor))
     }
 
     /// The images each encoder sees: the fused left view for the context, and for the features

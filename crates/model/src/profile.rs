@@ -1,17 +1,18 @@
-//! Per-stage timing of one forward pass.
+//! Per-stage time and work of one forward pass.
 //!
-//! [`profile_forward`] runs [`RaftStereo::forward_flow`] itself with a
-//! [`StageClock`](dgstereo_core::timing::StageClock): the production path times its own stages,
-//! so there is no second copy of the forward sequence to drift from it. The CPU backend executes
-//! every operation eagerly, so the time a stage's closure takes is the time of that stage. Each
-//! stage's time is paired with its operation count ([`StageMacs`], per call times calls) so a
-//! report can show achieved GFLOP/s.
+//! [`profile_forward`] runs [`RaftStereo::forward_flow`] itself under the kernels' operation
+//! count ([`dgstereo_kernels::count_work`]) with a [`StageClock`] metered by that count: the
+//! production path times its own stages, and each stage's multiply-accumulates are those its
+//! operations counted as they ran (the fusion and every configured variant included), so
+//! neither the forward sequence nor its arithmetic is described a second time. The CPU backend
+//! executes every operation eagerly, so the time a stage's closure takes is the time of that
+//! stage. Each stage's time is paired with its count so a report can show achieved GFLOP/s.
 
 use burn::tensor::Tensor;
 use dgstereo_core::timing::StageClock;
 use dgstereo_core::{DepthPrior, Error, Result};
+use dgstereo_kernels::{count_work, macs_so_far};
 
-use crate::flops::StageMacs;
 use crate::{ForwardOptions, ModelConfig, Probe, RaftStereo};
 
 /// The time and work of one stage, summed over the iterations where it repeats.
@@ -25,7 +26,8 @@ pub struct StageTime {
     pub cpu_seconds: f64,
     /// How many times it ran (iterations for the update stages).
     pub calls: usize,
-    /// Multiply-accumulates, all calls together (0 for memory-bound stages).
+    /// Multiply-accumulates its operations counted, all calls together (0 for memory-bound
+    /// stages).
     pub macs: u64,
 }
 
@@ -51,6 +53,8 @@ pub struct Profile {
     pub flow_lowres: Tensor<4>,
     /// The upsampled final flow.
     pub flow_up: Tensor<4>,
+    /// Multiply-accumulates of the whole pass (the stages' together).
+    pub macs: u64,
 }
 
 impl Profile {
@@ -76,7 +80,7 @@ pub fn profile_forward(
     prior: Option<&DepthPrior>,
     iters: usize,
 ) -> Result<Profile> {
-    let [n, _, h, w] = left.dims();
+    let [n, ..] = left.dims();
     if n != 1 {
         return Err(Error::Shape(format!("the profile runs one pair at a time, got a batch of {n}")));
     }
@@ -86,32 +90,9 @@ pub fn profile_forward(
     if iters == 0 {
         return Err(Error::Config("iterations must be at least 1".into()));
     }
-    let macs = StageMacs::new(config, [h, w]);
-    let mut clock = StageClock::synced(left.device());
-    let out = model.forward_flow(
-        left,
-        right,
-        prior,
-        iters,
-        ForwardOptions { probe: Probe::new(None, Some(&mut clock)), ..Default::default() },
-    );
-    // MACs per call of each counted stage; the encoders and the build run once per pass.
-    let per_call = |name: &str, calls: usize| -> u64 {
-        match name {
-            "feature encoder" => macs.feature_encoder / calls.max(1) as u64,
-            "context encoder" => macs.context_encoder / calls.max(1) as u64,
-            "correlation build" => macs.correlation_build,
-            "motion encoder" => macs.motion_encoder,
-            "GRU 1/4" => macs.gru_fine,
-            "GRU 1/8" => macs.gru_mid,
-            "GRU 1/16" => macs.gru_coarse,
-            "flow head" => macs.flow_head,
-            "mask head" => macs.mask_head,
-            "convex upsample" => macs.convex_upsample,
-            _ => 0,
-        }
-    };
-    let gru_fine_calls = clock.stages().iter().find(|s| s.name == "GRU 1/4").map_or(0, |s| s.calls);
+    let mut clock = StageClock::synced(left.device()).metered(macs_so_far);
+    let options = ForwardOptions { probe: Probe::new(None, Some(&mut clock)), ..Default::default() };
+    let (out, work) = count_work(|| model.forward_flow(left, right, prior, iters, options));
     let stages = clock
         .stages()
         .iter()
@@ -120,16 +101,11 @@ pub fn profile_forward(
             seconds: s.seconds,
             cpu_seconds: s.cpu_seconds,
             calls: s.calls,
-            // The interpolations' count is per update iteration (several calls each).
-            macs: if s.name == "interpolation" {
-                macs.interpolation * gru_fine_calls as u64
-            } else {
-                per_call(s.name, s.calls) * s.calls as u64
-            },
+            macs: s.work,
         })
         .collect();
     let flow_up = out.flow_up.into_iter().last().expect("at least one iteration");
-    Ok(Profile { stages, flow_lowres: out.flow_lowres, flow_up })
+    Ok(Profile { stages, flow_lowres: out.flow_lowres, flow_up, macs: work.macs })
 }
 
 #[cfg(test)]
@@ -159,12 +135,72 @@ mod tests {
         for stage in ["feature encoder", "context encoder", "correlation build", "correlation lookup", "GRU 1/8"] {
             assert!(names.contains(&stage), "{stage} missing from {names:?}");
         }
-        // The counted work is the model's, stage by stage.
-        let macs = StageMacs::new(&config, [32, 64]);
-        let of = |name: &str| profile.stages.iter().find(|s| s.name == name).unwrap().macs;
-        assert_eq!(of("GRU 1/4"), 3 * macs.gru_fine);
-        assert_eq!(of("feature encoder"), macs.feature_encoder);
         assert!(profile.total_seconds() > 0.0);
+    }
+
+    /// A small model's counted work, stage by stage, against a hand count of its layers at a
+    /// 64x128 input (an 16x32 update grid): the fine GRU (three 3x3 convolutions of
+    /// `16 + 128 + 16 -> 16` channels), the mask head (3x3 `16 -> 256`, 1x1 `256 -> 144`), the
+    /// correlation's product (`W/4` pairs of 256-long features per pixel), the convex upsampling
+    /// (9 per full-resolution value) and the feature encoder of both views (stem at full
+    /// resolution, layer1 there, layer2 and layer3 halving, the 1x1 projection).
+    #[test]
+    fn counted_work_matches_a_hand_count() {
+        let device = default_device();
+        let mut config = ModelConfig::default();
+        config.updater.hidden_dims = [16, 16, 16];
+        let model = config.init(&device).unwrap();
+        let img = || Tensor::<4>::random([1, 3, 64, 128], Distribution::Uniform(0.0, 255.0), &device);
+        let iters = 2;
+        let profile = profile_forward(&model, &config, img(), img(), None, iters).unwrap();
+        let of = |name: &str| profile.stages.iter().find(|s| s.name == name).map_or(0, |s| s.macs);
+        let grid = 16 * 32u64;
+        assert_eq!(of("GRU 1/4"), iters as u64 * 3 * (16 + 128 + 16) * 16 * 9 * grid);
+        assert_eq!(of("mask head"), (16 * 256 * 9 + 256 * 144) * grid);
+        assert_eq!(of("correlation build"), grid * 32 * 256);
+        assert_eq!(of("convex upsample"), 9 * 64 * 128);
+        let full = 64 * 128u64;
+        let stem = 3 * 64 * 49 * full;
+        let layer1 = 4 * 64 * 64 * 9 * full;
+        let layer2 = (64 * 96 * 9 + 3 * 96 * 96 * 9 + 64 * 96) * full / 4;
+        let layer3 = (96 * 128 * 9 + 3 * 128 * 128 * 9 + 96 * 128) * grid;
+        let projection = 128 * 256 * grid;
+        assert_eq!(of("feature encoder"), 2 * (stem + layer1 + layer2 + layer3 + projection));
+        // Memory-bound stages count nothing.
+        assert_eq!(of("correlation lookup") + of("interpolation"), 0);
+    }
+
+    /// The stages' counts add up to the pass's, which is what `forward_flow` does under
+    /// `count_work`; a fusion adds exactly its own stage's work to the pass without one.
+    #[test]
+    fn stage_counts_add_to_the_pass_and_fusion_is_counted() {
+        use dgstereo_fusion::{FusionConfig, FusionTarget};
+        let device = default_device();
+        let img = || Tensor::<4>::random([1, 3, 32, 64], Distribution::Uniform(0.0, 255.0), &device);
+        let depth = || Tensor::<4>::random([1, 1, 32, 64], Distribution::Uniform(0.5, 2.0), &device);
+        let (left, right, prior) = (img(), img(), DepthPrior { left: depth(), right: depth() });
+        let run = |fusion: FusionConfig| {
+            let mut config = ModelConfig { fusion, ..ModelConfig::default() };
+            config.updater.hidden_dims = [16, 16, 16];
+            let model = config.init(&device).unwrap();
+            let profile = profile_forward(&model, &config, left.clone(), right.clone(), Some(&prior), 2).unwrap();
+            assert_eq!(profile.stages.iter().map(|s| s.macs).sum::<u64>(), profile.macs);
+            let options = ForwardOptions::default();
+            let (_, work) = count_work(|| model.forward_flow(left.clone(), right.clone(), Some(&prior), 2, options));
+            assert_eq!(work.macs, profile.macs);
+            let fusion = profile.stages.iter().find(|s| s.name == "fusion").map_or(0, |s| s.macs);
+            (profile.macs, fusion)
+        };
+        let (plain, none) = run(FusionConfig::None);
+        assert_eq!(none, 0);
+        for target in [FusionTarget::ContextOnly, FusionTarget::Both] {
+            let features = 8;
+            for fusion in [FusionConfig::Deformable { target, features }, FusionConfig::Conv { target, features }] {
+                let (total, fused) = run(fusion.clone());
+                assert!(fused > 0, "{fusion:?}");
+                assert_eq!(total, plain + fused, "{fusion:?}");
+            }
+        }
     }
 
     #[test]

@@ -3,25 +3,26 @@
 //! Design decision: burn's autodiff runs a backward pass by graph depth, not stage by stage (the
 //! encoders' nodes come last, each iteration's loss branch interleaves with the next
 //! iterations' update), so one pass cannot be split into stages by a clock. Instead
-//! [`profile_backward`] runs each stage of [`RaftStereo::forward_flow`] alone, on the shapes it has
-//! in a training step: its inputs are the detached outputs of the stage before (leaves that
-//! require gradients, so the gradient into the stage's inputs is computed as in the step), its
-//! outputs are dotted with fixed random weights into one scalar, and the forward and the backward
-//! from that scalar are timed. The stages' backward seconds add up to about a whole step's
+//! [`profile_backward`] runs each stage of [`RaftStereo::forward_flow`] alone, by calling the
+//! same stage functions `forward_flow` calls (`encode`, `correlation_volume` with `lookup`,
+//! `update`, `upsample_weights` with `upsample`), on the shapes they have in a training step:
+//! a stage's inputs are the detached outputs of the stage before (leaves that require gradients,
+//! so the gradient into the stage's inputs is computed as in the step), with random flows in
+//! place of the iterations' own, its outputs are dotted with fixed random weights into one
+//! scalar, and the forward and the backward from that scalar are timed. The stages' backward seconds add up to about a whole step's
 //! backward (the dot products and the loss itself are the difference), which `dgstereo bench
 //! --train --stages` prints beside the step's own split.
 
 use std::time::Instant;
 
 use burn::optim::GradientsParams;
-use burn::tensor::{DType, Device, Distribution, FloatDType, Tensor, TensorData};
-use dgstereo_core::tensor::cast_float;
+use burn::tensor::{DType, Device, Distribution, Tensor};
 use dgstereo_core::timing::process_cpu_seconds;
 use dgstereo_core::{DepthPrior, Probe};
-use dgstereo_costvolume::CostVolume;
-use dgstereo_updater::{GateContext, Updater, convex_upsample};
+use dgstereo_updater::GateContext;
 
 use crate::RaftStereo;
+use crate::network::Encodings;
 
 /// The forward and backward seconds of one stage run alone.
 #[derive(Debug, Clone, PartialEq)]
@@ -100,36 +101,30 @@ pub fn profile_backward(
 ) -> Vec<StageBackward> {
     let device = left.device();
     let mut probe = Probe::none();
-    let (encoders, (fmaps, hidden, gates)) = timed(model, "fusion + encoders", 1, &device, || {
-        let inputs = model.fuse(left, right, prior, &mut probe);
-        let encoded = model.encoder.encode(inputs, model.n_gru_layers, &mut probe);
-        let (hidden, gates) = model.gru_context(encoded.context, &mut probe);
-        let mut outputs = vec![encoded.fmap1.clone(), encoded.fmap2.clone()];
-        outputs.extend(hidden.iter().cloned());
-        outputs.extend(gates.iter().flat_map(|g| [g.zr.clone(), g.q.clone()]));
-        (outputs, ([encoded.fmap1, encoded.fmap2], hidden, gates))
+    let (encoders, encodings) = timed(model, "fusion + encoders", 1, &device, || {
+        let encodings = model.encode(left, right, prior, &mut probe);
+        let mut outputs = vec![encodings.fmap1.clone(), encodings.fmap2.clone()];
+        outputs.extend(encodings.hidden.iter().cloned());
+        outputs.extend(encodings.gates.iter().flat_map(|g| [g.zr.clone(), g.q.clone()]));
+        (outputs, encodings)
     });
+    let Encodings { fmap1, fmap2, hidden, gates } = encodings;
 
     let [n, _, h, w] = hidden[0].dims();
     let f32_on = (&device, DType::F32);
-    let dtype = dgstereo_core::device::float_dtype(&device);
-    let coords0 = Tensor::<1>::from_data(TensorData::new((0..w).map(|x| x as f32).collect::<Vec<_>>(), [w]), f32_on)
-        .reshape([1, 1, 1, w])
-        .expand([n, 1, h, w]);
+    let grid = model.update_grid(&hidden[0], prior, &mut probe);
     // Positions spread as a step's are: a random flow of up to a quarter of the grid's width.
     let flows: Vec<Tensor<4>> = (0..iters)
         .map(|_| Tensor::<4>::random([n, 1, h, w], Distribution::Uniform(-(w as f64) / 4.0, 0.0), f32_on))
         .collect();
     let (correlation, corrs) = timed(model, "correlation", iters, &device, || {
-        let [f1, f2] = fmaps.each_ref().map(|f| cast_float(leaf(f), FloatDType::F32));
-        let volume = model.correlation.build_with(model.correlation.implementation, f1, f2);
+        let implementation = model.correlation.implementation;
+        let volume = model.correlation_volume(leaf(&fmap1), leaf(&fmap2), implementation, &mut probe);
         let corrs: Vec<Tensor<4>> =
-            flows.iter().map(|flow| cast_float(volume.lookup(coords0.clone() + flow.clone()), dtype)).collect();
+            flows.iter().map(|flow| model.lookup(&volume, &grid, flow.clone(), &mut probe)).collect();
         (corrs.clone(), corrs)
     });
 
-    let guidance = prior.and_then(|p| model.guidance.feature(p.left.clone(), [h, w]));
-    let zeros = Tensor::<4>::zeros([n, 1, h, w], &device);
     let (update, states) = timed(model, "update steps", iters, &device, || {
         let mut state: Vec<Tensor<4>> = hidden.iter().map(leaf).collect();
         let context: Vec<GateContext> = gates
@@ -139,22 +134,19 @@ pub fn profile_backward(
         let mut deltas = Vec::with_capacity(iters);
         let mut states = Vec::with_capacity(iters);
         for (corr, flow_x) in corrs.iter().zip(&flows) {
-            let flow = Tensor::cat(vec![cast_float(flow_x.clone(), dtype), zeros.clone()], 1);
-            let out = model.update_block.step(&mut state, &context, leaf(corr), flow, guidance.as_ref(), &mut probe);
-            deltas.push(out.delta_x);
+            deltas.push(model.update(&mut state, &context, leaf(corr), &grid, flow_x.clone(), &mut probe));
             states.push(state[0].clone());
         }
         (deltas, states)
     });
 
-    let factor = 1usize << model.n_downsample;
     let (upsampling, ()) = timed(model, "mask heads + upsampling", iters, &device, || {
         let up = states
             .iter()
             .zip(&flows)
             .map(|(state, flow_x)| {
-                let mask = model.update_block.upsample_mask(&[leaf(state)]);
-                convex_upsample(leaf(flow_x), cast_float(mask, FloatDType::F32), factor)
+                let mask = model.upsample_weights(&[leaf(state)], &mut probe);
+                model.upsample(leaf(flow_x), mask, &mut probe)
             })
             .collect();
         (up, ())

@@ -3,9 +3,10 @@
 //! Design decision: the whole-inference figure goes through [`StereoModel::predict`], the same
 //! call `infer` makes (padding, network, cropping), on synthetic images of the requested size,
 //! so it measures what a user waits for; the weights are freshly initialised because the cost
-//! of the network does not depend on their values. The achieved GFLOP/s divides the operation
-//! count of the model ([`dgstereo_model::flops::StageMacs`], convolutions and matrix products)
-//! by the median time; the count is that of direct convolutions, so where the host path computes
+//! of the network does not depend on their values. The achieved GFLOP/s divides the
+//! multiply-accumulates the network's operations counted as they ran
+//! ([`dgstereo_kernels::count_work`]: convolutions and matrix products) by the median time; the
+//! count is that of direct convolutions, so where the host path computes
 //! a 3x3 convolution by Winograd's algorithm (fewer multiplications) the rate is an effective
 //! one, and can exceed what the arithmetic units do. `--stages` adds a per-stage table
 //! ([`dgstereo_model::profile::profile_forward`]) with each stage's share of the machine's peak.
@@ -24,8 +25,7 @@ use dgstereo_core::device::Precision;
 use dgstereo_core::timing::process_cpu_seconds;
 use dgstereo_core::{DepthPrior, DeviceChoice, InputPadder};
 use dgstereo_inference::cost_volume::{CorrChoice, DEFAULT_MEMORY_BUDGET, corr_for, corr_name};
-use dgstereo_kernels::{Op, Path, Settings, path};
-use dgstereo_model::flops::StageMacs;
+use dgstereo_kernels::{Op, Path, Settings, count_work, path};
 use dgstereo_model::profile::profile_forward;
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig, PriorInput, PriorProvider};
@@ -198,7 +198,8 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let mut prior_seconds = Vec::new();
     let padder = InputPadder::new(h, w, config.pad_divisor());
     let padded = padder.padded();
-    let macs = StageMacs::new(&config, padded).forward(a.iters, 1);
+    // The network's work, counted by its operations in each run (the prior's are outside).
+    let mut macs = 0;
     // What runs: the host kernels only on f32 CPU inference, whatever `--kernels` asked.
     let kernels = match path(&device, Op::Conv) {
         Path::Host => "host",
@@ -230,7 +231,10 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
             None => None,
         };
         let prior = computed.as_ref().or(prior.as_ref());
-        let out = model.predict(left.clone(), right.clone(), prior, a.iters, false, Some(implementation))?;
+        let (out, work) =
+            count_work(|| model.predict(left.clone(), right.clone(), prior, a.iters, false, Some(implementation)));
+        let out = out?;
+        macs = work.macs;
         let data = out.last().into_data(); // waits for asynchronous backends
         let wall = start.elapsed().as_secs_f64();
         let cpu = process_cpu_seconds().zip(cpu).map_or(f64::NAN, |(b, a)| b - a);

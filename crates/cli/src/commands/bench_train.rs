@@ -4,8 +4,9 @@
 //! makes (forward with every iteration, the experiment's loss, backward, clipping, AdamW and the
 //! one-cycle schedule), on a batch of random pairs of the requested size, so the figure is what a
 //! training run pays per step without its data loading; the split comes from the trainer's own
-//! clock ([`Trainer::last_step_seconds`]). The operation count is three times the forward's
-//! (the backward's products are twice the forward's), an estimate. `--stages` runs each stage
+//! clock ([`Trainer::last_step_seconds`]). The operation count is three times the forward's, as
+//! its operations counted it in the step ([`dgstereo_kernels::count_work`]; the backward's
+//! products are twice the forward's), an estimate. `--stages` runs each stage
 //! alone as well ([`dgstereo_model::stage_backward`]), since one backward pass cannot be split by
 //! stage.
 
@@ -13,9 +14,8 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use dgstereo_core::{DeviceChoice, InputPadder};
-use dgstereo_kernels::{Op, Path, Settings, path};
-use dgstereo_model::flops::StageMacs;
+use dgstereo_core::DeviceChoice;
+use dgstereo_kernels::{Op, Path, Settings, count_work, path};
 use dgstereo_train::batch::TensorBatch;
 use dgstereo_train::step_timing::{StageBackward, StepSeconds, random_batch};
 use dgstereo_train::{TrainParts, Trainer};
@@ -58,9 +58,13 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         Path::Host => "host convolution backward",
         Path::Gpu | Path::Stock => "stock",
     };
+    // The forward's work, counted by its operations in each step.
+    let mut macs = 0;
     let mut step = || -> anyhow::Result<(f64, StepSeconds)> {
         let start = Instant::now();
-        trainer.step_on(&batch, None)?;
+        let (stepped, work) = count_work(|| trainer.step_on(&batch, None));
+        stepped?;
+        macs = work.macs;
         Ok((start.elapsed().as_secs_f64(), trainer.last_step_seconds()))
     };
     for _ in 0..a.warmup {
@@ -72,8 +76,6 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     let (forward, backward, optimizer) = (part(|s| s.forward), part(|s| s.backward), part(|s| s.optimizer));
     let min = times.iter().copied().fold(f64::INFINITY, f64::min);
     let med = median(&mut times);
-    let padded = InputPadder::new(h, w, trainer.parts().model.pad_divisor()).padded();
-    let macs = StageMacs::new(&trainer.parts().model, padded).forward(a.iters, a.batch);
     println!(
         "training step: batch {} of {h}x{w}, {} iterations, loss {:?}, device {}, {kernels}, {} threads",
         a.batch,

@@ -41,6 +41,7 @@ fn convolve<F: FnOnce(Tensor<3>) -> Tensor<3>>(
     numerics: Numerics,
     after: After<F>,
 ) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::conv_macs(x.dims(), weight.dims(), &options));
     let call = ConvCall { x_dims: x.dims(), w_dims: weight.dims(), options: &options, numerics };
     match plan(&x.device(), &call) {
         Plan::HostInference(algorithm) => match after {
@@ -74,6 +75,7 @@ fn module_convolve<F: FnOnce(Tensor<3>) -> Tensor<3>>(
     numerics: Numerics,
     after: After<F>,
 ) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::conv_module_macs(conv, x.dims()));
     match conv_options(conv) {
         Some(options) => convolve(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), options, numerics, after),
         None => finish(conv.forward(x), after),
@@ -128,6 +130,7 @@ pub fn conv2d_affine(
     relu: bool,
     numerics: Numerics,
 ) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::conv_module_macs(conv, x.dims()));
     if let Some(options) = conv_options(conv) {
         let call = ConvCall { x_dims: x.dims(), w_dims: conv.weight.dims(), options: &options, numerics };
         if let Plan::HostInference(algorithm) = plan(&x.device(), &call) {

@@ -14,6 +14,7 @@ use crate::host::deform::{Geometry, deform_conv2d_host};
 /// # Shapes
 /// - `input`: `[N, C, H, W]`; `offset`: `[N, 2·kh·kw, H_out, W_out]`; output `[N, O, H_out, W_out]`
 pub fn deform_conv2d_forward(conv: &DeformConv2d, input: Tensor<4>, offset: Tensor<4>) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::deform_macs(conv, offset.dims()));
     let options = DeformOptions::of(conv);
     let host = options.filter(|&o| Geometry::new(input.dims(), conv.weight.dims(), o).is_some());
     let ours = match plan(&input.device(), &DeformCall { host, training: options }) {

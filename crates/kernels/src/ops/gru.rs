@@ -35,6 +35,7 @@ pub fn conv_gru_step(
     inputs: &[Tensor<4>],
     numerics: Numerics,
 ) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::gru_step_macs(convs, h.dims()));
     let input_channels = inputs.iter().map(|t| t.dims()[1]).sum();
     let call = GruStepCall::new(convs, h.dims(), input_channels);
     match plan(&h.device(), &call) {

@@ -24,6 +24,7 @@ use crate::host::upsample::convex_upsample_host;
 /// # Shapes
 /// - `flow`: `[N, D, H, W]`, `mask`: `[N, 9·factor², H, W]`; output `[N, D, factor·H, factor·W]`
 pub fn convex_upsample(flow: Tensor<4>, mask: Tensor<4>, factor: usize) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::convex_upsample_macs(flow.dims(), factor));
     let call = PlainCall(Op::Upsample);
     match (plan(&flow.device(), &call), plan(&mask.device(), &call)) {
         (Plan::HostTraining(()), Plan::HostTraining(())) => {

@@ -91,6 +91,7 @@ impl OnTheFlyCorrelation {
     /// # Shapes
     /// - `coords_x`: `[N, 1, H, W1]`; output `[N, levels · (2·radius + 1), H, W1]`, level-major
     pub fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
+        let _work = crate::work::operation(|| crate::work::on_the_fly_macs(self.dims, self.levels, self.radius));
         let [n, c, h, w1] = self.dims;
         let k = 2 * self.radius + 1;
         let (fmap1, pooled) = match &self.storage {

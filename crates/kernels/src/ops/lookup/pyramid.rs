@@ -98,6 +98,7 @@ impl CorrelationPyramid {
 
 /// `[N, C, H, W1] x [N, C, H, W2] -> [N, H, W1, W2]`, scaled by `1/sqrt(C)`.
 pub fn all_pairs(fmap1: Tensor<4>, fmap2: Tensor<4>) -> Tensor<4> {
+    let _work = crate::work::operation(|| crate::work::all_pairs_macs(fmap1.dims(), fmap2.dims()));
     let c = fmap1.dims()[1];
     let a = fmap1.permute([0, 2, 3, 1]); // N H W1 C
     let b = fmap2.permute([0, 2, 1, 3]); // N H C W2
