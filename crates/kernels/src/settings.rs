@@ -124,7 +124,10 @@ impl Settings {
     /// names the variable and the word it does not know.
     pub fn from_env() -> Result<Self> {
         match std::env::var(ENV_VAR) {
-            Ok(text) => text.parse().map_err(|e: Error| Error::Config(format!("{ENV_VAR}: {e}"))),
+            Ok(text) => text.parse().map_err(|e: Error| match e {
+                Error::Config(problem) => Error::config(ENV_VAR, problem.reason),
+                other => other,
+            }),
             Err(_) => Ok(Self::default()),
         }
     }
@@ -156,17 +159,20 @@ impl FromStr for Settings {
                         Some(_) => {}
                         None => {
                             let names: Vec<_> = GpuRoute::ALL.iter().map(|r| r.name()).collect();
-                            return Err(Error::Config(format!(
-                                "unknown GPU route '{name}' (expected all or one of {})",
-                                names.join(", ")
-                            )));
+                            return Err(Error::config(
+                                "kernels",
+                                format!("unknown GPU route '{name}' (expected all or one of {})", names.join(", ")),
+                            ));
                         }
                     },
                     None => {
-                        return Err(Error::Config(format!(
-                            "unknown kernel setting '{word}' (expected host, stock, stock-training, gpu-routes, \
-                             no-winograd, no-winograd-blocks or stock-route=NAME)"
-                        )));
+                        return Err(Error::config(
+                            "kernels",
+                            format!(
+                                "unknown kernel setting '{word}' (expected host, stock, stock-training, gpu-routes, \
+                                 no-winograd, no-winograd-blocks or stock-route=NAME)"
+                            ),
+                        ));
                     }
                 },
             }
@@ -184,9 +190,12 @@ pub fn configure(settings: Settings) -> Result<()> {
     if *in_use == settings {
         Ok(())
     } else {
-        Err(Error::Config(format!(
-            "kernel settings are already in use ({in_use:?}); they can be configured once, before the first operation"
-        )))
+        Err(Error::config(
+            "kernels",
+            format!(
+                "the settings are already in use ({in_use:?}); they can be configured once, before the first operation"
+            ),
+        ))
     }
 }
 
