@@ -68,7 +68,9 @@ impl ExperimentConfig {
     /// Everything wrong with the configuration, most basic first (empty when valid), keys as the
     /// experiment file writes them.
     pub fn problems(&self) -> Vec<Problem> {
-        let within = |table: &str, found: Vec<Problem>| found.into_iter().map(move |p| p.within(table));
+        fn within(table: &str, found: Vec<Problem>) -> Vec<Problem> {
+            found.into_iter().map(|p| p.within(table)).collect()
+        }
         let mut problems = name_problems(&self.name);
         problems.extend(within("model", self.model.problems()));
         problems.extend(within("prior", self.prior.problems()));

@@ -260,9 +260,9 @@ proptest! {
 fn a_module_built_on_a_plain_device_trains_after_fork_and_train() {
     // burn 0.22: a module forked to an autodiff device needs `.train()` to track gradients.
     let device = default_device();
-    let fusion = FusionConfig::deformable().init(&device).fork(&device.clone().autodiff()).train();
+    let fusion = FusionConfig::deformable().init(&device).unwrap().fork(&device.clone().autodiff()).train();
     let autodiff = device.autodiff();
-    let out = fusion.fuse(image(&autodiff), Some(depth(&autodiff)));
+    let out = fusion.fuse(image(&autodiff), Some(depth(&autodiff))).unwrap();
     let grads = out.mean().backward();
     let Fusion::Deformable(inner) = &fusion else { unreachable!() };
     assert!(inner.offset.weight.val().grad(&grads).is_some());
