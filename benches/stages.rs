@@ -165,10 +165,10 @@ fn update(c: &mut Criterion) {
         group.bench_function(BenchmarkId::new("gradient feature", name), |b| {
             b.iter(|| black_box(guidance.updater.guidance.feature(depth.clone(), [h, w])))
         });
-        let fusion = FusionConfig::deformable().init(&default_device());
+        let fusion = FusionConfig::deformable().init(&default_device()).expect("the paper's fusion builds");
         let img = image([4 * h, 4 * w]);
         group.bench_function(BenchmarkId::new("DGIA fusion (full resolution)", name), |b| {
-            b.iter(|| black_box(fusion.fuse(img.clone(), Some(depth.clone()))))
+            b.iter(|| black_box(fusion.fuse(img.clone(), Some(depth.clone())).expect("a prior is given")))
         });
     }
     group.finish();
@@ -183,7 +183,9 @@ fn forward(c: &mut Criterion) {
     for iters in [12usize, 32] {
         group.bench_function(BenchmarkId::new("forward 320x736", format!("{iters} iterations")), |b| {
             b.iter(|| {
-                let out = model.forward_flow(left.clone(), right.clone(), None, iters, ForwardOptions::default());
+                let out = model
+                    .forward_flow(left.clone(), right.clone(), None, iters, ForwardOptions::default())
+                    .expect("the model needs no prior");
                 black_box(out.flow_up.last().cloned().map(|t| t.into_data()))
             })
         });
@@ -206,13 +208,15 @@ fn training_step(c: &mut Criterion) {
         let mut optim = AdamWConfig::new().with_weight_decay(1e-5).init();
         b.iter(|| {
             let m = model.take().expect("model");
-            let out = m.forward_flow(
-                left.clone(),
-                right.clone(),
-                None,
-                iters,
-                ForwardOptions { all_iterations: true, ..ForwardOptions::default() },
-            );
+            let out = m
+                .forward_flow(
+                    left.clone(),
+                    right.clone(),
+                    None,
+                    iters,
+                    ForwardOptions { all_iterations: true, ..ForwardOptions::default() },
+                )
+                .expect("the model needs no prior");
             let n = out.flow_up.len();
             let loss = out
                 .flow_up

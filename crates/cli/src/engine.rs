@@ -174,11 +174,10 @@ pub fn flag_names(text: &str) -> String {
     FLAGS.iter().fold(text.to_string(), |m, (field, flag)| m.replace(&format!("`{field}`"), flag))
 }
 
-/// The option field and the reason of a library configuration error
-/// ([`dgstereo_core::Error::config`] writes them as `field: reason`).
+/// The option field and the reason of a library configuration error.
 fn config_field(e: &dgstereo_core::Error) -> Option<(&str, &str)> {
     match e {
-        dgstereo_core::Error::Config(message) => message.split_once(": "),
+        dgstereo_core::Error::Config(problem) => Some((problem.key.as_str(), problem.reason.as_str())),
         _ => None,
     }
 }

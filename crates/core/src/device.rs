@@ -34,7 +34,7 @@ impl std::str::FromStr for DeviceChoice {
         match s.to_ascii_lowercase().as_str() {
             "cpu" | "flex" => Ok(Self::Cpu),
             "gpu" | "wgpu" | "vulkan" => Ok(Self::Gpu),
-            other => Err(crate::Error::Config(format!("unknown device '{other}' (expected 'cpu' or 'gpu')"))),
+            other => Err(crate::Error::config("device", format!("unknown device '{other}' (expected 'cpu' or 'gpu')"))),
         }
     }
 }
@@ -56,8 +56,9 @@ impl DeviceChoice {
             #[cfg(any(feature = "gpu", feature = "gpu-wgsl"))]
             Self::Gpu => configured_gpu(gpu_device(), precision),
             #[cfg(not(any(feature = "gpu", feature = "gpu-wgsl")))]
-            Self::Gpu => Err(crate::Error::Config(
-                "this binary was built without the GPU backend; rebuild with `--features gpu`".into(),
+            Self::Gpu => Err(crate::Error::config(
+                "device",
+                "this binary was built without the GPU backend; rebuild with `--features gpu`",
             )),
         }
     }
@@ -83,7 +84,10 @@ impl std::str::FromStr for Precision {
             "f32" | "float32" | "fp32" => Ok(Self::F32),
             "f16" | "float16" | "fp16" | "half" => Ok(Self::F16),
             "bf16" | "bfloat16" => Ok(Self::Bf16),
-            other => Err(crate::Error::Config(format!("unknown precision '{other}' (expected f32, f16 or bf16)"))),
+            other => Err(crate::Error::config(
+                "precision",
+                format!("unknown precision '{other}' (expected f32, f16 or bf16)"),
+            )),
         }
     }
 }
@@ -118,16 +122,19 @@ fn configured(mut device: Device, precision: Precision) -> crate::Result<Device>
     }
     let result = device.configure(wanted);
     result.map_err(|e| {
-        crate::Error::Config(match e {
-            burn::tensor::DeviceError::UnsupportedDType { device: name, .. } => {
-                format!("precision {precision}: the backend of device {name} does not compute in this dtype")
-            }
-            burn::tensor::DeviceError::AlreadyInitialized { device: name } => format!(
-                "precision {precision}: device {name} is already set to {:?} (burn fixes a device's float \
+        crate::Error::config(
+            "precision",
+            match e {
+                burn::tensor::DeviceError::UnsupportedDType { device: name, .. } => {
+                    format!("{precision}: the backend of device {name} does not compute in this dtype")
+                }
+                burn::tensor::DeviceError::AlreadyInitialized { device: name } => format!(
+                    "{precision}: device {name} is already set to {:?} (burn fixes a device's float \
                  dtype at its first tensor or configuration, once per process)",
-                float_dtype(&device)
-            ),
-        })
+                    float_dtype(&device)
+                ),
+            },
+        )
     })?;
     Ok(device)
 }

@@ -1,5 +1,11 @@
-//! The error type shared by the library crates.
+//! The error type shared by the library crates, and [`Problem`], one thing wrong with a
+//! configuration.
+//!
+//! A configuration error is typed: it carries the dotted key at fault and the reason apart, so a
+//! caller that nests one configuration in another prefixes the key ([`Problem::within`]) instead
+//! of parsing it back out of a message.
 
+use std::fmt;
 use std::path::PathBuf;
 
 /// Errors of dgstereo's library crates. Each names the file, key or value at fault.
@@ -29,9 +35,9 @@ pub enum Error {
         /// The key and what is wrong with it.
         message: String,
     },
-    /// A configuration value is invalid.
+    /// A configuration value is invalid: the key at fault and why.
     #[error("config: {0}")]
-    Config(String),
+    Config(Problem),
     /// Tensors of incompatible shapes were given.
     #[error("shape: {0}")]
     Shape(String),
@@ -54,7 +60,73 @@ impl Error {
     /// An invalid configuration value: `key` is the dotted key (or option field) at fault,
     /// `reason` what is wrong with its value.
     pub fn config(key: impl Into<String>, reason: impl Into<String>) -> Self {
-        Self::Config(format!("{}: {}", key.into(), reason.into()))
+        Self::Config(Problem::new(key, reason))
+    }
+
+    /// The error as seen from the table that holds the configuration under `table`: a
+    /// configuration error's key is prefixed ([`Problem::within`]), other errors are unchanged.
+    #[must_use]
+    pub fn within(self, table: &str) -> Self {
+        match self {
+            Self::Config(problem) => Self::Config(problem.within(table)),
+            other => other,
+        }
+    }
+}
+
+/// One thing wrong with a configuration: the key at fault and what is wrong with its value.
+///
+/// A configuration names keys relative to its own table (`tau` in `LossConfig`); whoever holds
+/// that table under a name prefixes it ([`within`](Self::within): `loss.tau`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    /// Dotted key (or option field), e.g. `updater.guidance` or `sources[0].weight`; empty for
+    /// the table itself.
+    pub key: String,
+    /// What is wrong, and how to fix it where that is not obvious.
+    pub reason: String,
+}
+
+impl Problem {
+    /// A problem with `key`.
+    pub fn new(key: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self { key: key.into(), reason: reason.into() }
+    }
+
+    /// The problem as seen from the table that holds this one under `table` (`tau` becomes
+    /// `loss.tau`; an index such as `sources[0]` joins without a dot: `data.sources[0].weight`).
+    #[must_use]
+    pub fn within(self, table: &str) -> Self {
+        let key = match (table.is_empty(), self.key.is_empty()) {
+            (true, _) => self.key,
+            (false, true) => table.to_string(),
+            (false, false) if self.key.starts_with('[') => format!("{table}{}", self.key),
+            (false, false) => format!("{table}.{}", self.key),
+        };
+        Self { key, reason: self.reason }
+    }
+
+    /// `Ok` when `problems` is empty, else the first as [`Error::Config`].
+    ///
+    /// # Errors
+    /// The first problem.
+    pub fn first(problems: impl IntoIterator<Item = Problem>) -> Result<()> {
+        match problems.into_iter().next() {
+            None => Ok(()),
+            Some(problem) => Err(Error::Config(problem)),
+        }
+    }
+}
+
+impl fmt::Display for Problem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.key.is_empty() { write!(f, "{}", self.reason) } else { write!(f, "{}: {}", self.key, self.reason) }
+    }
+}
+
+impl From<Problem> for Error {
+    fn from(problem: Problem) -> Self {
+        Self::Config(problem)
     }
 }
 

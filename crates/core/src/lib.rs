@@ -20,7 +20,7 @@ pub mod tensor;
 pub mod timing;
 
 pub use device::{DeviceChoice, default_device};
-pub use error::{Error, Result};
+pub use error::{Error, Problem, Result};
 pub use padding::InputPadder;
 pub use probe::{Probe, Trace};
 

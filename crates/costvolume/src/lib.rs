@@ -15,6 +15,7 @@
 #![deny(missing_docs)]
 
 use burn::tensor::Tensor;
+use dgstereo_core::Problem;
 pub use dgstereo_kernels::{CorrelationPyramid, OnTheFlyCorrelation, all_pairs};
 use serde::{Deserialize, Serialize};
 
@@ -68,6 +69,12 @@ impl Default for CorrelationConfig {
 }
 
 impl CorrelationConfig {
+    /// Everything wrong with the options, keys relative to the correlation table (`levels`
+    /// must be at least 1).
+    pub fn problems(&self) -> Vec<Problem> {
+        if self.levels == 0 { vec![Problem::new("levels", "must be at least 1")] } else { Vec::new() }
+    }
+
     /// Channels of a lookup: `levels · (2·radius + 1)`.
     pub fn channels(&self) -> usize {
         self.levels * (2 * self.radius + 1)

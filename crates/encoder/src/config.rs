@@ -47,28 +47,38 @@ impl Default for EncoderConfig {
 }
 
 impl EncoderConfig {
-    /// Checks the options; the message names the key (under `encoder.`).
-    ///
-    /// # Errors
-    /// [`dgstereo_core::Error::Config`] for a zero width, or a trunk width that the group
-    /// norm (`channels / 8` groups) cannot split.
-    pub fn validate(&self) -> dgstereo_core::Result<()> {
-        let err = |m: String| Err(dgstereo_core::Error::Config(m));
+    /// Everything wrong with the options, keys relative to the encoder table: zero widths, and
+    /// trunk widths that the group norm (`channels / 8` groups) cannot split.
+    pub fn problems(&self) -> Vec<dgstereo_core::Problem> {
+        let mut problems = Vec::new();
+        let mut add = |key: &str, reason: String| problems.push(dgstereo_core::Problem::new(key, reason));
         if self.feature_dim == 0 {
-            return err("encoder.feature_dim must be positive".into());
+            add("feature_dim", "must be positive".into());
         }
         if self.trunk_dims.contains(&0) {
-            return err("encoder.trunk_dims must be positive".into());
-        }
-        if self.context_norm == NormKind::Group
+            add("trunk_dims", format!("{:?}: every width must be positive", self.trunk_dims));
+        } else if self.context_norm == NormKind::Group
             && let Some(c) = self.trunk_dims.iter().find(|&&c| c < 8 || c % (c / 8) != 0)
         {
-            return err(format!(
-                "encoder.trunk_dims = {:?}: with context_norm = \"group\" ({c} / 8 groups) every width must be at least 8 and divisible by its group count",
-                self.trunk_dims
-            ));
+            add(
+                "trunk_dims",
+                format!(
+                    "{:?}: with context_norm = \"group\" ({c} / 8 groups) every width must be at least 8 and \
+                     divisible by its group count",
+                    self.trunk_dims
+                ),
+            );
         }
-        Ok(())
+        problems
+    }
+
+    /// Checks the options.
+    ///
+    /// # Errors
+    /// [`dgstereo_core::Error::Config`] with the first of [`problems`](Self::problems), its key
+    /// relative to the encoder table.
+    pub fn validate(&self) -> dgstereo_core::Result<()> {
+        dgstereo_core::Problem::first(self.problems())
     }
 
     /// Builds the layout: separate feature and context encoders, or one shared backbone.

@@ -8,7 +8,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use dgstereo_core::{Error, Result};
+use dgstereo_core::{Error, Problem, Result};
 use dgstereo_data::FileDataset;
 use dgstereo_data::datasets::{
     DrivingStereoWeather, FlyingThingsTestSubset, KittiVersion, MiddleburySplit, SceneFlowPass, SceneFlowSubset,
@@ -105,7 +105,7 @@ impl FromStr for DatasetKind {
     fn from_str(s: &str) -> Result<Self> {
         Self::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| {
             let names: Vec<&str> = Self::ALL.iter().map(|k| k.name()).collect();
-            Error::Config(format!("unknown data set '{s}' (expected one of: {})", names.join(", ")))
+            Error::config("dataset", format!("unknown data set '{s}' (expected one of: {})", names.join(", ")))
         })
     }
 }
@@ -197,6 +197,16 @@ impl BenchmarkConfig {
             .collect()
     }
 
+    /// Everything wrong with the benchmark's values, keys relative to its table: `iters` at
+    /// least 1, and the [options of another data set](Self::option_problems).
+    pub fn problems(&self) -> Vec<Problem> {
+        let iters = (self.iters == 0).then(|| Problem::new("iters", "must be at least 1"));
+        iters
+            .into_iter()
+            .chain(self.option_problems().into_iter().map(|(key, reason)| Problem::new(key, reason)))
+            .collect()
+    }
+
     /// Lists the benchmark's samples: the data set in `root` with the split, weather or subset.
     ///
     /// # Errors
@@ -204,7 +214,7 @@ impl BenchmarkConfig {
     /// without a split, and the layout reader's errors (naming the folder).
     pub fn load(&self) -> Result<FileDataset> {
         if let Some((key, message)) = self.option_problems().into_iter().next() {
-            return Err(Error::Config(format!("benchmark '{}': {key}: {message}", self.label())));
+            return Err(Error::config(key, format!("{message} (benchmark '{}')", self.label())));
         }
         match self.dataset {
             DatasetKind::Middlebury => match self.split {
@@ -213,12 +223,15 @@ impl BenchmarkConfig {
                     let splits = middeval3_splits_in(&self.root);
                     if !splits.is_empty() {
                         let names: Vec<&str> = splits.iter().map(|s| s.name()).collect();
-                        return Err(Error::Config(format!(
-                            "benchmark '{}': root {} is a MiddEval3 folder: set split to one of {}",
-                            self.label(),
-                            self.root.display(),
-                            names.join(", ")
-                        )));
+                        return Err(Error::config(
+                            "split",
+                            format!(
+                                "root {} is a MiddEval3 folder: set split to one of {} (benchmark '{}')",
+                                self.root.display(),
+                                names.join(", "),
+                                self.label()
+                            ),
+                        ));
                     }
                     middlebury2014(&self.root)
                 }
@@ -235,19 +248,21 @@ impl BenchmarkConfig {
     /// missing or holds no sample with ground truth.
     pub fn dataset(&self) -> Result<(FileDataset, Vec<usize>)> {
         if !self.root.is_dir() {
-            return Err(Error::Config(format!(
-                "benchmark '{}': root {} is not a folder",
-                self.label(),
-                self.root.display()
-            )));
+            return Err(Error::config(
+                "root",
+                format!("{} is not a folder (benchmark '{}')", self.root.display(), self.label()),
+            ));
         }
         let dataset = self.load()?;
         if !dataset.files.iter().any(|f| f.disparity.is_some()) {
-            return Err(Error::Config(format!(
-                "benchmark '{}': no sample in {} has ground truth disparity",
-                self.label(),
-                self.root.display()
-            )));
+            return Err(Error::config(
+                "root",
+                format!(
+                    "no sample in {} has ground truth disparity (benchmark '{}')",
+                    self.root.display(),
+                    self.label()
+                ),
+            ));
         }
         let n = self.limit.unwrap_or(usize::MAX).min(dataset.files.len());
         Ok((dataset, (0..n).collect()))

@@ -1,14 +1,17 @@
 //! [`ExperimentConfig`]: everything a run needs, and the checks of its values and combinations.
+//!
+//! Each section validates in its own crate and lists its [`Problem`]s keyed relative to its
+//! table (`tau`, `updater.guidance`); this module gathers them under the section's name
+//! (`loss.tau`) and adds the checks that span sections: the run name, whether the model's need
+//! for a depth prior ([`ModelConfig::check_prior`]) and the prior provider agree, and the crop
+//! against the network's output grid.
 
-use std::fmt;
-
+use dgstereo_core::{Error, Problem};
 use dgstereo_eval::BenchmarkConfig;
-use dgstereo_fusion::FusionConfig;
 use dgstereo_loss::LossConfig;
 use dgstereo_model::ModelConfig;
 use dgstereo_prior::PriorConfig;
 use dgstereo_train::{TrainingConfig, TrainingDataConfig};
-use dgstereo_updater::GuidanceKind;
 use serde::{Deserialize, Serialize};
 
 /// The complete configuration of one run.
@@ -45,26 +48,6 @@ pub struct ExperimentConfig {
     pub benchmarks: Vec<BenchmarkConfig>,
 }
 
-/// One thing wrong with a configuration: the key at fault and what is wrong.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Problem {
-    /// Dotted key, e.g. `model.updater.guidance`.
-    pub key: String,
-    /// What is wrong, and how to fix it where that is not obvious.
-    pub message: String,
-}
-
-impl fmt::Display for Problem {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        // Messages of other crates' validators often start with the key already.
-        if self.message.starts_with(&self.key) {
-            write!(f, "{}", self.message)
-        } else {
-            write!(f, "{}: {}", self.key, self.message)
-        }
-    }
-}
-
 impl ExperimentConfig {
     /// The configuration as a complete TOML file (every key, defaults included); loading it as an
     /// experiment file gives this configuration back.
@@ -77,242 +60,77 @@ impl ExperimentConfig {
     /// Checks values and combinations.
     ///
     /// # Errors
-    /// [`dgstereo_core::Error::Config`] with every [`Problem`], `key: message`, joined by `; `.
+    /// [`Error::Config`] with the first of [`problems`](Self::problems).
     pub fn validate(&self) -> dgstereo_core::Result<()> {
-        let problems = self.problems();
-        if problems.is_empty() {
-            return Ok(());
-        }
-        let text: Vec<String> = problems.iter().map(Problem::to_string).collect();
-        Err(dgstereo_core::Error::Config(text.join("; ")))
+        Problem::first(self.problems())
     }
 
-    /// Everything wrong with the configuration, most basic first (empty when valid).
+    /// Everything wrong with the configuration, most basic first (empty when valid), keys as the
+    /// experiment file writes them.
     pub fn problems(&self) -> Vec<Problem> {
-        let mut problems = Vec::new();
-        let mut add = |key: &str, message: String| problems.push(Problem { key: key.into(), message });
-        check_name(&self.name, &mut add);
-        check_model(&self.model, &mut add);
-        check_prior(&self.prior, "prior", &mut add);
-        check_combination(self, &mut add);
-        check_loss(&self.loss, &mut add);
-        check_benchmarks(&self.benchmarks, &mut add);
-        for result in [self.train.validate(), self.data.validate()] {
-            if let Err(e) = result {
-                let message = match e {
-                    dgstereo_core::Error::Config(m) => m,
-                    other => other.to_string(),
-                };
-                add(&leading_key(&message), message.clone());
+        fn within(table: &str, found: Vec<Problem>) -> Vec<Problem> {
+            found.into_iter().map(|p| p.within(table)).collect()
+        }
+        let mut problems = name_problems(&self.name);
+        problems.extend(within("model", self.model.problems()));
+        problems.extend(within("prior", self.prior.problems()));
+        problems.extend(self.combination_problems());
+        problems.extend(within("loss", self.loss.problems()));
+        for (i, b) in self.benchmarks.iter().enumerate() {
+            let table = format!("benchmarks[{i}]");
+            problems.extend(within(&table, b.problems()));
+            if self.benchmarks[..i].iter().any(|o| o.label() == b.label()) {
+                let reason = format!("'{}' is used twice: give each benchmark a name", b.label());
+                problems.push(Problem::new(format!("{table}.name"), reason));
             }
+        }
+        problems.extend(within("train", self.train.problems()));
+        problems.extend(within("data", self.data.problems()));
+        problems
+    }
+
+    /// A depth prior needs a consumer and fusion or guidance needs a prior; training crops fit
+    /// the network's output grid.
+    fn combination_problems(&self) -> Vec<Problem> {
+        let mut problems = Vec::new();
+        // Unpadded, the network's full-resolution output is the crop rounded up to a multiple of
+        // 2^n_downsample, which would not match the crop's ground truth.
+        if (2..=3).contains(&self.model.updater.n_downsample) {
+            let factor = self.model.factor();
+            let crop = self.train.crop;
+            if crop.iter().any(|side| side % factor != 0) {
+                let reason =
+                    format!("{crop:?}: both sides must be multiples of 2^model.updater.n_downsample = {factor}");
+                problems.push(Problem::new("train.crop", reason));
+            }
+        }
+        let gives = self.prior.gives_prior();
+        if let Err(Error::Config(problem)) = self.model.check_prior(gives) {
+            problems.push(problem.within("model"));
+        } else if gives && !self.model.needs_prior() {
+            problems.push(Problem::new(
+                "prior.kind",
+                "a depth prior is configured but nothing uses it: set model.fusion.kind or model.updater.guidance, \
+                 or set prior.kind = \"none\"",
+            ));
         }
         problems
     }
 }
 
-/// The dotted key a validation message of another crate starts with (`train.lr = 0: ...`).
-fn leading_key(message: &str) -> String {
-    message
-        .split(|c: char| c.is_whitespace() || c == ':' || c == '=')
-        .next()
-        .unwrap_or_default()
-        .split('[')
-        .next()
-        .unwrap_or_default()
-        .to_string()
-}
-
-/// Benchmark labels name table columns: each once; at least one iteration; a split, weather or
-/// subset only on the data set it belongs to.
-fn check_benchmarks(benchmarks: &[BenchmarkConfig], add: &mut impl FnMut(&str, String)) {
-    for (i, b) in benchmarks.iter().enumerate() {
-        if b.iters == 0 {
-            add(&format!("benchmarks[{i}].iters"), "must be at least 1".into());
-        }
-        for (key, message) in b.option_problems() {
-            add(&format!("benchmarks[{i}].{key}"), message);
-        }
-        if benchmarks[..i].iter().any(|o| o.label() == b.label()) {
-            add(&format!("benchmarks[{i}].name"), format!("'{}' is used twice: give each benchmark a name", b.label()));
-        }
-    }
-}
-
 /// Run names become folder names of outputs: printable, no whitespace, no `..`, relative.
-fn check_name(name: &str, add: &mut impl FnMut(&str, String)) {
+fn name_problems(name: &str) -> Vec<Problem> {
     let bad_char = name
         .chars()
         .find(|c| c.is_whitespace() || c.is_control() || matches!(c, '\\' | ':' | '*' | '?' | '"' | '<' | '>' | '|'));
-    if name.is_empty() {
-        add("name", "the run name is empty".into());
+    let reason = if name.is_empty() {
+        "the run name is empty".to_string()
     } else if let Some(c) = bad_char {
-        add("name", format!("'{name}' contains {c:?}; run names become folder names"));
+        format!("'{name}' contains {c:?}; run names become folder names")
     } else if name.starts_with('/') || name.split('/').any(|part| part.is_empty() || part == "." || part == "..") {
-        add("name", format!("'{name}' must be a relative path without empty, '.' or '..' parts"));
-    }
-}
-
-fn check_model(model: &ModelConfig, add: &mut impl FnMut(&str, String)) {
-    let mut found = Vec::new();
-    let mut note = |key: &str, message: String| found.push((key.to_string(), message));
-    let u = &model.updater;
-    if !(1..=3).contains(&u.n_gru_layers) {
-        note("model.updater.n_gru_layers", format!("{} is not 1, 2 or 3", u.n_gru_layers));
-    }
-    if !(2..=3).contains(&u.n_downsample) {
-        note("model.updater.n_downsample", format!("{} is not 2 or 3", u.n_downsample));
-    }
-    if u.hidden_dims.contains(&0) {
-        note("model.updater.hidden_dims", format!("{:?}: every width must be positive", u.hidden_dims));
-    }
-    if model.correlation.levels == 0 {
-        note("model.correlation.levels", "must be at least 1".into());
-    }
-    if model.encoder.feature_dim == 0 {
-        note("model.encoder.feature_dim", "must be positive".into());
-    }
-    if let FusionConfig::Deformable { features, .. } | FusionConfig::Conv { features, .. } = model.fusion
-        && features < 3
-    {
-        note("model.fusion.features", format!("{features} is below 3"));
-    }
-    // Whatever the model crate checks beyond the above.
-    if found.is_empty()
-        && let Err(e) = model.validate()
-    {
-        found.push(("model".into(), e.to_string()));
-    }
-    for (key, message) in found {
-        add(&key, message);
-    }
-}
-
-fn check_prior(prior: &PriorConfig, key: &str, add: &mut impl FnMut(&str, String)) {
-    match prior {
-        PriorConfig::None => {}
-        PriorConfig::DepthAnythingV2 { weights, input_size, .. } => {
-            if weights.as_os_str().is_empty() {
-                add(&format!("{key}.weights"), "is empty: name the Depth Anything V2 checkpoint".into());
-            }
-            if *input_size < 14 {
-                add(&format!("{key}.input_size"), format!("{input_size} is below the ViT patch size 14"));
-            }
-        }
-        PriorConfig::File { dir, .. } => {
-            if dir.as_os_str().is_empty() {
-                add(&format!("{key}.dir"), "is empty: name the folder of the prior files".into());
-            }
-        }
-        PriorConfig::Cache { dir, inner } => {
-            if dir.as_os_str().is_empty() {
-                add(&format!("{key}.dir"), "is empty: name the cache folder".into());
-            }
-            if !inner.gives_prior() {
-                add(&format!("{key}.inner.kind"), "a cache must wrap a provider that gives a prior".into());
-            }
-            check_prior(inner, &format!("{key}.inner"), add);
-        }
-        PriorConfig::Simulated(simulated) => {
-            if let Err(e) = simulated.validate() {
-                let message = match e {
-                    dgstereo_core::Error::Config(m) => m,
-                    other => other.to_string(),
-                };
-                // The prior crate names keys as `prior.KEY`; nested under a cache they move.
-                let inner_key = leading_key(&message);
-                let inner_key = inner_key.strip_prefix("prior").unwrap_or(&inner_key);
-                add(&format!("{key}{inner_key}"), message);
-            }
-        }
-    }
-}
-
-/// A depth prior needs a consumer, fusion or guidance needs a prior, and training crops fit the
-/// network's output grid.
-fn check_combination(config: &ExperimentConfig, add: &mut impl FnMut(&str, String)) {
-    // Unpadded, the network's full-resolution output is the crop rounded up to a multiple of
-    // 2^n_downsample, which would not match the crop's ground truth.
-    if (2..=3).contains(&config.model.updater.n_downsample) {
-        let factor = config.model.factor();
-        let crop = config.train.crop;
-        if crop.iter().any(|side| side % factor != 0) {
-            add(
-                "train.crop",
-                format!("{crop:?}: both sides must be multiples of 2^model.updater.n_downsample = {factor}"),
-            );
-        }
-    }
-    let gives = config.prior.gives_prior();
-    let fusion = &config.model.fusion;
-    let guidance = config.model.updater.guidance;
-    if !gives {
-        if fusion.needs_prior() {
-            add(
-                "model.fusion.kind",
-                format!("{} fusion needs a depth prior, but prior.kind is none: set [prior]", fusion_name(fusion)),
-            );
-        }
-        if guidance != GuidanceKind::None {
-            add(
-                "model.updater.guidance",
-                format!(
-                    "{} guidance needs a depth prior, but prior.kind is none: set [prior]",
-                    guidance_name(guidance)
-                ),
-            );
-        }
-    } else if !config.model.needs_prior() {
-        add(
-            "prior.kind",
-            "a depth prior is configured but nothing uses it: set model.fusion.kind or \
-             model.updater.guidance, or set prior.kind = \"none\""
-                .into(),
-        );
-    }
-}
-
-fn check_loss(loss: &LossConfig, add: &mut impl FnMut(&str, String)) {
-    let (gamma, max_disparity) = match *loss {
-        LossConfig::SequenceL1 { gamma, max_disparity } => (gamma, max_disparity),
-        LossConfig::EdgeAware { tau, gamma, max_disparity } => {
-            if !(tau.is_finite() && tau >= 0.0) {
-                add("loss.tau", format!("{tau} must be a finite value >= 0"));
-            }
-            (gamma, max_disparity)
-        }
+        format!("'{name}' must be a relative path without empty, '.' or '..' parts")
+    } else {
+        return Vec::new();
     };
-    if !(gamma > 0.0 && gamma <= 1.0) {
-        add("loss.gamma", format!("{gamma} must lie in (0, 1]"));
-    }
-    if !(max_disparity.is_finite() && max_disparity > 0.0) {
-        add("loss.max_disparity", format!("{max_disparity} must be a finite value > 0"));
-    }
-}
-
-fn fusion_name(fusion: &FusionConfig) -> &'static str {
-    match fusion {
-        FusionConfig::None => "none",
-        FusionConfig::Deformable { .. } => "deformable",
-        FusionConfig::Conv { .. } => "conv",
-    }
-}
-
-fn guidance_name(guidance: GuidanceKind) -> &'static str {
-    match guidance {
-        GuidanceKind::None => "none",
-        GuidanceKind::Gradient => "gradient",
-        GuidanceKind::Depth => "depth",
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn leading_keys_of_other_crates_messages() {
-        assert_eq!(leading_key("train.lr = 0: must be a finite value > 0"), "train.lr");
-        assert_eq!(leading_key("data.sources[0].weight = -1: must be"), "data.sources");
-        assert_eq!(leading_key("train.steps must be at least 1"), "train.steps");
-    }
+    vec![Problem::new("name", reason)]
 }

@@ -158,7 +158,38 @@ fn refine_key(message: &str, located: Option<&str>, lines: &[(Vec<String>, Value
         let table = located.and_then(|at| at.rsplit_once('.')).map_or(String::new(), |(t, _)| format!("{t}."));
         return format!("{table}{name}");
     }
+    if let Some(key) = located.and_then(|at| holder_of_value(message, at, lines)) {
+        return key;
+    }
     located.unwrap_or_default().to_string()
+}
+
+/// For an `invalid type` / `invalid value` message about a value inside a table that serde read
+/// as a whole (an internally tagged or flattened table, whose errors point at the table's first
+/// line), the one leaf of that table holding the value the message quotes.
+fn holder_of_value(message: &str, located: &str, lines: &[(Vec<String>, Value)]) -> Option<String> {
+    let rest = message.strip_prefix("invalid type: ").or_else(|| message.strip_prefix("invalid value: "))?;
+    let (unexpected, _) = rest.split_once(", expected")?;
+    let table = located.rsplit_once('.').map_or("", |(t, _)| t);
+    let mut holders = lines.iter().filter(|(path, value)| {
+        let in_table = table.is_empty() || dotted(path).starts_with(&format!("{table}."));
+        in_table && unexpected_of(value).is_some_and(|u| u == unexpected)
+    });
+    match (holders.next(), holders.next()) {
+        (Some((path, _)), None) => Some(dotted(path)),
+        _ => None,
+    }
+}
+
+/// How serde's `invalid type` messages describe a TOML value (`string "0.8"`, `integer `3``).
+fn unexpected_of(value: &Value) -> Option<String> {
+    match value {
+        Value::String(s) => Some(format!("string {s:?}")),
+        Value::Integer(i) => Some(format!("integer `{i}`")),
+        Value::Boolean(b) => Some(format!("boolean `{b}`")),
+        Value::Array(_) => Some("sequence".into()),
+        _ => None,
+    }
 }
 
 /// The first key of `input` that `written` (the configuration serialised back) lacks.

@@ -60,7 +60,8 @@ pub mod sweep;
 
 use std::path::{Path, PathBuf};
 
-pub use config::{ExperimentConfig, Problem};
+pub use config::ExperimentConfig;
+pub use dgstereo_core::Problem;
 pub use smoke::{SmokeReport, smoke_test, trainable_parameters};
 
 /// One run of an experiment file: a sweep combination, or the file itself without a sweep.

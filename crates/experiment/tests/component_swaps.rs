@@ -47,12 +47,10 @@ struct Combination {
 
 fn combination() -> impl Strategy<Value = Combination> {
     let target = prop_oneof![Just(FusionTarget::Both), Just(FusionTarget::ContextOnly)];
-    let fusion = (0usize..3, target, 3usize..9).prop_map(|(kind, target, features)| match kind {
-        0 => FusionConfig::None,
-        1 => FusionConfig::Conv { target, features },
-        _ => FusionConfig::Deformable { target, features },
-    });
-    let guidance = prop_oneof![Just(GuidanceKind::None), Just(GuidanceKind::Gradient), Just(GuidanceKind::Depth)];
+    // The kinds come from the stage crates' lists, so a new kind is swapped in here unasked.
+    let fusion = (prop::sample::select(FusionConfig::variants()), target, 3usize..9)
+        .prop_map(|(kind, target, features)| kind.with_parameters(target, features));
+    let guidance = prop::sample::select(GuidanceKind::ALL.to_vec());
     let implementation = prop_oneof![Just(CorrelationImplementation::Reg), Just(CorrelationImplementation::Alt)];
     let loss = prop_oneof![
         (0.8f64..0.95).prop_map(|gamma| LossConfig::SequenceL1 { gamma, max_disparity: 700.0 }),
@@ -284,5 +282,39 @@ proptest! {
         prop_assert!(config.validate().is_ok(), "{:?}", config.validate());
         let trip = round_trips(&config, c.size[0] * 100 + c.size[1]);
         prop_assert!(trip.is_ok(), "{:?}: {:?}", config, trip);
+    }
+}
+
+/// Every fusion and guidance kind the stage crates list is checked against the prior: without
+/// a provider a kind that consumes the prior is refused naming its key, with one a kind that
+/// consumes nothing is refused naming `prior.kind`, and the other combinations validate.
+#[test]
+fn every_kind_is_checked_against_the_prior() {
+    for fusion in FusionConfig::variants() {
+        for guidance in GuidanceKind::ALL {
+            let mut model = ModelConfig { fusion: fusion.clone(), ..Default::default() };
+            model.updater.guidance = guidance;
+            let label = format!("{} fusion, {} guidance", fusion.kind(), guidance.name());
+            for prior in [PriorConfig::None, PriorConfig::Simulated(SimulatedPriorConfig::default())] {
+                let config = ExperimentConfig {
+                    name: "kinds".into(),
+                    description: None,
+                    model: model.clone(),
+                    prior,
+                    loss: LossConfig::default(),
+                    train: Default::default(),
+                    data: Default::default(),
+                    benchmarks: Vec::new(),
+                };
+                let keys: Vec<String> = config.problems().into_iter().map(|p| p.key).collect();
+                let expected: &[&str] = match (model.needs_prior(), config.prior.gives_prior()) {
+                    (true, false) if fusion.needs_prior() => &["model.fusion.kind"],
+                    (true, false) => &["model.updater.guidance"],
+                    (false, true) => &["prior.kind"],
+                    _ => &[],
+                };
+                assert_eq!(keys, expected, "{label}, prior {}", config.prior.kind());
+            }
+        }
     }
 }

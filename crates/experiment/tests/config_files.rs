@@ -250,6 +250,9 @@ fn missing_keys_and_wrong_types_name_the_file_and_the_key() {
         ("name.toml", "name = 3\n"),
         ("base_type.toml", "base = 3\n"),
         ("syntax.toml", "[loss\nkind = 1\n"),
+        ("tagged_type.toml", "[loss]\nkind = \"edge-aware\"\ntau = \"0.8\"\n"),
+        ("flattened_type.toml", "[data.validation]\ncount = 2\nwidth = \"wide\"\n"),
+        ("source_type.toml", "[[data.sources]]\nkind = \"synthetic\"\nheight = \"tall\"\n"),
     ]);
     names(&files.error("no_weights.toml"), "no_weights.toml", "prior.weights");
     names(&files.error("no_kind.toml"), "no_kind.toml", "kind");
@@ -260,6 +263,13 @@ fn missing_keys_and_wrong_types_name_the_file_and_the_key() {
     names(&files.error("name.toml"), "name.toml", "name");
     names(&files.error("base_type.toml"), "base_type.toml", "base");
     names(&files.error("syntax.toml"), "syntax.toml", "TOML");
+    // Inside a table serde reads as a whole (a tagged `kind`, flattened scene keys), the key
+    // named is the one holding the value, not the table's first key.
+    names(&files.error("tagged_type.toml"), "tagged_type.toml", "loss.tau");
+    names(&files.error("flattened_type.toml"), "flattened_type.toml", "data.validation.width");
+    let message = files.error("source_type.toml");
+    names(&message, "source_type.toml", "data.sources");
+    assert!(message.contains("tall"), "{message}");
 }
 
 #[test]

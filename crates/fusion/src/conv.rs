@@ -4,12 +4,13 @@ use burn::module::Module;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::tensor::{Device, Tensor};
+use dgstereo_core::Result;
 use dgstereo_kernels::{Numerics, conv2d_forward};
 
-use crate::ImageFusion;
 use crate::deformable::KERNEL;
 use crate::init::{RGB, near_identity_conv};
 use crate::projection::FeatureProjection;
+use crate::{ImageFusion, missing_prior};
 
 /// Depth+CNN fusion: [`crate::DeformableFusion`] with the deformable conv replaced by a plain one.
 ///
@@ -31,14 +32,14 @@ pub struct ConvFusion {
 impl ConvFusion {
     /// Builds the module with `features` channels per branch.
     ///
-    /// # Panics
-    /// When `features < 3`.
-    pub fn new(features: usize, device: &Device) -> Self {
-        let projection = FeatureProjection::new(features, device);
+    /// # Errors
+    /// [`dgstereo_core::Error::Config`] naming `features` when `features < 3`.
+    pub fn new(features: usize, device: &Device) -> Result<Self> {
+        let projection = FeatureProjection::new(features, device)?;
         let mixer = Conv2dConfig::new([2 * features, RGB], [KERNEL, KERNEL])
             .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
             .init(device);
-        Self { projection, mixer: near_identity_conv(mixer) }
+        Ok(Self { projection, mixer: near_identity_conv(mixer) })
     }
 
     /// The enhanced image.
@@ -54,10 +55,8 @@ impl ConvFusion {
 }
 
 impl ImageFusion for ConvFusion {
-    /// # Panics
-    /// When `depth` is `None`: this fusion needs the prior.
-    fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Tensor<4> {
-        let depth = depth.expect("conv fusion needs the depth prior (FusionConfig::needs_prior)");
-        self.forward(image, depth)
+    fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Result<Tensor<4>> {
+        let depth = depth.ok_or_else(|| missing_prior("conv"))?;
+        Ok(self.forward(image, depth))
     }
 }

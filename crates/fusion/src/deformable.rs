@@ -5,12 +5,13 @@ use burn::module::Module;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig, DeformConv2d, DeformConv2dConfig};
 use burn::tensor::{Device, Tensor};
+use dgstereo_core::Result;
 use dgstereo_kernels::deform_conv2d_forward;
 use dgstereo_kernels::{Numerics, conv2d_forward};
 
-use crate::ImageFusion;
 use crate::init::{RGB, near_identity_deform_conv, zeroed};
 use crate::projection::FeatureProjection;
+use crate::{ImageFusion, missing_prior};
 
 /// Side of the deformable kernel.
 pub const KERNEL: usize = 3;
@@ -41,17 +42,17 @@ pub struct DeformableFusion {
 impl DeformableFusion {
     /// Builds the module with `features` channels per branch (`F`, the paper uses 8).
     ///
-    /// # Panics
-    /// When `features < 3`.
-    pub fn new(features: usize, device: &Device) -> Self {
-        let projection = FeatureProjection::new(features, device);
+    /// # Errors
+    /// [`dgstereo_core::Error::Config`] naming `features` when `features < 3`.
+    pub fn new(features: usize, device: &Device) -> Result<Self> {
+        let projection = FeatureProjection::new(features, device)?;
         let offset = Conv2dConfig::new([features, 2 * KERNEL * KERNEL], [KERNEL, KERNEL])
             .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
             .init(device);
         let mixer = DeformConv2dConfig::new([2 * features, RGB], [KERNEL, KERNEL])
             .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
             .init(device);
-        Self { projection, offset: zeroed(offset), mixer: near_identity_deform_conv(mixer) }
+        Ok(Self { projection, offset: zeroed(offset), mixer: near_identity_deform_conv(mixer) })
     }
 
     /// The sampling offsets predicted from the depth features.
@@ -79,10 +80,8 @@ impl DeformableFusion {
 }
 
 impl ImageFusion for DeformableFusion {
-    /// # Panics
-    /// When `depth` is `None`: this fusion needs the prior.
-    fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Tensor<4> {
-        let depth = depth.expect("deformable fusion needs the depth prior (FusionConfig::needs_prior)");
-        self.forward(image, depth)
+    fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Result<Tensor<4>> {
+        let depth = depth.ok_or_else(|| missing_prior("deformable"))?;
+        Ok(self.forward(image, depth))
     }
 }

@@ -50,6 +50,7 @@ pub use projection::FeatureProjection;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
+use dgstereo_core::{Error, Problem, Result};
 use serde::{Deserialize, Serialize};
 
 /// The stage trait.
@@ -60,7 +61,16 @@ use serde::{Deserialize, Serialize};
 /// - output: `[N, 3, H, W]`, 0..255
 pub trait ImageFusion {
     /// The enhanced image.
-    fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Tensor<4>;
+    ///
+    /// # Errors
+    /// [`Error::Config`] naming `fusion.kind` when a fusion that needs the depth prior
+    /// ([`FusionConfig::needs_prior`]) gets `depth = None`.
+    fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Result<Tensor<4>>;
+}
+
+/// The error of a learned fusion of kind `kind` run without its depth prior.
+pub(crate) fn missing_prior(kind: &str) -> Error {
+    Error::config("fusion.kind", format!("{kind} fusion needs the depth prior, but none was given"))
 }
 
 /// Which encoders see the enhanced image. Applied by the model, not by the fusion.
@@ -109,6 +119,32 @@ pub enum FusionConfig {
 }
 
 impl FusionConfig {
+    /// One configuration of every kind, with the paper's parameters, in the order of the enum.
+    /// Tests and the experiment crate's checks draw the kinds from here, so a new kind is
+    /// listed once, in this crate (`every_kind_is_listed` in the tests fails otherwise).
+    pub fn variants() -> Vec<Self> {
+        vec![Self::None, Self::deformable(), Self::conv()]
+    }
+
+    /// The kind's name as the TOML key `kind` writes it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Deformable { .. } => "deformable",
+            Self::Conv { .. } => "conv",
+        }
+    }
+
+    /// This kind with `target` and `features` where the kind has them (`none` has neither).
+    #[must_use]
+    pub fn with_parameters(&self, target: FusionTarget, features: usize) -> Self {
+        match self {
+            Self::None => Self::None,
+            Self::Deformable { .. } => Self::Deformable { target, features },
+            Self::Conv { .. } => Self::Conv { target, features },
+        }
+    }
+
     /// The DGIA config with the paper's defaults (`target = "both"`, `features = 8`).
     pub fn deformable() -> Self {
         Self::Deformable { target: FusionTarget::default(), features: DEFAULT_FEATURES }
@@ -134,30 +170,34 @@ impl FusionConfig {
         !matches!(self, Self::None)
     }
 
+    /// Everything wrong with the parameters, keys relative to the fusion table (`features`).
+    pub fn problems(&self) -> Vec<Problem> {
+        match self {
+            Self::None => Vec::new(),
+            Self::Deformable { features, .. } | Self::Conv { features, .. } => {
+                projection::features_problem(*features).into_iter().collect()
+            }
+        }
+    }
+
     /// Checks the parameters.
     ///
     /// # Errors
-    /// [`dgstereo_core::Error::Config`] when `features < 3`.
-    pub fn validate(&self) -> dgstereo_core::Result<()> {
-        match self {
-            Self::None => Ok(()),
-            Self::Deformable { features, .. } | Self::Conv { features, .. } if *features < 3 => {
-                Err(dgstereo_core::Error::Config(format!("fusion features must be at least 3, got {features}")))
-            }
-            _ => Ok(()),
-        }
+    /// [`Error::Config`] with the first of [`problems`](Self::problems) (`features < 3`).
+    pub fn validate(&self) -> Result<()> {
+        Problem::first(self.problems())
     }
 
     /// Builds the module.
     ///
-    /// # Panics
-    /// When [`validate`](Self::validate) fails.
-    pub fn init(&self, device: &Device) -> Fusion {
-        match self {
+    /// # Errors
+    /// [`Error::Config`] when [`validate`](Self::validate) fails.
+    pub fn init(&self, device: &Device) -> Result<Fusion> {
+        Ok(match self {
             Self::None => Fusion::None(IdentityFusion),
-            Self::Deformable { features, .. } => Fusion::Deformable(DeformableFusion::new(*features, device)),
-            Self::Conv { features, .. } => Fusion::Conv(ConvFusion::new(*features, device)),
-        }
+            Self::Deformable { features, .. } => Fusion::Deformable(DeformableFusion::new(*features, device)?),
+            Self::Conv { features, .. } => Fusion::Conv(ConvFusion::new(*features, device)?),
+        })
     }
 }
 
@@ -167,8 +207,8 @@ impl FusionConfig {
 pub struct IdentityFusion;
 
 impl ImageFusion for IdentityFusion {
-    fn fuse(&self, image: Tensor<4>, _depth: Option<Tensor<4>>) -> Tensor<4> {
-        image
+    fn fuse(&self, image: Tensor<4>, _depth: Option<Tensor<4>>) -> Result<Tensor<4>> {
+        Ok(image)
     }
 }
 
@@ -186,9 +226,7 @@ pub enum Fusion {
 }
 
 impl ImageFusion for Fusion {
-    /// # Panics
-    /// When a learned fusion gets `depth = None`.
-    fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Tensor<4> {
+    fn fuse(&self, image: Tensor<4>, depth: Option<Tensor<4>>) -> Result<Tensor<4>> {
         match self {
             Self::None(fusion) => fusion.fuse(image, depth),
             Self::Deformable(fusion) => fusion.fuse(image, depth),

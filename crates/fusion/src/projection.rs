@@ -3,6 +3,7 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::tensor::{Device, Tensor};
+use dgstereo_core::{Problem, Result};
 use dgstereo_kernels::{Numerics, conv2d_forward};
 
 use crate::depth::normalize_depth;
@@ -20,16 +21,22 @@ pub struct FeatureProjection {
     pub depth: Conv2d,
 }
 
+/// The problem with a feature channel count below 3 (the identity initialisation needs room for
+/// the RGB channels), keyed `features`.
+pub(crate) fn features_problem(features: usize) -> Option<Problem> {
+    (features < RGB).then(|| Problem::new("features", format!("{features} is below {RGB}")))
+}
+
 impl FeatureProjection {
     /// Builds the two projections to `features` channels.
     ///
-    /// # Panics
-    /// When `features < 3` (the identity initialisation needs room for the RGB channels).
-    pub fn new(features: usize, device: &Device) -> Self {
-        assert!(features >= RGB, "fusion features must be at least {RGB}, got {features}");
+    /// # Errors
+    /// [`dgstereo_core::Error::Config`] naming `features` when `features < 3`.
+    pub fn new(features: usize, device: &Device) -> Result<Self> {
+        Problem::first(features_problem(features))?;
         let image = Conv2dConfig::new([RGB, features], [1, 1]).init(device);
         let depth = Conv2dConfig::new([1, features], [1, 1]).init(device);
-        Self { image: identity_padded_projection(image), depth }
+        Ok(Self { image: identity_padded_projection(image), depth })
     }
 
     /// The feature channel count `F`.

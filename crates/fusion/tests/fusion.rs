@@ -4,8 +4,8 @@
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::nn::conv::Conv2dConfig;
 use burn::tensor::{Device, Distribution, Gradients, Tensor};
-use dgstereo_core::default_device;
 use dgstereo_core::tensor::{max_abs_diff, to_vec};
+use dgstereo_core::{Error, default_device};
 use dgstereo_fusion::{ConvFusion, DeformableFusion, Fusion, FusionConfig, FusionTarget, ImageFusion, normalize_depth};
 use proptest::prelude::*;
 
@@ -20,7 +20,10 @@ fn depth(device: &Device) -> Tensor<4> {
 }
 
 fn learned(device: &Device) -> Vec<(&'static str, Fusion)> {
-    vec![("deformable", FusionConfig::deformable().init(device)), ("conv", FusionConfig::conv().init(device))]
+    vec![
+        ("deformable", FusionConfig::deformable().init(device).unwrap()),
+        ("conv", FusionConfig::conv().init(device).unwrap()),
+    ]
 }
 
 #[test]
@@ -37,7 +40,11 @@ fn configs_read_from_toml() {
     assert!(!FusionConfig::None.needs_prior());
     assert!(read("kind = \"deformable\"\ntau = 1").is_err());
     assert!(read("kind = \"deformable\"\ntarget = \"feature\"").is_err());
-    assert!(FusionConfig::Deformable { target: FusionTarget::Both, features: 2 }.validate().is_err());
+    let thin = FusionConfig::Deformable { target: FusionTarget::Both, features: 2 };
+    let problems = thin.problems();
+    assert_eq!(problems.len(), 1);
+    assert_eq!(problems[0].key, "features");
+    assert!(thin.validate().is_err());
     let text = toml::to_string(&FusionConfig::deformable()).unwrap();
     assert_eq!(read(&text).unwrap(), FusionConfig::deformable());
 }
@@ -46,7 +53,7 @@ fn configs_read_from_toml() {
 fn none_is_the_identity() {
     let device = default_device();
     let x = image(&device);
-    let out = FusionConfig::None.init(&device).fuse(x.clone(), None);
+    let out = FusionConfig::None.init(&device).unwrap().fuse(x.clone(), None).unwrap();
     assert_eq!(max_abs_diff(out, x), 0.0);
 }
 
@@ -55,7 +62,7 @@ fn learned_fusions_start_close_to_the_identity() {
     let device = default_device();
     let x = image(&device);
     for (name, fusion) in learned(&device) {
-        let out = fusion.fuse(x.clone(), Some(depth(&device)));
+        let out = fusion.fuse(x.clone(), Some(depth(&device))).unwrap();
         assert_eq!(out.dims(), SIZE, "{name}");
         let values = to_vec(out.clone());
         assert!(values.iter().all(|v| v.is_finite()), "{name}");
@@ -71,16 +78,62 @@ fn prior_at_another_resolution_is_resized() {
     let device = default_device();
     let small = Tensor::random([SIZE[0], 1, 5, 7], Distribution::Uniform(0.0, 1.0), &device);
     for (name, fusion) in learned(&device) {
-        let out = fusion.fuse(image(&device), Some(small.clone()));
+        let out = fusion.fuse(image(&device), Some(small.clone())).unwrap();
         assert_eq!(out.dims(), SIZE, "{name}");
     }
 }
 
+/// A learned fusion without its prior is an error naming `fusion.kind`, not a panic.
 #[test]
-#[should_panic(expected = "needs the depth prior")]
-fn learned_fusion_without_prior_panics() {
+fn learned_fusion_without_prior_is_an_error() {
     let device = default_device();
-    FusionConfig::deformable().init(&device).fuse(image(&device), None);
+    for (name, fusion) in learned(&device) {
+        match fusion.fuse(image(&device), None) {
+            Err(Error::Config(problem)) => {
+                assert_eq!(problem.key, "fusion.kind", "{name}");
+                assert!(problem.reason.contains(name), "{name}: {problem}");
+            }
+            other => panic!("{name}: expected a configuration error, got {other:?}"),
+        }
+    }
+}
+
+/// An invalid configuration is refused by `init` with the key, not a panic.
+#[test]
+fn init_refuses_an_invalid_config() {
+    let device = default_device();
+    for kind in FusionConfig::variants() {
+        let thin = kind.with_parameters(FusionTarget::Both, 2);
+        match thin.init(&device) {
+            Ok(_) => assert!(thin.validate().is_ok(), "{thin:?} builds but does not validate"),
+            Err(Error::Config(problem)) => assert_eq!(problem.key, "features", "{thin:?}"),
+            Err(other) => panic!("{thin:?}: {other}"),
+        }
+    }
+    assert!(DeformableFusion::new(2, &device).is_err());
+    assert!(ConvFusion::new(2, &device).is_err());
+}
+
+/// The kinds serde accepts for `kind`, read from its error for an unknown kind ("unknown
+/// variant `?`, expected one of `a`, `b`").
+fn kinds_serde_accepts() -> Vec<String> {
+    let message = toml::from_str::<FusionConfig>("kind = \"?\"").unwrap_err().to_string();
+    let expected = message.split_once("expected").map(|(_, rest)| rest).unwrap_or_default();
+    expected.split('`').skip(1).step_by(2).map(str::to_string).collect()
+}
+
+/// `FusionConfig::variants` lists every kind, once, in the enum's order, and names each as TOML
+/// does: the tests and checks that draw their kinds from it see every kind.
+#[test]
+fn every_kind_is_listed() {
+    let listed: Vec<String> = FusionConfig::variants().iter().map(|v| v.kind().to_string()).collect();
+    assert_eq!(listed, kinds_serde_accepts());
+    for variant in FusionConfig::variants() {
+        let text = toml::to_string(&variant).unwrap();
+        assert!(text.contains(&format!("kind = \"{}\"", variant.kind())), "{text}");
+        assert_eq!(toml::from_str::<FusionConfig>(&text).unwrap(), variant);
+        assert!(variant.validate().is_ok(), "{variant:?}");
+    }
 }
 
 /// Checks that every float parameter has a finite, non-zero gradient.
@@ -102,12 +155,10 @@ impl ModuleVisitor for GradientCheck<'_> {
 #[test]
 fn every_parameter_gets_a_finite_gradient() {
     let device = default_device().autodiff();
-    for (name, fusion, params) in
-        [("deformable", FusionConfig::deformable().init(&device), 8), ("conv", FusionConfig::conv().init(&device), 6)]
-    {
+    for ((name, fusion), params) in learned(&device).into_iter().zip([8, 6]) {
         let x = image(&device);
         let goal = image(&device);
-        let out = fusion.fuse(x, Some(depth(&device)));
+        let out = fusion.fuse(x, Some(depth(&device))).unwrap();
         let loss = (out - goal).powi_scalar(2).mean();
         let grads = loss.backward();
         let mut check = GradientCheck { grads: &grads, checked: 0 };
@@ -119,7 +170,7 @@ fn every_parameter_gets_a_finite_gradient() {
 /// A conv fusion with the deformable fusion's weights (its mixer weights made random first, so
 /// that the comparison exercises every tap).
 fn matched_pair(device: &Device) -> (DeformableFusion, ConvFusion) {
-    let mut deformable = DeformableFusion::new(8, device);
+    let mut deformable = DeformableFusion::new(8, device).unwrap();
     let weight = Tensor::random(deformable.mixer.weight.dims(), Distribution::Uniform(-0.2, 0.2), device);
     let bias = Tensor::random([3], Distribution::Uniform(-1.0, 1.0), device);
     deformable.mixer.weight = Param::from_tensor(weight.clone());
@@ -209,9 +260,9 @@ proptest! {
 fn a_module_built_on_a_plain_device_trains_after_fork_and_train() {
     // burn 0.22: a module forked to an autodiff device needs `.train()` to track gradients.
     let device = default_device();
-    let fusion = FusionConfig::deformable().init(&device).fork(&device.clone().autodiff()).train();
+    let fusion = FusionConfig::deformable().init(&device).unwrap().fork(&device.clone().autodiff()).train();
     let autodiff = device.autodiff();
-    let out = fusion.fuse(image(&autodiff), Some(depth(&autodiff)));
+    let out = fusion.fuse(image(&autodiff), Some(depth(&autodiff))).unwrap();
     let grads = out.mean().backward();
     let Fusion::Deformable(inner) = &fusion else { unreachable!() };
     assert!(inner.offset.weight.val().grad(&grads).is_some());

@@ -19,7 +19,7 @@
 use std::str::FromStr;
 use std::sync::OnceLock;
 
-use dgstereo_core::{Error, Result};
+use dgstereo_core::{Error, Problem, Result};
 
 /// The environment variable read when no binary configured the settings.
 pub const ENV_VAR: &str = "DGSTEREO_KERNELS";
@@ -160,17 +160,20 @@ impl FromStr for Settings {
                         Some(_) => {}
                         None => {
                             let names: Vec<_> = GpuRoute::ALL.iter().map(|r| r.name()).collect();
-                            return Err(Error::Config(format!(
-                                "unknown GPU route '{name}' (expected all or one of {})",
-                                names.join(", ")
-                            )));
+                            return Err(Error::config(
+                                "kernels",
+                                format!("unknown GPU route '{name}' (expected all or one of {})", names.join(", ")),
+                            ));
                         }
                     },
                     None => {
-                        return Err(Error::Config(format!(
-                            "unknown kernel setting '{word}' (expected host, stock, stock-training, gpu-routes, \
-                             no-winograd, no-winograd-blocks or stock-route=NAME)"
-                        )));
+                        return Err(Error::config(
+                            "kernels",
+                            format!(
+                                "unknown kernel setting '{word}' (expected host, stock, stock-training, gpu-routes, \
+                                 no-winograd, no-winograd-blocks or stock-route=NAME)"
+                            ),
+                        ));
                     }
                 },
             }
@@ -188,14 +191,17 @@ pub fn configure(settings: Settings) -> Result<()> {
     if *in_use == settings {
         Ok(())
     } else {
-        Err(Error::Config(format!(
-            "kernel settings are already in use ({in_use:?}); they can be configured once, before the first operation"
-        )))
+        Err(Error::config(
+            "kernels",
+            format!(
+                "the settings are already in use ({in_use:?}); they can be configured once, before the first operation"
+            ),
+        ))
     }
 }
 
 /// Why `DGSTEREO_KERNELS` did not parse, where [`settings`] read it and it did not.
-static ENV_PROBLEM: OnceLock<String> = OnceLock::new();
+static ENV_PROBLEM: OnceLock<Problem> = OnceLock::new();
 
 /// The process's settings: those [`configure`]d, else `DGSTEREO_KERNELS`'s, read once. An
 /// operation cannot return an error, so where the variable does not parse the operations run with
@@ -204,7 +210,11 @@ static ENV_PROBLEM: OnceLock<String> = OnceLock::new();
 pub fn settings() -> &'static Settings {
     SETTINGS.get_or_init(|| {
         Settings::from_env().unwrap_or_else(|e| {
-            let _ = ENV_PROBLEM.set(reason(&e));
+            let problem = match e {
+                Error::Config(problem) => problem,
+                other => Problem::new(ENV_VAR, other.to_string()),
+            };
+            let _ = ENV_PROBLEM.set(problem);
             Settings::default()
         })
     })
@@ -223,7 +233,7 @@ pub fn check() -> Result<&'static Settings> {
 /// The reason of a configuration error, without a key of its own.
 fn reason(e: &Error) -> String {
     match e {
-        Error::Config(text) => text.clone(),
+        Error::Config(problem) => problem.reason.clone(),
         other => other.to_string(),
     }
 }

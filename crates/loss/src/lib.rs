@@ -116,6 +116,51 @@ impl LossConfig {
     pub fn needs_nearest(&self) -> bool {
         matches!(self, Self::EdgeAware { .. })
     }
+
+    /// One configuration of every kind, with the defaults, in the order of the enum; tests draw
+    /// the kinds from here (`every_kind_is_listed` fails when a kind is missing).
+    pub fn variants() -> Vec<Self> {
+        vec![Self::default(), Self::edge_aware()]
+    }
+
+    /// The kind's name as the TOML key `kind` writes it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::SequenceL1 { .. } => "sequence-l1",
+            Self::EdgeAware { .. } => "edge-aware",
+        }
+    }
+
+    /// Everything wrong with the values, keys relative to the loss table: `tau` finite and
+    /// `>= 0`, `gamma` in `(0, 1]`, `max_disparity` finite and `> 0`.
+    pub fn problems(&self) -> Vec<dgstereo_core::Problem> {
+        let mut problems = Vec::new();
+        let mut add = |key: &str, reason: String| problems.push(dgstereo_core::Problem::new(key, reason));
+        let (gamma, max_disparity) = match *self {
+            Self::SequenceL1 { gamma, max_disparity } => (gamma, max_disparity),
+            Self::EdgeAware { tau, gamma, max_disparity } => {
+                if !(tau.is_finite() && tau >= 0.0) {
+                    add("tau", format!("{tau} must be a finite value >= 0"));
+                }
+                (gamma, max_disparity)
+            }
+        };
+        if !(gamma > 0.0 && gamma <= 1.0) {
+            add("gamma", format!("{gamma} must lie in (0, 1]"));
+        }
+        if !(max_disparity.is_finite() && max_disparity > 0.0) {
+            add("max_disparity", format!("{max_disparity} must be a finite value > 0"));
+        }
+        problems
+    }
+
+    /// Checks the values.
+    ///
+    /// # Errors
+    /// [`dgstereo_core::Error::Config`] with the first of [`problems`](Self::problems).
+    pub fn validate(&self) -> dgstereo_core::Result<()> {
+        dgstereo_core::Problem::first(self.problems())
+    }
 }
 
 impl DisparityLoss for LossConfig {

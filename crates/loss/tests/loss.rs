@@ -208,3 +208,28 @@ proptest! {
         prop_assert!(counts.windows(2).all(|c| c[0] <= c[1]), "{:?} at {:?}", counts, taus);
     }
 }
+
+/// `LossConfig::variants` lists every kind serde accepts, once, in the enum's order, each valid
+/// and named as TOML names it.
+#[test]
+fn every_kind_is_listed() {
+    let unknown = toml::from_str::<LossConfig>("kind = \"?\"").unwrap_err().to_string();
+    let expected = unknown.split_once("expected").map(|(_, rest)| rest).unwrap_or_default();
+    let accepted: Vec<&str> = expected.split('`').skip(1).step_by(2).collect();
+    let variants = LossConfig::variants();
+    let listed: Vec<&str> = variants.iter().map(LossConfig::kind).collect();
+    assert_eq!(listed, accepted);
+    for variant in variants {
+        assert!(variant.validate().is_ok(), "{variant:?}");
+        assert_eq!(toml::from_str::<LossConfig>(&toml::to_string(&variant).unwrap()).unwrap(), variant);
+    }
+}
+
+/// Invalid values are problems keyed relative to the loss table.
+#[test]
+fn invalid_values_are_keyed_problems() {
+    let keys = |config: LossConfig| config.problems().into_iter().map(|p| p.key).collect::<Vec<_>>();
+    assert_eq!(keys(LossConfig::EdgeAware { tau: -1.0, gamma: 0.9, max_disparity: 700.0 }), ["tau"]);
+    assert_eq!(keys(LossConfig::SequenceL1 { gamma: 0.0, max_disparity: f64::NAN }), ["gamma", "max_disparity"]);
+    assert!(LossConfig::edge_aware().problems().is_empty());
+}

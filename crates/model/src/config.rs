@@ -1,5 +1,6 @@
 //! Configuration of the stereo network.
 
+use dgstereo_core::{Error, Problem, Result};
 use dgstereo_costvolume::CorrelationConfig;
 pub use dgstereo_encoder::EncoderConfig;
 use dgstereo_fusion::FusionConfig;
@@ -27,31 +28,58 @@ pub struct ModelConfig {
 }
 
 impl ModelConfig {
-    /// Checks the combination of options; the message names the key.
-    pub fn validate(&self) -> dgstereo_core::Result<()> {
-        let err = |m: String| Err(dgstereo_core::Error::Config(m));
-        let u = &self.updater;
-        if !(1..=3).contains(&u.n_gru_layers) {
-            return err(format!("updater.n_gru_layers = {} (must be 1, 2 or 3)", u.n_gru_layers));
-        }
-        if !(2..=3).contains(&u.n_downsample) {
-            return err(format!("updater.n_downsample = {} (must be 2 or 3)", u.n_downsample));
-        }
-        if u.hidden_dims.contains(&0) {
-            return err("updater.hidden_dims must be positive".into());
-        }
-        if self.correlation.levels == 0 {
-            return err("correlation.levels must be at least 1".into());
-        }
-        self.encoder.validate()?;
-        // `init` would panic on an invalid fusion (fewer than 3 feature channels).
-        self.fusion.validate()?;
-        Ok(())
+    /// Everything wrong with the options, keys relative to the model table
+    /// (`updater.n_gru_layers`, `fusion.features`): each stage's own
+    /// [`problems`](UpdaterConfig::problems), gathered under its table.
+    pub fn problems(&self) -> Vec<Problem> {
+        let stages = [
+            ("updater", self.updater.problems()),
+            ("correlation", self.correlation.problems()),
+            ("encoder", self.encoder.problems()),
+            ("fusion", self.fusion.problems()),
+        ];
+        stages.into_iter().flat_map(|(table, problems)| problems.into_iter().map(move |p| p.within(table))).collect()
+    }
+
+    /// Checks the combination of options.
+    ///
+    /// # Errors
+    /// [`Error::Config`] with the first of [`problems`](Self::problems).
+    pub fn validate(&self) -> Result<()> {
+        Problem::first(self.problems())
     }
 
     /// Whether the network consumes a depth prior (fusion or guidance).
     pub fn needs_prior(&self) -> bool {
-        self.fusion != FusionConfig::None || self.updater.guidance != GuidanceKind::None
+        self.fusion.needs_prior() || self.updater.guidance != GuidanceKind::None
+    }
+
+    /// The one check that a network that consumes a depth prior gets one: `has_prior` says
+    /// whether a prior will be there (a provider is configured, or the caller passes maps).
+    ///
+    /// # Errors
+    /// [`Error::Config`] naming the consuming key relative to the model table (`fusion.kind`,
+    /// else `updater.guidance`) when the network needs a prior and `has_prior` is false.
+    pub fn check_prior(&self, has_prior: bool) -> Result<()> {
+        if has_prior {
+            return Ok(());
+        }
+        let missing = |key: &str, what: String| {
+            Err(Error::config(
+                key,
+                format!(
+                    "{what} needs a depth prior, but there is none: configure a prior provider (prior.kind) or \
+                     give a prior with each pair"
+                ),
+            ))
+        };
+        if self.fusion.needs_prior() {
+            return missing("fusion.kind", format!("{} fusion", self.fusion.kind()));
+        }
+        if self.updater.guidance != GuidanceKind::None {
+            return missing("updater.guidance", format!("{} guidance", self.updater.guidance.name()));
+        }
+        Ok(())
     }
 
     /// The upsampling factor `2^n_downsample`.

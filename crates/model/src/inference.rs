@@ -72,15 +72,11 @@ impl StereoModel {
             return Err(Error::Shape(format!("images must have 3 channels, found {c}")));
         }
         if iters == 0 {
-            return Err(Error::Config("iterations must be at least 1".into()));
+            return Err(Error::config("iters", "must be at least 1"));
         }
-        if self.config.needs_prior() && prior.is_none() {
-            return Err(Error::Config(
-                "this model uses a depth prior (fusion or guidance) but none was given: configure a prior source (an experiment's [prior]) or give a prior per view".into(),
-            ));
-        }
+        self.config.check_prior(prior.is_some())?;
         let disparities =
-            padded_disparities(&self.network, &self.config, left, right, prior, iters, implementation, all_iterations);
+            padded_disparities(&self.network, &self.config, left, right, prior, iters, implementation, all_iterations)?;
         Ok(IterationDisparities { disparities })
     }
 }
@@ -89,6 +85,9 @@ impl StereoModel {
 /// a multiple of [`ModelConfig::pad_divisor`], and returns positive disparity, cropped back, for
 /// every iteration kept. Inputs are not checked: [`StereoModel::predict`] is the checked entry
 /// point; training calls this directly on batches it built itself.
+///
+/// # Errors
+/// As [`RaftStereo::forward_flow`]: the fusion needs the prior and `prior` is `None`.
 ///
 /// # Shapes
 /// - `left`, `right`: `[N, 3, H, W]`, RGB 0..255; prior maps `[N, 1, H, W]`
@@ -103,7 +102,7 @@ pub fn padded_disparities(
     iters: usize,
     implementation: Option<CorrelationImplementation>,
     all_iterations: bool,
-) -> Vec<Tensor<4>> {
+) -> Result<Vec<Tensor<4>>> {
     let [_, _, h, w] = left.dims();
     let padder = InputPadder::new(h, w, config.pad_divisor());
     let padded_prior =
@@ -114,6 +113,6 @@ pub fn padded_disparities(
         padded_prior.as_ref(),
         iters,
         ForwardOptions { implementation, all_iterations, ..ForwardOptions::default() },
-    );
-    out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect()
+    )?;
+    Ok(out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect())
 }

@@ -121,17 +121,20 @@ impl ModelConfig {
     /// Builds the network with fresh weights, after [`ModelConfig::validate`].
     pub fn init(&self, device: &Device) -> dgstereo_core::Result<RaftStereo> {
         self.validate()?;
-        Ok(RaftStereo::new(self, device))
+        RaftStereo::new(self, device)
     }
 }
 
 impl RaftStereo {
     /// Builds the network with fresh weights (see [`ModelConfig::init`]).
-    pub fn new(config: &ModelConfig, device: &Device) -> Self {
+    ///
+    /// # Errors
+    /// [`dgstereo_core::Error::Config`] when a stage refuses its configuration.
+    pub fn new(config: &ModelConfig, device: &Device) -> dgstereo_core::Result<Self> {
         let u = &config.updater;
         let dims = u.hidden_dims;
-        Self {
-            fusion: config.fusion.init(device),
+        Ok(Self {
+            fusion: config.fusion.init(device)?,
             encoder: config.encoder.init(dims, u.n_downsample, device),
             // Level `i` counts from the finest (1/4, `hidden_dims[2]`) as the context does.
             context_zqr_convs: (0..u.n_gru_layers)
@@ -146,7 +149,7 @@ impl RaftStereo {
             fuse_features: config.fusion.target() == FusionTarget::Both,
             n_gru_layers: u.n_gru_layers,
             n_downsample: u.n_downsample,
-        }
+        })
     }
 
     /// Runs the network on images already padded to a multiple of `2^(n_downsample+3)`.
@@ -158,6 +161,10 @@ impl RaftStereo {
     /// # Shapes
     /// - `left`, `right`: `[N, 3, H, W]`; prior maps `[N, 1, H, W]`
     /// - `flow_up[k]`: `[N, 1, H, W]`; `flow_lowres`: `[N, 1, H/f, W/f]`
+    ///
+    /// # Errors
+    /// [`dgstereo_core::Error::Config`] when the fusion needs the depth prior and `prior` is
+    /// `None` (the checked entry points answer this first with [`ModelConfig::check_prior`]).
     pub fn forward_flow(
         &self,
         left: Tensor<4>,
@@ -165,10 +172,10 @@ impl RaftStereo {
         prior: Option<&DepthPrior>,
         iters: usize,
         options: ForwardOptions<'_>,
-    ) -> FlowOutput {
+    ) -> dgstereo_core::Result<FlowOutput> {
         let ForwardOptions { flow_init, implementation, all_iterations, mut probe } = options;
         let probe = &mut probe;
-        let Encodings { fmap1, fmap2, mut hidden, gates } = self.encode(left, right, prior, probe);
+        let Encodings { fmap1, fmap2, mut hidden, gates } = self.encode(left, right, prior, probe)?;
         let implementation = implementation.unwrap_or(self.correlation.implementation);
         let corr_fn = self.correlation_volume(fmap1, fmap2, implementation, probe);
         let grid = self.update_grid(&hidden[0], prior, probe);
@@ -203,7 +210,7 @@ impl RaftStereo {
                 flow_up.push(up);
             }
         }
-        FlowOutput { flow_up, flow_lowres: flow_x }
+        Ok(FlowOutput { flow_up, flow_lowres: flow_x })
     }
 
     /// Stage 1, fusion and encoders: both views' features, and per GRU level the initial hidden
@@ -214,13 +221,13 @@ impl RaftStereo {
         right: Tensor<4>,
         prior: Option<&DepthPrior>,
         probe: &mut Probe<'_>,
-    ) -> Encodings {
+    ) -> dgstereo_core::Result<Encodings> {
         let Encoded { fmap1, fmap2, context } =
-            self.encoder.encode(self.fuse(left, right, prior, probe), self.n_gru_layers, probe);
+            self.encoder.encode(self.fuse(left, right, prior, probe)?, self.n_gru_layers, probe);
         probe.record("fnet.left", &fmap1);
         probe.record("fnet.right", &fmap2);
         let (hidden, gates) = self.gru_context(context, probe);
-        Encodings { fmap1, fmap2, hidden, gates }
+        Ok(Encodings { fmap1, fmap2, hidden, gates })
     }
 
     /// Stage 2, the cost volume of `fmap1` against `fmap2` (`[N, C, H/f, W/f]`) by
@@ -309,25 +316,26 @@ impl RaftStereo {
     }
 
     /// The images each encoder sees: the fused left view for the context, and for the features
-    /// the fused views or the raw ones ([`FusionTarget`]).
+    /// the fused views or the raw ones ([`FusionTarget`]); an error when the fusion needs the
+    /// prior and there is none.
     pub(crate) fn fuse(
         &self,
         left: Tensor<4>,
         right: Tensor<4>,
         prior: Option<&DepthPrior>,
         probe: &mut Probe<'_>,
-    ) -> EncoderInputs {
+    ) -> dgstereo_core::Result<EncoderInputs> {
         let (prior_left, prior_right) = match prior {
             Some(p) => (Some(p.left.clone()), Some(p.right.clone())),
             None => (None, None),
         };
-        let context_left = probe.time("fusion", || self.fusion.fuse(left.clone(), prior_left));
+        let context_left = probe.time("fusion", || self.fusion.fuse(left.clone(), prior_left))?;
         let (features_left, features_right) = if self.fuse_features {
-            (context_left.clone(), probe.time("fusion", || self.fusion.fuse(right, prior_right)))
+            (context_left.clone(), probe.time("fusion", || self.fusion.fuse(right, prior_right))?)
         } else {
             (left, right)
         };
-        EncoderInputs { context_left, features_left, features_right }
+        Ok(EncoderInputs { context_left, features_left, features_right })
     }
 
     /// The GRUs' initial hidden states (tanh of the first heads) and their gate context terms

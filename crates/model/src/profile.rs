@@ -84,15 +84,14 @@ pub fn profile_forward(
     if n != 1 {
         return Err(Error::Shape(format!("the profile runs one pair at a time, got a batch of {n}")));
     }
-    if config.needs_prior() && prior.is_none() {
-        return Err(Error::Config("this model uses a depth prior but none was given to the profiler".into()));
-    }
+    config.check_prior(prior.is_some())?;
     if iters == 0 {
-        return Err(Error::Config("iterations must be at least 1".into()));
+        return Err(Error::config("iters", "must be at least 1"));
     }
     let mut clock = StageClock::synced(left.device()).metered(macs_so_far);
     let options = ForwardOptions { probe: Probe::new(None, Some(&mut clock)), ..Default::default() };
     let (out, work) = count_work(|| model.forward_flow(left, right, prior, iters, options));
+    let out = out?;
     let stages = clock
         .stages()
         .iter()
@@ -124,7 +123,7 @@ mod tests {
         let model = config.init(&device).unwrap();
         let img = || Tensor::<4>::random([1, 3, 32, 64], Distribution::Uniform(0.0, 255.0), &device);
         let (left, right) = (img(), img());
-        let out = model.forward_flow(left.clone(), right.clone(), None, 3, ForwardOptions::default());
+        let out = model.forward_flow(left.clone(), right.clone(), None, 3, ForwardOptions::default()).unwrap();
         let profile = profile_forward(&model, &config, left, right, None, 3).unwrap();
         assert!(max_abs_diff(profile.flow_lowres.clone(), out.flow_lowres) < 1e-5);
         assert!(max_abs_diff(profile.flow_up.clone(), out.flow_up[0].clone()) < 1e-4);

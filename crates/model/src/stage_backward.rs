@@ -18,7 +18,7 @@ use std::time::Instant;
 use burn::optim::GradientsParams;
 use burn::tensor::{DType, Device, Distribution, Tensor};
 use dgstereo_core::timing::process_cpu_seconds;
-use dgstereo_core::{DepthPrior, Probe};
+use dgstereo_core::{DepthPrior, Probe, Result};
 use dgstereo_updater::GateContext;
 
 use crate::RaftStereo;
@@ -64,15 +64,15 @@ fn timed<T>(
     name: &'static str,
     calls: usize,
     device: &Device,
-    forward: impl FnOnce() -> (Vec<Tensor<4>>, T),
-) -> (StageBackward, T) {
+    forward: impl FnOnce() -> Result<(Vec<Tensor<4>>, T)>,
+) -> Result<(StageBackward, T)> {
     let wait = || {
         // A failed sync surfaces again at the next read of a result; timing needs no error.
         let _ = device.sync();
     };
     wait();
     let start = Instant::now();
-    let (outputs, kept) = forward();
+    let (outputs, kept) = forward()?;
     let scalar = dotted(&outputs);
     wait();
     let forward_seconds = start.elapsed().as_secs_f64();
@@ -82,7 +82,7 @@ fn timed<T>(
     let backward_seconds = start.elapsed().as_secs_f64();
     let backward_cpu_seconds = process_cpu_seconds().zip(cpu_start).map_or(f64::NAN, |(end, start)| end - start);
     let parameters = GradientsParams::from_grads(grads, model).len();
-    (StageBackward { name, forward_seconds, backward_seconds, backward_cpu_seconds, calls, parameters }, kept)
+    Ok((StageBackward { name, forward_seconds, backward_seconds, backward_cpu_seconds, calls, parameters }, kept))
 }
 
 /// Each stage's forward and backward seconds in a training step of `iters` iterations on
@@ -92,22 +92,25 @@ fn timed<T>(
 ///
 /// # Shapes
 /// - `left`, `right`: `[N, 3, H, W]` padded as for [`RaftStereo::forward_flow`]; prior maps `[N, 1, H, W]`
+///
+/// # Errors
+/// As [`RaftStereo::forward_flow`]: the fusion needs the prior and `prior` is `None`.
 pub fn profile_backward(
     model: &RaftStereo,
     left: Tensor<4>,
     right: Tensor<4>,
     prior: Option<&DepthPrior>,
     iters: usize,
-) -> Vec<StageBackward> {
+) -> Result<Vec<StageBackward>> {
     let device = left.device();
     let mut probe = Probe::none();
     let (encoders, encodings) = timed(model, "fusion + encoders", 1, &device, || {
-        let encodings = model.encode(left, right, prior, &mut probe);
+        let encodings = model.encode(left, right, prior, &mut probe)?;
         let mut outputs = vec![encodings.fmap1.clone(), encodings.fmap2.clone()];
         outputs.extend(encodings.hidden.iter().cloned());
         outputs.extend(encodings.gates.iter().flat_map(|g| [g.zr.clone(), g.q.clone()]));
-        (outputs, encodings)
-    });
+        Ok((outputs, encodings))
+    })?;
     let Encodings { fmap1, fmap2, hidden, gates } = encodings;
 
     let [n, _, h, w] = hidden[0].dims();
@@ -122,8 +125,8 @@ pub fn profile_backward(
         let volume = model.correlation_volume(leaf(&fmap1), leaf(&fmap2), implementation, &mut probe);
         let corrs: Vec<Tensor<4>> =
             flows.iter().map(|flow| model.lookup(&volume, &grid, flow.clone(), &mut probe)).collect();
-        (corrs.clone(), corrs)
-    });
+        Ok((corrs.clone(), corrs))
+    })?;
 
     let (update, states) = timed(model, "update steps", iters, &device, || {
         let mut state: Vec<Tensor<4>> = hidden.iter().map(leaf).collect();
@@ -137,8 +140,8 @@ pub fn profile_backward(
             deltas.push(model.update(&mut state, &context, leaf(corr), &grid, flow_x.clone(), &mut probe));
             states.push(state[0].clone());
         }
-        (deltas, states)
-    });
+        Ok((deltas, states))
+    })?;
 
     let (upsampling, ()) = timed(model, "mask heads + upsampling", iters, &device, || {
         let up = states
@@ -149,9 +152,9 @@ pub fn profile_backward(
                 model.upsample(leaf(flow_x), mask, &mut probe)
             })
             .collect();
-        (up, ())
-    });
-    vec![encoders, correlation, update, upsampling]
+        Ok((up, ()))
+    })?;
+    Ok(vec![encoders, correlation, update, upsampling])
 }
 
 #[cfg(test)]
@@ -186,7 +189,7 @@ mod tests {
         let depth = || Tensor::<4>::random([1, 1, 64, 128], Distribution::Uniform(0.5, 2.0), &device);
         let prior = DepthPrior { left: depth(), right: depth() };
         let iters = 3;
-        let stages = profile_backward(&model, left.clone(), right.clone(), Some(&prior), iters);
+        let stages = profile_backward(&model, left.clone(), right.clone(), Some(&prior), iters).unwrap();
         let names: Vec<&str> = stages.iter().map(|s| s.name).collect();
         assert_eq!(names, ["fusion + encoders", "correlation", "update steps", "mask heads + upsampling"]);
         assert_eq!(stages.iter().map(|s| s.calls).collect::<Vec<_>>(), [1, iters, iters, iters]);
@@ -194,7 +197,7 @@ mod tests {
         assert!(stages.iter().all(|s| s.name == "correlation" || s.parameters > 0), "{stages:?}");
 
         let options = ForwardOptions { all_iterations: true, ..ForwardOptions::default() };
-        let out = model.forward_flow(left, right, Some(&prior), iters, options);
+        let out = model.forward_flow(left, right, Some(&prior), iters, options).unwrap();
         let loss = out.flow_up.into_iter().map(|f| f.abs().sum()).reduce(|a, b| a + b).expect("iterations");
         let whole = GradientsParams::from_grads(loss.backward(), &model).len();
         assert_eq!(stages.iter().map(|s| s.parameters).sum::<usize>(), whole, "{stages:?}");

@@ -130,7 +130,7 @@ pub fn verify_raft_stereo(weights: &Path, reference: &Path, device: &Device) -> 
     let mut trace = BTreeMap::new();
     let options =
         ForwardOptions { all_iterations: true, probe: Probe::new(Some(&mut trace), None), ..ForwardOptions::default() };
-    let _ = model.forward_flow(left, right, None, iters, options);
+    model.forward_flow(left, right, None, iters, options)?;
     for (alias, traced) in aliases(iters.saturating_sub(1)) {
         if let Some(t) = trace.get(&traced).cloned() {
             trace.insert(alias.to_string(), t);

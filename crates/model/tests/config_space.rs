@@ -25,13 +25,16 @@ fn norm() -> impl Strategy<Value = NormKind> {
     prop_oneof![Just(NormKind::Batch), Just(NormKind::Group), Just(NormKind::Instance), Just(NormKind::None)]
 }
 
+/// Every fusion kind the fusion crate lists, with random parameters (some invalid).
 fn fusion() -> impl Strategy<Value = FusionConfig> {
     let target = prop_oneof![Just(FusionTarget::Both), Just(FusionTarget::ContextOnly)];
-    (0usize..3, target, 1usize..=8).prop_map(|(kind, target, features)| match kind {
-        0 => FusionConfig::None,
-        1 => FusionConfig::Conv { target, features },
-        _ => FusionConfig::Deformable { target, features },
-    })
+    (prop::sample::select(FusionConfig::variants()), target, 1usize..=8)
+        .prop_map(|(kind, target, features)| kind.with_parameters(target, features))
+}
+
+/// Every guidance kind the updater crate lists.
+fn guidance() -> impl Strategy<Value = GuidanceKind> {
+    prop::sample::select(GuidanceKind::ALL.to_vec())
 }
 
 fn hidden_dims() -> impl Strategy<Value = [usize; 3]> {
@@ -40,8 +43,7 @@ fn hidden_dims() -> impl Strategy<Value = [usize; 3]> {
 }
 
 fn config() -> impl Strategy<Value = ModelConfig> {
-    let guidance = prop_oneof![Just(GuidanceKind::None), Just(GuidanceKind::Gradient), Just(GuidanceKind::Depth)];
-    let updater = (2usize..=3, 1usize..=3, hidden_dims(), any::<bool>(), guidance);
+    let updater = (2usize..=3, 1usize..=3, hidden_dims(), any::<bool>(), guidance());
     // Trunk widths that a group norm (width / 8 groups) can and cannot split.
     let trunk = prop::sample::select(vec![[16usize, 16, 24], [8, 16, 16], [12, 16, 20], [16, 17, 24], [4, 16, 16]]);
     let encoder = (norm(), any::<bool>(), prop::sample::select(vec![16usize, 32]), trunk);
@@ -154,12 +156,46 @@ proptest! {
         match config.validate() {
             Err(e) => {
                 let message = e.to_string();
-                let keys = ["updater.", "encoder.", "correlation.", "fusion"];
+                let keys = ["updater.", "encoder.", "correlation.", "fusion."];
                 prop_assert!(keys.iter().any(|k| message.contains(k)), "{message} names no key");
             }
             Ok(()) => {
                 let run = builds_and_runs(&config, [size.0, size.1], iters);
                 prop_assert!(run.is_ok(), "{config:?}: {run:?}");
+            }
+        }
+    }
+}
+
+/// Every fusion and guidance kind the stage crates list is answered by the one prior check
+/// (`ModelConfig::check_prior`): without a prior, a network the check lets through runs, and one
+/// it refuses is refused naming the consuming key. A new kind that consumes the prior without
+/// saying so fails here (its forward pass errs or panics without one).
+#[test]
+fn every_kind_is_covered_by_the_prior_check() {
+    let device = default_device();
+    for fusion in FusionConfig::variants() {
+        for guidance in GuidanceKind::ALL {
+            let mut config = ModelConfig { fusion: fusion.clone(), ..Default::default() };
+            config.updater.guidance = guidance;
+            config.updater.hidden_dims = [8; 3];
+            config.encoder.feature_dim = 16;
+            config.encoder.trunk_dims = [16, 16, 24];
+            let label = format!("{} fusion, {} guidance", fusion.kind(), guidance.name());
+            assert!(config.check_prior(true).is_ok(), "{label}");
+            match config.check_prior(false) {
+                Ok(()) => {
+                    assert!(!config.needs_prior(), "{label}");
+                    let network = config.init(&device).unwrap();
+                    let (left, right, _) = inputs([32, 32], &device);
+                    let out = network.forward_flow(left, right, None, 1, Default::default());
+                    assert!(out.is_ok(), "{label} runs without a prior: {:?}", out.err());
+                }
+                Err(dgstereo_core::Error::Config(problem)) => {
+                    assert!(config.needs_prior(), "{label}");
+                    assert!(["fusion.kind", "updater.guidance"].contains(&problem.key.as_str()), "{label}: {problem}");
+                }
+                Err(other) => panic!("{label}: {other}"),
             }
         }
     }

@@ -124,7 +124,7 @@ fn check_mixed_precision_dtypes(device: &burn::tensor::Device, dtype: DType) {
         probe: dgstereo_model::Probe::new(Some(&mut trace), None),
         ..Default::default()
     };
-    let out = network.forward_flow(left, right, None, 1, options);
+    let out = network.forward_flow(left, right, None, 1, options).unwrap();
     for (name, expected) in [
         ("fnet.left", dtype),
         ("corr.pyramid.0", DType::F32),

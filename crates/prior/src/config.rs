@@ -3,9 +3,10 @@
 use std::path::PathBuf;
 
 use burn::tensor::Device;
-use dgstereo_core::{Error, Result};
+use dgstereo_core::{Error, Problem, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::depth_anything::dinov2::PATCH_SIZE;
 use crate::depth_anything::preprocess::DEFAULT_INPUT_SIZE;
 use crate::file::{DEFAULT_LEFT_PATTERN, DEFAULT_RIGHT_PATTERN};
 use crate::{
@@ -103,7 +104,7 @@ impl PriorConfig {
             ))),
             Self::File { dir, left, right } => {
                 if !dir.is_dir() {
-                    return Err(Error::Config(format!("prior.dir = '{}': no such folder", dir.display())));
+                    return Err(Error::config("prior.dir", format!("'{}': no such folder", dir.display())));
                 }
                 Ok(Prior::File(FilePrior::new(dir.clone(), left.clone(), right.clone())))
             }
@@ -118,6 +119,73 @@ impl PriorConfig {
             }
             Self::Simulated(config) => Ok(Prior::Simulated(SimulatedPrior::new(config.clone())?)),
         }
+    }
+
+    /// One configuration of every kind, in the order of the enum (paths empty); tests draw the
+    /// kinds from here (`every_kind_is_listed` fails when a kind is missing).
+    pub fn variants() -> Vec<Self> {
+        vec![
+            Self::None,
+            Self::DepthAnythingV2 { weights: PathBuf::new(), encoder: None, input_size: DEFAULT_INPUT_SIZE },
+            Self::File { dir: PathBuf::new(), left: default_left_pattern(), right: default_right_pattern() },
+            Self::Cache { dir: PathBuf::new(), inner: Box::new(Self::Simulated(SimulatedPriorConfig::default())) },
+            Self::Simulated(SimulatedPriorConfig::default()),
+        ]
+    }
+
+    /// The kind's name as the TOML key `kind` writes it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::DepthAnythingV2 { .. } => "depth-anything-v2",
+            Self::File { .. } => "file",
+            Self::Cache { .. } => "cache",
+            Self::Simulated(_) => "simulated",
+        }
+    }
+
+    /// Everything wrong with the configuration without reading files, keys relative to the
+    /// prior table (`weights`, `inner.kind`): empty paths, an input size below the ViT patch,
+    /// a cache around a provider that gives no prior, the simulated ranges. Whether the files
+    /// exist is checked by [`init`](Self::init).
+    pub fn problems(&self) -> Vec<Problem> {
+        let mut problems = Vec::new();
+        let mut add = |key: &str, reason: &str| problems.push(Problem::new(key, reason));
+        match self {
+            Self::None => {}
+            Self::DepthAnythingV2 { weights, input_size, .. } => {
+                if weights.as_os_str().is_empty() {
+                    add("weights", "is empty: name the Depth Anything V2 checkpoint");
+                }
+                if *input_size < PATCH_SIZE {
+                    add("input_size", &format!("{input_size} is below the ViT patch size {PATCH_SIZE}"));
+                }
+            }
+            Self::File { dir, .. } => {
+                if dir.as_os_str().is_empty() {
+                    add("dir", "is empty: name the folder of the prior files");
+                }
+            }
+            Self::Cache { dir, inner } => {
+                if dir.as_os_str().is_empty() {
+                    add("dir", "is empty: name the cache folder");
+                }
+                if !inner.gives_prior() {
+                    add("inner.kind", "a cache must wrap a provider that gives a prior");
+                }
+                problems.extend(inner.problems().into_iter().map(|p| p.within("inner")));
+            }
+            Self::Simulated(simulated) => problems.extend(simulated.problems()),
+        }
+        problems
+    }
+
+    /// Checks the configuration without reading files.
+    ///
+    /// # Errors
+    /// [`Error::Config`] with the first of [`problems`](Self::problems).
+    pub fn validate(&self) -> Result<()> {
+        Problem::first(self.problems())
     }
 
     /// Whether this configuration yields a prior.

@@ -286,3 +286,37 @@ fn a_corrupt_cache_entry_is_an_error_naming_it() {
     assert_eq!(calls.get(), 0);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `PriorConfig::variants` lists every kind serde accepts, once, in the enum's order, and names
+/// each as TOML does.
+#[test]
+fn every_kind_is_listed() {
+    let unknown = toml::from_str::<PriorConfig>("kind = \"?\"").unwrap_err().to_string();
+    let expected = unknown.split_once("expected").map(|(_, rest)| rest).unwrap_or_default();
+    let accepted: Vec<&str> = expected.split('`').skip(1).step_by(2).collect();
+    let variants = PriorConfig::variants();
+    let listed: Vec<&str> = variants.iter().map(PriorConfig::kind).collect();
+    assert_eq!(listed, accepted);
+    for variant in variants {
+        let text = toml::to_string(&variant).unwrap();
+        assert_eq!(toml::from_str::<PriorConfig>(&text).unwrap(), variant, "{text}");
+    }
+}
+
+/// Validation reads no files and keys its problems relative to the prior table, nested ones
+/// under `inner`.
+#[test]
+fn problems_are_keyed_relative_to_the_table() {
+    let keys = |config: &PriorConfig| config.problems().into_iter().map(|p| p.key).collect::<Vec<_>>();
+    let empty_cache = PriorConfig::Cache {
+        dir: PathBuf::new(),
+        inner: Box::new(PriorConfig::File { dir: PathBuf::new(), left: "l".into(), right: "r".into() }),
+    };
+    assert_eq!(keys(&empty_cache), ["dir", "inner.dir"]);
+    let none_inside = PriorConfig::Cache { dir: "c".into(), inner: Box::new(PriorConfig::None) };
+    assert_eq!(keys(&none_inside), ["inner.kind"]);
+    let bad = SimulatedPriorConfig { gamma: [2.0, 1.0], noise_std: -1.0, ..SimulatedPriorConfig::default() };
+    assert_eq!(keys(&PriorConfig::Simulated(bad)), ["gamma", "noise_std"]);
+    let files = PriorConfig::File { dir: "no/such/folder".into(), left: "l".into(), right: "r".into() };
+    assert!(files.validate().is_ok(), "validation reads no files");
+}

@@ -172,7 +172,10 @@ impl FinishedRun {
 pub fn evaluate_finished_run(parts: &TrainParts, run: &FinishedRun, device: &Device) -> Result<Metrics> {
     let set = ValidationSet::new(&parts.data.validation)?;
     if set.is_empty() {
-        return Err(Error::Config(format!("run '{}': data.validation.count is 0, nothing to evaluate on", parts.name)));
+        return Err(Error::config(
+            "data.validation.count",
+            format!("is 0: nothing to evaluate run '{}' on", parts.name),
+        ));
     }
     set.evaluate(&run.model, &parts.model, &run.prior, device)
 }

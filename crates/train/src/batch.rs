@@ -17,7 +17,7 @@ use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use crate::config::{DataSource, TrainingConfig, TrainingDataConfig, synthetic_config, with_photos};
+use crate::config::{DataSource, TrainingConfig, TrainingDataConfig};
 
 /// SplitMix64 finaliser: a well-mixed 64-bit hash of `x`.
 pub fn mix64(mut x: u64) -> u64 {
@@ -69,7 +69,7 @@ fn dataset(source: &DataSource, index: usize) -> Result<Option<(String, FileData
         if root.is_dir() {
             Ok(())
         } else {
-            Err(Error::Config(format!("{} = '{}': no such folder", key("root"), root.display())))
+            Err(Error::config(key("root"), format!("'{}': no such folder", root.display())))
         }
     };
     let ds = match source {
@@ -81,16 +81,16 @@ fn dataset(source: &DataSource, index: usize) -> Result<Option<(String, FileData
                 "driving" => SceneFlowSubset::Driving,
                 "monkaa" => SceneFlowSubset::Monkaa,
                 other => {
-                    return Err(Error::Config(format!(
-                        "{} = '{other}': expected flyingthings, driving or monkaa",
-                        key("subset")
-                    )));
+                    return Err(Error::config(
+                        key("subset"),
+                        format!("'{other}': expected flyingthings, driving or monkaa"),
+                    ));
                 }
             };
             let pass = match pass.as_str() {
                 "clean" => SceneFlowPass::Clean,
                 "final" => SceneFlowPass::Final,
-                other => return Err(Error::Config(format!("{} = '{other}': expected clean or final", key("pass")))),
+                other => return Err(Error::config(key("pass"), format!("'{other}': expected clean or final"))),
             };
             ("sceneflow", dgstereo_data::datasets::sceneflow(root, subset, pass)?)
         }
@@ -107,7 +107,7 @@ fn dataset(source: &DataSource, index: usize) -> Result<Option<(String, FileData
             let v = match version {
                 2012 => KittiVersion::K2012,
                 2015 => KittiVersion::K2015,
-                other => return Err(Error::Config(format!("{} = {other}: expected 2012 or 2015", key("version")))),
+                other => return Err(Error::config(key("version"), format!("{other}: expected 2012 or 2015"))),
             };
             ("kitti", dgstereo_data::datasets::kitti(root, v)?)
         }
@@ -118,10 +118,13 @@ fn dataset(source: &DataSource, index: usize) -> Result<Option<(String, FileData
     };
     let (name, ds) = ds;
     if ds.files.is_empty() {
-        return Err(Error::Config(format!("data.sources[{index}] ({name}) lists no pairs")));
+        return Err(Error::config(format!("data.sources[{index}]"), format!("the {name} source lists no pairs")));
     }
     if ds.files.iter().any(|f| f.disparity.is_none()) {
-        return Err(Error::Config(format!("data.sources[{index}] ({name}): some pairs have no ground truth")));
+        return Err(Error::config(
+            format!("data.sources[{index}]"),
+            format!("some pairs of the {name} source have no ground truth"),
+        ));
     }
     Ok(Some((name.to_string(), ds)))
 }
@@ -136,23 +139,9 @@ impl TrainingData {
             match dataset(s, i)? {
                 Some((name, dataset)) => sources.push(Source::Files { name, dataset, sparse: s.sparse_ground_truth() }),
                 None => {
-                    let DataSource::Synthetic {
-                        width,
-                        height,
-                        max_disparity,
-                        count,
-                        textures,
-                        min_disparity,
-                        lattices,
-                        photos,
-                        ..
-                    } = s
-                    else {
-                        unreachable!()
+                    let (DataSource::Synthetic { count, .. }, Some(config)) = (s, s.synthetic()) else {
+                        unreachable!("`dataset` lists every source but the synthetic one")
                     };
-                    let mut config =
-                        synthetic_config([*width, *height], *textures, *max_disparity, *min_disparity, *lattices);
-                    with_photos(&mut config, photos.as_ref());
                     sources.push(Source::Synthetic {
                         config: Box::new(config),
                         count: *count,

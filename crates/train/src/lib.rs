@@ -35,7 +35,7 @@ pub mod trainer;
 pub mod validate;
 pub mod verify_step;
 
-pub use config::{DataSource, PhotoTextures, TrainingConfig, TrainingDataConfig, ValidationConfig};
+pub use config::{DataSource, PhotoTextures, SyntheticScenes, TrainingConfig, TrainingDataConfig, ValidationConfig};
 pub use run::{RunOptions, RunSummary, train};
 pub use schedule::OneCycleLr;
 pub use trainer::{StepInternals, StepReport, TrainParts, Trainer};

@@ -118,7 +118,7 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
     let existing = list_checkpoints(&ckpt_dir)?;
     let mut trainer = if options.resume {
         let (_, path) = existing.last().ok_or_else(|| {
-            Error::Config(format!("resume: {} holds no checkpoint to resume from", ckpt_dir.display()))
+            Error::config("resume", format!("{} holds no checkpoint to resume from", ckpt_dir.display()))
         })?;
         let stored = crate::checkpoint::read_metadata(path)?.remove("config").unwrap_or_default();
         if stored != parts.resolved_toml {
@@ -130,11 +130,14 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
         load_checkpoint(parts, path, device)?
     } else {
         if let Some((_, p)) = existing.last() {
-            return Err(Error::Config(format!(
-                "{} already holds checkpoints ({}): resume the run to continue, or choose another output folder",
-                ckpt_dir.display(),
-                p.display()
-            )));
+            return Err(Error::config(
+                "out",
+                format!(
+                    "{} already holds checkpoints ({}): resume the run to continue, or choose another output folder",
+                    ckpt_dir.display(),
+                    p.display()
+                ),
+            ));
         }
         Trainer::new(parts, device)?
     };

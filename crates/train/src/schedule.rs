@@ -29,10 +29,10 @@ impl OneCycleLr {
     /// A schedule; fails when `total_steps` is 0 or `pct_start` is outside `(0, 1)`.
     pub fn new(max_lr: f64, total_steps: usize, pct_start: f64) -> Result<Self> {
         if total_steps == 0 {
-            return Err(Error::Config("one-cycle schedule: total_steps must be at least 1".into()));
+            return Err(Error::config("total_steps", "must be at least 1 (one-cycle schedule)"));
         }
         if !(pct_start > 0.0 && pct_start < 1.0) {
-            return Err(Error::Config(format!("one-cycle schedule: pct_start = {pct_start} must lie in (0, 1)")));
+            return Err(Error::config("pct_start", format!("{pct_start} must lie in (0, 1) (one-cycle schedule)")));
         }
         Ok(Self { max_lr, total_steps, pct_start })
     }

@@ -45,15 +45,10 @@ pub struct TrainParts {
 impl TrainParts {
     /// Checks every part; the message names the key.
     pub fn validate(&self) -> Result<()> {
-        self.model.validate()?;
+        self.model.validate().map_err(|e| e.within("model"))?;
         self.train.validate()?;
         self.data.validate()?;
-        if self.model.needs_prior() && !self.prior.gives_prior() {
-            return Err(Error::Config(
-                "the model uses a depth prior (fusion or guidance) but [prior] gives none: set prior.kind".into(),
-            ));
-        }
-        Ok(())
+        self.model.check_prior(self.prior.gives_prior()).map_err(|e| e.within("model"))
     }
 }
 
@@ -165,7 +160,7 @@ pub fn batch_prior(prior: &Prior, needs: bool, batch: &TensorBatch) -> Result<Op
         gt_disparity: Some(batch.target.disparity_bilinear.clone()),
         names: batch.names.clone(),
     };
-    prior.provide(&input)?.map(Some).ok_or_else(|| Error::Config("the prior provider gave no prior".into()))
+    prior.provide(&input)?.map(Some).ok_or_else(|| Error::config("prior.kind", "the provider gave no prior"))
 }
 
 /// Runs `model` on a batch of any size and returns positive disparity after every iteration kept
@@ -182,7 +177,7 @@ pub fn forward_disparities(
     prior: Option<&DepthPrior>,
     iters: usize,
     all_iterations: bool,
-) -> Vec<Tensor<4>> {
+) -> Result<Vec<Tensor<4>>> {
     dgstereo_model::padded_disparities(model, config, left, right, prior, iters, None, all_iterations)
 }
 
@@ -217,7 +212,7 @@ impl Trainer {
         let model = match &parts.train.init {
             Some(path) => {
                 let (model, missing) = dgstereo_model::checkpoint::load_weights(model, path, parts.train.init_strict)
-                    .map_err(|e| Error::Config(format!("train.init: {e}")))?;
+                    .map_err(|e| Error::config("train.init", e.to_string()))?;
                 if !missing.is_empty() {
                     notices.push(format!(
                         "train.init: {} parameter(s) not in {} keep their initialisation (e.g. {})",
@@ -299,7 +294,7 @@ impl Trainer {
             prior.as_ref(),
             t.iters,
             true,
-        );
+        )?;
         let loss = self.parts.loss.loss(&predictions, &batch.target);
         let loss_value = f64::from(dgstereo_core::tensor::to_vec(loss.clone().detach())[0]);
         if !loss_value.is_finite() {
@@ -410,12 +405,12 @@ impl Trainer {
         let padder = dgstereo_core::InputPadder::new(h, w, self.parts.model.pad_divisor());
         let prior = prior.map(|p| dgstereo_core::DepthPrior { left: padder.pad(p.left), right: padder.pad(p.right) });
         let (left, right) = (padder.pad(batch.left.clone()), padder.pad(batch.right.clone()));
-        Ok(dgstereo_model::stage_backward::profile_backward(
+        dgstereo_model::stage_backward::profile_backward(
             &self.model,
             left,
             right,
             prior.as_ref(),
             self.parts.train.iters,
-        ))
+        )
     }
 }

@@ -22,9 +22,7 @@ impl ValidationSet {
     /// Renders `config.count` synthetic pairs (scene seeds `seed .. seed + count`); fails when
     /// the photo folder the keys name does not load.
     pub fn new(config: &ValidationConfig) -> Result<Self> {
-        if let Some(p) = &config.photos {
-            p.check_folder("data.validation")?;
-        }
+        config.scenes.check_files().map_err(|e| e.within("data.validation"))?;
         let synth = config.synthetic();
         let pairs = (0..config.count as u64)
             .map(|i| {
@@ -77,7 +75,7 @@ pub(crate) fn predict_pair(
 ) -> Result<DisparityMap> {
     let batch = to_tensors(std::slice::from_ref(pair), device)?;
     let p = batch_prior(prior, config.needs_prior(), &batch)?;
-    let out = forward_disparities(model, config, batch.left, batch.right, p.as_ref(), iters, false);
+    let out = forward_disparities(model, config, batch.left, batch.right, p.as_ref(), iters, false)?;
     let pred = dgstereo_core::tensor::to_vec(out.last().expect("one iteration").clone());
     DisparityMap::from_vec(pair.left.width, pair.left.height, pred)
 }

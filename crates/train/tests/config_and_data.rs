@@ -4,7 +4,7 @@ mod common;
 
 use dgstereo_data::synthetic::TexturePreset;
 use dgstereo_train::batch::TrainingData;
-use dgstereo_train::{DataSource, TrainingConfig, TrainingDataConfig};
+use dgstereo_train::{DataSource, SyntheticScenes, TrainingConfig, TrainingDataConfig};
 
 #[test]
 fn empty_tables_are_the_reference_recipe() {
@@ -59,14 +59,9 @@ fn augmented_batches_have_the_crop_size_and_both_targets() {
     parts.data.augment = true;
     parts.data.sources = vec![DataSource::Synthetic {
         weight: 1.0,
-        width: 96,
-        height: 64,
-        max_disparity: None,
+        scenes: SyntheticScenes { width: 96, height: 64, ..Default::default() },
         count: None,
-        textures: Default::default(),
-        min_disparity: None,
         lattices: None,
-        photos: None,
     }];
     let data = TrainingData::new(&parts.data, &parts.train).unwrap();
     let pairs = data.batch(3, 2).unwrap();
@@ -83,7 +78,7 @@ fn synthetic_textures_key_selects_the_preset_and_rejects_unknown_values() {
         toml::from_str::<TrainingDataConfig>(&format!("[[sources]]\nkind = \"synthetic\"\nwidth = 48\n{extra}"))
     };
     let textures = |d: &TrainingDataConfig| match &d.sources[0] {
-        DataSource::Synthetic { textures, .. } => *textures,
+        DataSource::Synthetic { scenes, .. } => scenes.textures,
         other => panic!("{other:?}"),
     };
     let smooth = parse("").unwrap();
@@ -100,16 +95,16 @@ fn synthetic_textures_key_selects_the_preset_and_rejects_unknown_values() {
     assert!(e.contains("textures"), "{e}");
     // The validation set takes the same key.
     let v = toml::from_str::<TrainingDataConfig>("[validation]\ntextures = \"rich\"").unwrap();
-    assert_eq!(v.validation.textures, TexturePreset::Rich);
-    assert_eq!(toml::from_str::<TrainingDataConfig>("").unwrap().validation.textures, TexturePreset::Smooth);
+    assert_eq!(v.validation.scenes.textures, TexturePreset::Rich);
+    assert_eq!(toml::from_str::<TrainingDataConfig>("").unwrap().validation.scenes.textures, TexturePreset::Smooth);
     let e = toml::from_str::<TrainingDataConfig>("[validation]\ntextures = \"rough\"").unwrap_err().to_string();
     assert!(e.contains("textures") && e.contains("rough"), "{e}");
 
     // The rich source renders the same scenes (same disparity) with other colours.
     let mut parts = common::tiny_parts(10, 1, 1e-3, None, 2);
     let smooth_data = TrainingData::new(&parts.data, &parts.train).unwrap();
-    let DataSource::Synthetic { textures, .. } = &mut parts.data.sources[0] else { unreachable!() };
-    *textures = TexturePreset::Rich;
+    let DataSource::Synthetic { scenes, .. } = &mut parts.data.sources[0] else { unreachable!() };
+    scenes.textures = TexturePreset::Rich;
     let rich_data = TrainingData::new(&parts.data, &parts.train).unwrap();
     let (mut differ, mut same_disparity) = (false, true);
     for step in 0..3 {
@@ -133,7 +128,10 @@ fn synthetic_min_disparity_range_raises_the_far_end_and_bad_ranges_name_the_key(
     let error = |text: &str| toml::from_str::<TrainingDataConfig>(text).unwrap().validate().unwrap_err().to_string();
     let near = synthetic_source("min_disparity = [10.0, 14.0]");
     near.validate().unwrap();
-    assert!(matches!(near.sources[0], DataSource::Synthetic { min_disparity: Some([10.0, 14.0]), .. }));
+    assert!(matches!(
+        near.sources[0],
+        DataSource::Synthetic { scenes: SyntheticScenes { min_disparity: Some([10.0, 14.0]), .. }, .. }
+    ));
     assert_eq!(toml::from_str::<TrainingDataConfig>(&toml::to_string(&near).unwrap()).unwrap(), near);
     for bad in ["[0.0, 4.0]", "[8.0, 4.0]", "[4.0, 23.5]", "[nan, 4.0]"] {
         let e = synthetic_source(&format!("min_disparity = {bad}")).validate().unwrap_err().to_string();

@@ -11,7 +11,7 @@ use dgstereo_train::checkpoint::{list_checkpoints, load_checkpoint, read_metadat
 use dgstereo_train::ema::{RAW_WEIGHTS_PREFIX, warmed_decay};
 use dgstereo_train::run::{RunOptions, checkpoint_dir, train};
 use dgstereo_train::trainer::init_model;
-use dgstereo_train::{TrainParts, Trainer, TrainingConfig, ValidationConfig};
+use dgstereo_train::{SyntheticScenes, TrainParts, Trainer, TrainingConfig, ValidationConfig};
 
 /// Every float tensor of `model` by module path, as `f64`.
 fn weights(model: &RaftStereo) -> Vec<(String, Vec<f64>)> {
@@ -134,7 +134,12 @@ fn checkpoints_ship_the_average_and_resume_it_exactly() {
     let device = default_device();
     let mut parts = ema_parts(4, 0.5);
     // One small validation pair at the end, to see which weights it scores.
-    parts.data.validation = ValidationConfig { count: 1, width: 64, height: 32, iters: 1, ..Default::default() };
+    parts.data.validation = ValidationConfig {
+        count: 1,
+        iters: 1,
+        scenes: SyntheticScenes { width: 64, height: 32, ..Default::default() },
+        ..Default::default()
+    };
     let dir = tempfile::tempdir().unwrap();
     let (full, split) = (dir.path().join("full"), dir.path().join("split"));
     assert!(train(parts.clone(), &device, &opts(&full, false, None)).unwrap().finished);

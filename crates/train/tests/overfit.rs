@@ -38,7 +38,7 @@ fn tiny_model_overfits_one_synthetic_pair() {
         .pair(0, 0)
         .unwrap();
     let batch = to_tensors(&[pair], &device).unwrap();
-    let out = forward_disparities(&model, &trainer.parts().model, batch.left, batch.right, None, iters, false);
+    let out = forward_disparities(&model, &trainer.parts().model, batch.left, batch.right, None, iters, false).unwrap();
     let m = batch_metrics(out[0].clone(), batch.target.disparity_bilinear, batch.target.valid).unwrap().metrics();
     eprintln!(
         "overfit: {steps} steps in {:.1} s; loss {:.3} -> {:.3}, train EPE {:.3} -> {:.3}; final EPE {:.3} px, bad-3 {:.2} %",

@@ -1,7 +1,7 @@
 //! The `photos` key of a synthetic source and of the validation set: parsed, checked (the share
 //! and, where the data is opened, the folder, named by key) and handed to the generator.
 
-use dgstereo_train::{DataSource, TrainingDataConfig};
+use dgstereo_train::{DataSource, SyntheticScenes, TrainingDataConfig};
 
 fn scratch(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("dgstereo-train-test-{}-{name}", std::process::id()));
@@ -25,7 +25,7 @@ fn photo_textures_are_checked_and_reach_the_generator() {
         .unwrap();
     let config = data(&dir, 0.5);
     config.validate().unwrap();
-    let DataSource::Synthetic { photos: Some(p), .. } = &config.sources[0] else {
+    let DataSource::Synthetic { scenes: SyntheticScenes { photos: Some(p), .. }, .. } = &config.sources[0] else {
         panic!("a synthetic source with photos")
     };
     assert_eq!((p.dir.as_path(), p.share), (dir.as_path(), 0.5));
@@ -33,7 +33,7 @@ fn photo_textures_are_checked_and_reach_the_generator() {
     assert_eq!((validation.photo_dir.as_deref(), validation.photo_prob), (Some(dir.as_path()), 1.0));
 
     let e = data(&dir, 1.5).validate().unwrap_err().to_string();
-    assert!(e.contains("data.sources[0].photos.share = 1.5"), "{e}");
+    assert!(e.contains("data.sources[0].photos.share: 1.5"), "{e}");
     config.check_files().unwrap();
     // A missing folder passes `validate` (an experiment file checks on a machine without the
     // data) and is named where the data is opened.

@@ -24,6 +24,20 @@ pub enum GuidanceKind {
 }
 
 impl GuidanceKind {
+    /// Every kind, in the order of the enum. Tests and the experiment crate's checks draw the
+    /// kinds from here, so a new kind is listed once, in this crate (`every_kind_is_listed` in
+    /// the tests fails otherwise).
+    pub const ALL: [Self; 3] = [Self::None, Self::Gradient, Self::Depth];
+
+    /// The kind's name as the TOML key `guidance` writes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Gradient => "gradient",
+            Self::Depth => "depth",
+        }
+    }
+
     /// Channels of the guidance feature (0 for none).
     pub fn channels(self) -> usize {
         match self {

@@ -15,7 +15,7 @@ pub mod guidance;
 pub mod motion;
 
 use burn::tensor::Tensor;
-use dgstereo_core::Probe;
+use dgstereo_core::{Probe, Problem};
 use serde::{Deserialize, Serialize};
 
 pub use block::MultiLevelUpdateBlock;
@@ -101,5 +101,23 @@ impl Default for UpdaterConfig {
             slow_fast_gru: false,
             guidance: GuidanceKind::None,
         }
+    }
+}
+
+impl UpdaterConfig {
+    /// Everything wrong with the options, keys relative to the updater table: the GRU levels
+    /// (1 to 3), the update grid (`n_downsample` 2 or 3) and the hidden widths (positive).
+    pub fn problems(&self) -> Vec<Problem> {
+        let mut problems = Vec::new();
+        if !(1..=3).contains(&self.n_gru_layers) {
+            problems.push(Problem::new("n_gru_layers", format!("{} is not 1, 2 or 3", self.n_gru_layers)));
+        }
+        if !(2..=3).contains(&self.n_downsample) {
+            problems.push(Problem::new("n_downsample", format!("{} is not 2 or 3", self.n_downsample)));
+        }
+        if self.hidden_dims.contains(&0) {
+            problems.push(Problem::new("hidden_dims", format!("{:?}: every width must be positive", self.hidden_dims)));
+        }
+        problems
     }
 }

@@ -112,3 +112,20 @@ fn batch_elements_are_normalised_independently() {
     let second = feature.slice([1..2, 0..3, 0..6, 0..8]);
     assert!(max_abs_diff(first, second) < 2e-3);
 }
+
+/// `GuidanceKind::ALL` lists every kind serde accepts, once, in the enum's order, and names each
+/// as TOML does: the tests and checks that draw their kinds from it see every kind.
+#[test]
+fn every_kind_is_listed() {
+    use serde::Deserialize;
+    use serde::de::value::{Error, StrDeserializer};
+    // serde's error for an unknown name lists the known ones: "expected one of `a`, `b`".
+    let unknown = GuidanceKind::deserialize(StrDeserializer::<Error>::new("?")).unwrap_err().to_string();
+    let expected = unknown.split_once("expected").map(|(_, rest)| rest).unwrap_or_default();
+    let accepted: Vec<&str> = expected.split('`').skip(1).step_by(2).collect();
+    let listed: Vec<&str> = GuidanceKind::ALL.iter().map(|k| k.name()).collect();
+    assert_eq!(listed, accepted);
+    for kind in GuidanceKind::ALL {
+        assert_eq!(GuidanceKind::deserialize(StrDeserializer::<Error>::new(kind.name())), Ok(kind));
+    }
+}

@@ -66,7 +66,10 @@ impl FromStr for DrivingStereoWeather {
 
     fn from_str(s: &str) -> Result<Self> {
         Self::ALL.into_iter().find(|w| w.name() == s).ok_or_else(|| {
-            Error::Config(format!("unknown DrivingStereo weather '{s}' (expected sunny, cloudy, foggy or rainy)"))
+            Error::config(
+                "weather",
+                format!("unknown DrivingStereo weather '{s}' (expected sunny, cloudy, foggy or rainy)"),
+            )
         })
     }
 }

@@ -63,7 +63,10 @@ impl FromStr for FlyingThingsTestSubset {
 
     fn from_str(s: &str) -> Result<Self> {
         Self::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| {
-            Error::Config(format!("unknown FlyingThings3D TEST subset '{s}' (expected all or raft-stereo-400)"))
+            Error::config(
+                "subset",
+                format!("unknown FlyingThings3D TEST subset '{s}' (expected all or raft-stereo-400)"),
+            )
         })
     }
 }

@@ -67,7 +67,7 @@ impl FromStr for MiddleburySplit {
         Self::ALL
             .into_iter()
             .find(|k| k.name().eq_ignore_ascii_case(s))
-            .ok_or_else(|| Error::Config(format!("unknown MiddEval3 split '{s}' (expected Q, H or F)")))
+            .ok_or_else(|| Error::config("split", format!("unknown MiddEval3 split '{s}' (expected Q, H or F)")))
     }
 }
 

@@ -38,23 +38,26 @@ impl DepthAnythingV2Prior {
         device: &Device,
     ) -> Result<Self> {
         if input_size < super::dinov2::PATCH_SIZE {
-            return Err(Error::Config(format!("prior.input_size = {input_size}: must be at least 14")));
+            return Err(Error::config("prior.input_size", format!("{input_size}: must be at least 14")));
         }
         if !weights.is_file() {
-            return Err(Error::Config(format!(
-                "prior.weights = '{}': no such file (download depth_anything_v2_vit{{s,b,l}}.pth from the official \
-                 release; there is no fallback)",
-                weights.display()
-            )));
+            return Err(Error::config(
+                "prior.weights",
+                format!(
+                    "'{}': no such file (download depth_anything_v2_vit{{s,b,l}}.pth from the official release; \
+                     there is no fallback)",
+                    weights.display()
+                ),
+            ));
         }
         let detected = super::checkpoint::detect_encoder(weights)?;
         if let Some(encoder) = encoder
             && encoder != detected
         {
-            return Err(Error::Config(format!(
-                "prior.encoder = '{encoder}' but prior.weights = '{}' holds a {detected} checkpoint",
-                weights.display()
-            )));
+            return Err(Error::config(
+                "prior.encoder",
+                format!("'{encoder}' but prior.weights = '{}' holds a {detected} checkpoint", weights.display()),
+            ));
         }
         Ok(Self::new(DepthAnythingV2::load(detected, weights, device)?, input_size))
     }

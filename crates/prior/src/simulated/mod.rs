@@ -31,7 +31,7 @@ pub mod map_ops;
 
 use burn::tensor::{Tensor, TensorData};
 use dgstereo_core::tensor::to_vec;
-use dgstereo_core::{Error, Result};
+use dgstereo_core::{Error, Problem, Result};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -100,27 +100,35 @@ impl SimulatedPriorConfig {
         Self { seed, scale: [1.0, 1.0], shift: [0.0, 0.0], gamma: [1.0, 1.0], blur_sigma: 0.0, noise_std: 0.0 }
     }
 
-    /// Checks the ranges; the message names the key.
-    pub fn validate(&self) -> Result<()> {
-        let range = |key: &str, [lo, hi]: [f32; 2], positive: bool| {
+    /// Everything wrong with the ranges, keys relative to the prior table (`scale`, `gamma`).
+    pub fn problems(&self) -> Vec<Problem> {
+        let mut problems = Vec::new();
+        for (key, [lo, hi], positive) in
+            [("scale", self.scale, true), ("shift", self.shift, false), ("gamma", self.gamma, true)]
+        {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi) || (positive && lo <= 0.0) {
-                Err(Error::Config(format!(
-                    "prior.{key} = [{lo}, {hi}]: expected finite [min, max] with min <= max{}",
-                    if positive { " and min > 0" } else { "" }
-                )))
-            } else {
-                Ok(())
-            }
-        };
-        range("scale", self.scale, true)?;
-        range("shift", self.shift, false)?;
-        range("gamma", self.gamma, true)?;
-        for (key, v) in [("blur_sigma", self.blur_sigma), ("noise_std", self.noise_std)] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(Error::Config(format!("prior.{key} = {v}: expected a finite value >= 0")));
+                let floor = if positive { " and min > 0" } else { "" };
+                problems.push(Problem::new(
+                    key,
+                    format!("[{lo}, {hi}]: expected finite [min, max] with min <= max{floor}"),
+                ));
             }
         }
-        Ok(())
+        for (key, v) in [("blur_sigma", self.blur_sigma), ("noise_std", self.noise_std)] {
+            if !(v.is_finite() && v >= 0.0) {
+                problems.push(Problem::new(key, format!("{v}: expected a finite value >= 0")));
+            }
+        }
+        problems
+    }
+
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`Error::Config`] with the first of [`problems`](Self::problems), its key relative to the
+    /// prior table.
+    pub fn validate(&self) -> Result<()> {
+        Problem::first(self.problems())
     }
 }
 
@@ -189,7 +197,8 @@ pub struct SimulatedPrior {
 impl SimulatedPrior {
     /// A provider with these error parameters (checked).
     pub fn new(config: SimulatedPriorConfig) -> Result<Self> {
-        config.validate()?;
+        // A built provider's errors name keys under `prior`, as the other providers' do.
+        config.validate().map_err(|e| e.within("prior"))?;
         Ok(Self { config })
     }
 
@@ -218,9 +227,9 @@ impl SimulatedPrior {
 impl PriorProvider for SimulatedPrior {
     fn provide(&self, input: &PriorInput) -> Result<Option<DepthPrior>> {
         let gt = input.gt_disparity.as_ref().ok_or_else(|| {
-            Error::Config(
-                "prior.kind = 'simulated' needs ground-truth disparity (PriorInput.gt_disparity), which this input lacks"
-                    .into(),
+            Error::config(
+                "prior.kind",
+                "'simulated' needs ground-truth disparity (PriorInput.gt_disparity), which this input lacks",
             )
         })?;
         let [n, c, h, w] = gt.dims();

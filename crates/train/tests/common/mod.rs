@@ -5,7 +5,7 @@
 use dgstereo_loss::LossConfig;
 use dgstereo_model::ModelConfig;
 use dgstereo_prior::PriorConfig;
-use dgstereo_train::{DataSource, TrainParts, TrainingConfig, TrainingDataConfig, ValidationConfig};
+use dgstereo_train::{DataSource, SyntheticScenes, TrainParts, TrainingConfig, TrainingDataConfig, ValidationConfig};
 
 /// Image size of the tests: `[height, width]`.
 pub const SIZE: [usize; 2] = [32, 64];
@@ -37,14 +37,9 @@ pub fn tiny_parts(steps: usize, iters: usize, lr: f64, count: Option<usize>, bat
     let data = TrainingDataConfig {
         sources: vec![DataSource::Synthetic {
             weight: 1.0,
-            width: SIZE[1],
-            height: SIZE[0],
-            max_disparity: Some(5.0),
+            scenes: SyntheticScenes { width: SIZE[1], height: SIZE[0], max_disparity: Some(5.0), ..Default::default() },
             count,
-            textures: Default::default(),
-            min_disparity: None,
             lattices: None,
-            photos: None,
         }],
         augment: false,
         validation: ValidationConfig { count: 0, ..ValidationConfig::default() },
