@@ -174,7 +174,8 @@ fn kernel_internals_are_named_only_inside_kernels() {
     let kernels = root().join("crates").join("kernels");
     let offenders: Vec<String> = files
         .iter()
-        .filter(|path| !path.starts_with(&kernels))
+        // This file names the internals in the check's own tests.
+        .filter(|path| !path.starts_with(&kernels) && !path.ends_with("tests/architecture.rs"))
         .filter_map(|path| {
             let text = std::fs::read_to_string(path).unwrap_or_default();
             let named = kernel_internals_named(&text);

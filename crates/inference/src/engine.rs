@@ -214,10 +214,15 @@ impl Engine {
             None
         };
         let prior_per_call = priors_given && model.config.needs_prior() && prior.is_none();
-        if model.config.needs_prior() && prior.is_none() && !prior_per_call {
+        // The model's own check names the stage that needs the prior; the engine reports it
+        // against its `prior` option, which is what the caller can set.
+        if !prior_per_call && let Err(Error::Config(problem)) = model.config.check_prior(prior.is_some()) {
             return Err(Error::config(
                 "prior",
-                "this model uses a depth prior (fusion or guidance): set `prior` (Depth Anything V2 or files)",
+                format!(
+                    "this model uses a depth prior (its {}): set `prior` (Depth Anything V2 or files)",
+                    problem.key
+                ),
             ));
         }
         let file_prior = prior.is_some() && matches!(prior_config, PriorConfig::File { .. });

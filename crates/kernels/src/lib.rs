@@ -25,9 +25,9 @@ mod product;
 pub mod settings;
 mod taps;
 mod test_paths;
-mod work;
 #[doc(hidden)]
 pub mod testing;
+mod work;
 
 pub use dispatch::{Numerics, Op, Path, path, with_path};
 pub use host::winograd::UpdateLoop;

@@ -150,37 +150,7 @@ pub(crate) fn convex_upsample_macs([n, d, h, w]: [usize; 4], factor: usize) -> u
 
 #[cfg(test)]
 mod tests {
-    use burn::nn::conv::Conv2dConfig;
-    use burn::tensor::{Device, Distribution, Tensor};
-
     use super::*;
-    use crate::dispatch::{Numerics, Path, with_path};
-    use crate::ops::conv::{conv2d_forward, conv2d_relu_forward};
-
-    fn conv(c: usize, o: usize, k: usize, stride: usize, device: &Device) -> Conv2d {
-        Conv2dConfig::new([c, o], [k, k])
-            .with_stride([stride, stride])
-            .with_padding(PaddingConfig2d::Explicit(k / 2, k / 2, k / 2, k / 2))
-            .init(device)
-    }
-
-    /// A convolution counts `N·C·O·k·k·H_out·W_out` on every path, whichever fused form runs;
-    /// nothing is counted outside `count_work`.
-    #[test]
-    fn a_convolution_counts_its_direct_products() {
-        let device = Device::flex();
-        let x = Tensor::<4>::random([2, 5, 12, 10], Distribution::Normal(0.0, 1.0), &device);
-        let (three, strided) = (conv(5, 7, 3, 1, &device), conv(5, 4, 3, 2, &device));
-        for pinned in [Path::Host, Path::Gpu, Path::Stock] {
-            let before = macs_so_far();
-            let _ = with_path(pinned, || conv2d_forward(&three, x.clone(), Numerics::Sensitive));
-            assert_eq!(macs_so_far(), before, "counting is off outside count_work");
-            let (_, work) = count_work(|| with_path(pinned, || conv2d_forward(&three, x.clone(), Numerics::Sensitive)));
-            assert_eq!(work.macs, 2 * 5 * 7 * 9 * 12 * 10, "{pinned:?}");
-            let (_, work) = count_work(|| with_path(pinned, || conv2d_relu_forward(&strided, x.clone(), Numerics::Sensitive)));
-            assert_eq!(work.macs, 2 * 5 * 4 * 9 * 6 * 5, "{pinned:?} stride 2");
-        }
-    }
 
     /// An operation running inside another is counted once, by the outer one; operations one
     /// after the other add up, and a nested `count_work` counts its own span only.
@@ -197,26 +167,5 @@ mod tests {
             count_work(|| drop(operation(|| 5))).1
         });
         assert_eq!((inner.macs, outer.macs), (5, 8));
-    }
-
-    /// The ConvGRU step counts its three convolutions whether the fused host step or the
-    /// tensor-op step runs.
-    #[test]
-    fn the_gru_step_counts_its_three_convolutions() {
-        let device = Device::flex();
-        let (hidden, input) = (6, 4);
-        let convs: Vec<Conv2d> = (0..3).map(|_| conv(hidden + input, hidden, 3, 1, &device)).collect();
-        let h = Tensor::<4>::random([1, hidden, 8, 9], Distribution::Normal(0.0, 1.0), &device);
-        let x = Tensor::<4>::random([1, input, 8, 9], Distribution::Normal(0.0, 1.0), &device);
-        let ctx = Tensor::<4>::zeros([1, 2 * hidden, 8, 9], &device);
-        let q = Tensor::<4>::zeros([1, hidden, 8, 9], &device);
-        for pinned in [Path::Host, Path::Stock] {
-            let step = || {
-                let convs = [&convs[0], &convs[1], &convs[2]];
-                crate::ops::gru::conv_gru_step(convs, h.clone(), [&ctx, &q], std::slice::from_ref(&x), Numerics::Tolerant)
-            };
-            let (_, work) = count_work(|| with_path(pinned, step));
-            assert_eq!(work.macs, (3 * (hidden + input) * hidden * 9 * 8 * 9) as u64, "{pinned:?}");
-        }
     }
 }

@@ -163,8 +163,8 @@ impl RaftStereo {
     /// - `flow_up[k]`: `[N, 1, H, W]`; `flow_lowres`: `[N, 1, H/f, W/f]`
     ///
     /// # Errors
-    /// [`dgstereo_core::Error::Config`] when the fusion needs the depth prior and `prior` is
-    /// `None` (the checked entry points answer this first with [`ModelConfig::check_prior`]).
+    /// [`dgstereo_core::Error::Config`] when the fusion or the guidance needs the depth prior and
+    /// `prior` is `None` (the checked entry points answer this first with [`ModelConfig::check_prior`]).
     pub fn forward_flow(
         &self,
         left: Tensor<4>,
@@ -178,7 +178,7 @@ impl RaftStereo {
         let Encodings { fmap1, fmap2, mut hidden, gates } = self.encode(left, right, prior, probe)?;
         let implementation = implementation.unwrap_or(self.correlation.implementation);
         let corr_fn = self.correlation_volume(fmap1, fmap2, implementation, probe);
-        let grid = self.update_grid(&hidden[0], prior, probe);
+        let grid = self.update_grid(&hidden[0], prior, probe)?;
         let mut flow_x = match flow_init {
             Some(flow) => cast_float(flow, FloatDType::F32),
             None => grid.zero_flow(),
@@ -264,9 +264,17 @@ impl RaftStereo {
         hidden_fine: &Tensor<4>,
         prior: Option<&DepthPrior>,
         probe: &mut Probe<'_>,
-    ) -> UpdateGrid {
+    ) -> dgstereo_core::Result<UpdateGrid> {
         let [n, _, h, w] = hidden_fine.dims();
         let device = hidden_fine.device();
+        if prior.is_none() && self.guidance != GuidanceKind::None {
+            // As the fusion refuses to run without its prior: the motion encoder's guidance
+            // branch would otherwise see no input.
+            return Err(dgstereo_core::Error::config(
+                "updater.guidance",
+                format!("{} guidance needs the depth prior, and none was given", self.guidance.name()),
+            ));
+        }
         let guidance = probe.time("guidance", || prior.and_then(|p| self.guidance.feature(p.left.clone(), [h, w])));
         let f32_on = (&device, DType::F32);
         let coords0 =
@@ -274,7 +282,7 @@ impl RaftStereo {
                 .reshape([1, 1, 1, w])
                 .expand([n, 1, h, w]);
         let zeros = Tensor::<4>::zeros([n, 1, h, w], &device);
-        UpdateGrid { coords0, zeros, guidance, dtype: float_dtype(&device) }
+        Ok(UpdateGrid { coords0, zeros, guidance, dtype: float_dtype(&device) })
     }
 
     /// Stage 3, one iteration's lookup: the cost volume sampled around each pixel's match at

@@ -115,7 +115,7 @@ pub fn profile_backward(
 
     let [n, _, h, w] = hidden[0].dims();
     let f32_on = (&device, DType::F32);
-    let grid = model.update_grid(&hidden[0], prior, &mut probe);
+    let grid = model.update_grid(&hidden[0], prior, &mut probe)?;
     // Positions spread as a step's are: a random flow of up to a quarter of the grid's width.
     let flows: Vec<Tensor<4>> = (0..iters)
         .map(|_| Tensor::<4>::random([n, 1, h, w], Distribution::Uniform(-(w as f64) / 4.0, 0.0), f32_on))

@@ -75,7 +75,8 @@ fn ema_decay_must_be_finite_and_in_zero_one() {
     let t: TrainingConfig = toml::from_str("ema_decay = 0.999").unwrap();
     assert_eq!(t.ema_decay, Some(0.999));
     let t: TrainingConfig = toml::from_str("ema_decay = nan").unwrap();
-    assert!(t.validate().unwrap_err().to_string().contains("ema_decay = NaN"));
+    let message = t.validate().unwrap_err().to_string();
+    assert!(message.contains("ema_decay") && message.contains("NaN"), "{message}");
     let off: TrainingConfig = toml::from_str("").unwrap();
     assert_eq!(off.ema_decay, None);
     assert!(!toml::to_string(&off).unwrap().contains("ema_decay"));

@@ -9,13 +9,9 @@ use dgstereo_kernels::{Numerics, conv2d_forward, conv2d_forward_then, conv2d_rel
 use dgstereo_kernels::{average_pool_half, resize_bilinear};
 
 use crate::gru::{ConvGru, GateContext};
+use crate::loop_numerics::UPDATE_LOOP;
 use crate::motion::MotionEncoder;
 use crate::{UpdateOutput, Updater, UpdaterConfig};
-
-/// The numerics of the update loop's convolutions: no norm after them divides by the
-/// activations' statistics, so a change of rounding is not magnified and the training forward
-/// may take Winograd wherever it suits.
-pub(crate) const UPDATE_LOOP: Numerics = Numerics::Tolerant;
 
 /// Two convolutions predicting the disparity update (`FlowHead`).
 #[derive(Module, Debug)]

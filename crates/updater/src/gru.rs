@@ -12,7 +12,7 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_kernels::{conv_gru_step, conv2d_op};
 
-use crate::block::UPDATE_LOOP;
+use crate::loop_numerics::UPDATE_LOOP;
 
 /// A ConvGRU whose gates also receive precomputed context terms.
 ///

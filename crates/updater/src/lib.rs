@@ -12,6 +12,7 @@
 pub mod block;
 pub mod gru;
 pub mod guidance;
+mod loop_numerics;
 pub mod motion;
 
 use burn::tensor::Tensor;

@@ -7,7 +7,7 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_kernels::conv2d_relu_forward;
 
-use crate::block::UPDATE_LOOP;
+use crate::loop_numerics::UPDATE_LOOP;
 
 /// Correlation branch (1x1, 3x3), flow branch (7x7, 3x3) and an optional guidance branch
 /// (7x7, 3x3) joined by a 3x3 merge convolution; the 2-channel flow is appended to the output.
