@@ -7,7 +7,7 @@
 //! live here; the pure-Python layer (`python/dgstereo/`) keeps the interface a Python user
 //! reads: the `Model` class, keyword defaults, docstrings and the exception classes. No panic
 //! crosses into the interpreter: every library call runs under `catch_unwind`
-//! ([`errors::guarded`]), and inputs are checked before they reach the library.
+//! (`errors::guarded`), and inputs are checked before they reach the library.
 //!
 //! The crate is a member of the workspace, so `maturin develop` reuses what `cargo test
 //! --workspace` compiled.

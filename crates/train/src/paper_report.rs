@@ -1,8 +1,10 @@
 //! Our runs in the paper's ablation tables, optionally beside the published figures.
 //!
 //! [`PaperComparison::new`] fills one of [`PAPER_TABLES`] from run results: a row takes the
-//! scores of the run named by [`PaperRow::run`], a column the metric of the benchmark named by
-//! [`PaperColumn::benchmark`] (the `[[benchmarks]]` names of `experiments/paper.toml`); anything
+//! scores of the run named by [`PaperRow::run`](crate::paper_tables::PaperRow::run), a column
+//! the metric of the benchmark named by
+//! [`PaperColumn::benchmark`](crate::paper_tables::PaperColumn::benchmark) (the
+//! `[[benchmarks]]` names of `experiments/paper.toml`); anything
 //! missing stays unknown (NaN, shown as `–`). Design decision: matching by name keeps the tables
 //! a pure function of what `dgstereo ablate` scored, so the same runs always give the same
 //! tables, and a partial ablation (some rows trained, some benchmarks present) still fills what it

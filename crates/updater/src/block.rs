@@ -5,8 +5,8 @@ use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::Probe;
 use dgstereo_core::layers::{ConvInit, conv2d};
-use dgstereo_kernels::{Numerics, conv2d_forward, conv2d_forward_then, conv2d_relu_forward};
 use dgstereo_kernels::{average_pool_half, resize_bilinear};
+use dgstereo_kernels::{conv2d_forward, conv2d_forward_then, conv2d_relu_forward};
 
 use crate::gru::{ConvGru, GateContext};
 use crate::loop_numerics::UPDATE_LOOP;
