@@ -8,7 +8,7 @@
 //!   checkpoints unchanged and checked against the official code's activations
 //!   ([`depth_anything::verify`]);
 //! - `file`: priors computed elsewhere, read from `.npy`, `.pfm` or 16-bit `.png` files
-//!   ([`file`], [`formats`]);
+//!   ([`mod@file`], [`formats`]);
 //! - `cache`: any provider, with its outputs stored on disk by a hash of the image content and
 //!   the provider's configuration ([`cache`]);
 //! - `simulated`: a prior made from ground-truth disparity with documented, controlled errors,

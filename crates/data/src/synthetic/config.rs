@@ -42,7 +42,7 @@ pub struct SyntheticConfig {
     /// wide. Drawn from a stream of its own, so the scene's other draws are the same. Default: unset.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_disparity_range: Option<[f64; 2]>,
-    /// Probability that a scene gets a lattice ([`Outline::Lattice`]: a trellis or fence in front,
+    /// Probability that a scene gets a lattice ([`Outline::Lattice`](crate::synthetic::surface::Outline::Lattice): a trellis or fence in front,
     /// the scene seen through its holes). Drawn from a stream of its own, so the scene's other
     /// draws are the same. Default 0.
     #[serde(default, skip_serializing_if = "is_zero")]
