@@ -226,3 +226,22 @@ textures = "rich"
     assert!(!o.status.success());
     assert!(text(&o).contains("textures"), "{}", text(&o));
 }
+
+/// A build without MPI started by a launcher as one of several ranks refuses, naming the build
+/// that would work, before touching the output folder.
+#[cfg(not(feature = "mpi"))]
+#[test]
+fn a_build_without_mpi_refuses_to_run_as_one_of_several_ranks() {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = tiny_experiment(dir.path(), "ranks", &cones_dir(), "");
+    let out = dir.path().join("run");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dgstereo"))
+        .args(["train", exp.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"])
+        .env("OMPI_COMM_WORLD_SIZE", "2")
+        .output()
+        .unwrap();
+    let all = text(&o);
+    assert!(!o.status.success(), "{all}");
+    assert!(all.contains("2 ranks") && all.contains("--features mpi"), "{all}");
+    assert!(!out.exists(), "{} was created", out.display());
+}

@@ -62,6 +62,23 @@ impl DeviceChoice {
             )),
         }
     }
+
+    /// The device of one of `local_size` processes sharing a machine (the ranks of a
+    /// data-parallel run): the CPU as [`DeviceChoice::device`] (the processes divide the cores
+    /// among themselves); the GPU, when several processes share the machine, its discrete
+    /// adapter number `local_rank`, else the default adapter.
+    pub fn device_for_local_rank(self, local_rank: usize, local_size: usize) -> crate::Result<Device> {
+        match self {
+            #[cfg(any(feature = "gpu", feature = "gpu-wgsl"))]
+            Self::Gpu if local_size > 1 => {
+                configured_gpu(gpu_device_of(burn::tensor::DeviceKind::DiscreteGpu(local_rank)), Precision::F32)
+            }
+            _ => {
+                let _ = (local_rank, local_size);
+                self.device()
+            }
+        }
+    }
 }
 
 /// The float precision a whole forward pass runs in.
@@ -188,14 +205,26 @@ fn configured_gpu(device: Device, precision: Precision) -> crate::Result<Device>
 /// The GPU: burn's wgpu backend pinned to Vulkan (SPIR-V kernels).
 #[cfg(feature = "gpu")]
 fn gpu_device() -> Device {
-    Device::vulkan(Default::default())
+    gpu_device_of(Default::default())
+}
+
+/// The adapter `kind` on Vulkan.
+#[cfg(feature = "gpu")]
+fn gpu_device_of(kind: burn::tensor::DeviceKind) -> Device {
+    Device::vulkan(kind)
 }
 
 /// The GPU of the `gpu-wgsl` build: burn's wgpu backend on whichever adapter it finds, with WGSL
 /// kernels (a software Vulkan driver's compiler takes these where it crashes on the SPIR-V ones).
 #[cfg(all(feature = "gpu-wgsl", not(feature = "gpu")))]
 fn gpu_device() -> Device {
-    Device::wgpu(Default::default())
+    gpu_device_of(Default::default())
+}
+
+/// The adapter `kind`, with WGSL kernels.
+#[cfg(all(feature = "gpu-wgsl", not(feature = "gpu")))]
+fn gpu_device_of(kind: burn::tensor::DeviceKind) -> Device {
+    Device::wgpu(kind)
 }
 
 /// The default device: the Flex CPU backend.

@@ -4,7 +4,7 @@ use burn::tensor::Tensor;
 
 use crate::mask::{edge_mask, sanitized, supervised_mask};
 use crate::sequence::{sequence_weights, weighted_sum};
-use crate::{DisparityLoss, LossTarget};
+use crate::{DisparityLoss, LossTarget, LossTerms};
 
 /// Edge-aware loss suppression (the paper's EALS).
 ///
@@ -58,5 +58,17 @@ impl DisparityLoss for EdgeAwareLoss {
         weighted_sum(predictions, &weights, |prediction| {
             ((prediction.clone() - gt.clone()).abs() * mask.clone()).mean()
         })
+    }
+
+    /// The sum over the supervised pixels and the count of all pixels (`B * H * W`).
+    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> LossTerms {
+        let mask = self.mask(target);
+        let gt = sanitized(target.disparity_bilinear.clone(), mask.clone().greater_elem(0.5));
+        let weights = sequence_weights(predictions.len(), self.gamma, false);
+        let count = mask.dims().iter().product::<usize>() as f64;
+        let sum = weighted_sum(predictions, &weights, |prediction| {
+            ((prediction.clone() - gt.clone()).abs() * mask.clone()).sum()
+        });
+        LossTerms { sum, count }
     }
 }

@@ -49,10 +49,28 @@ pub struct LossTarget {
     pub valid: Tensor<4>,
 }
 
+/// A loss split into a sum and the count it is divided by, both additive over the batch's
+/// images.
+///
+/// The loss of a batch is `sum / max(count, 1)`. Split a batch into shards (the ranks of a
+/// data-parallel run), and the whole batch's loss is the shards' sums added, over their counts
+/// added: each shard can then take the gradient of `sum / total count` alone, and the gradients
+/// added over the shards are the whole batch's.
+#[derive(Debug, Clone)]
+pub struct LossTerms {
+    /// The weighted sum over the predictions and pixels, `[1]`.
+    pub sum: Tensor<1>,
+    /// What the sum is divided by (supervised pixels, or all pixels).
+    pub count: f64,
+}
+
 /// The stage trait.
 pub trait DisparityLoss {
     /// The scalar loss of `predictions` (one `[N, 1, H, W]` positive disparity per iteration).
     fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Tensor<1>;
+
+    /// The same loss as [`LossTerms`]: `loss` equals `sum / max(count, 1)` up to rounding.
+    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> LossTerms;
 }
 
 /// Which loss an experiment uses.
@@ -173,6 +191,17 @@ impl DisparityLoss for LossConfig {
             }
             Self::EdgeAware { tau, gamma, max_disparity } => {
                 EdgeAwareLoss { tau, gamma, max_disparity }.loss(predictions, target)
+            }
+        }
+    }
+
+    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> LossTerms {
+        match *self {
+            Self::SequenceL1 { gamma, max_disparity } => {
+                SequenceL1Loss { gamma, max_disparity }.terms(predictions, target)
+            }
+            Self::EdgeAware { tau, gamma, max_disparity } => {
+                EdgeAwareLoss { tau, gamma, max_disparity }.terms(predictions, target)
             }
         }
     }

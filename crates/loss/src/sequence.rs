@@ -3,7 +3,7 @@
 use burn::tensor::Tensor;
 
 use crate::mask::{sanitized, supervised_mask};
-use crate::{DisparityLoss, LossTarget};
+use crate::{DisparityLoss, LossTarget, LossTerms};
 
 /// The per-iteration weights `w_k = gamma^(N-k)`, `k = 1..N`: the last prediction gets 1.
 ///
@@ -61,5 +61,19 @@ impl DisparityLoss for SequenceL1Loss {
         weighted_sum(predictions, &weights, |prediction| {
             ((prediction.clone() - gt.clone()).abs() * supervised.clone()).sum() / count.clone()
         })
+    }
+
+    /// The sum over the supervised pixels and their count.
+    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> LossTerms {
+        let gt = target.disparity_bilinear.clone();
+        let supervised = supervised_mask(gt.clone(), target.valid.clone(), self.max_disparity);
+        let gt = sanitized(gt, supervised.clone());
+        let supervised = supervised.float();
+        let count = f64::from(dgstereo_core::tensor::to_vec(supervised.clone().sum())[0]);
+        let weights = sequence_weights(predictions.len(), self.gamma, true);
+        let sum = weighted_sum(predictions, &weights, |prediction| {
+            ((prediction.clone() - gt.clone()).abs() * supervised.clone()).sum()
+        });
+        LossTerms { sum, count }
     }
 }

@@ -16,14 +16,23 @@
 //! model weights and the final model use. [`ablation`] scores finished runs into the ablation
 //! table, and [`paper_report`] lays them out in the paper's tables beside its published figures
 //! ([`paper_tables`]). [`verify_step`] checks two steps against the official training loop.
+//!
+//! Data parallelism is one seam: a run is `N` ranks meeting through a [`Collective`] (the
+//! world of one is [`SingleProcess`]; MPI's lives in `dgstereo-distributed`).
+//! [`Trainer::step_among`] splits the global batch among them and sums their gradients
+//! ([`data_parallel`], [`gradient_exchange`]); [`train_among`] is the loop in which rank 0 alone
+//! writes the run's files.
 #![deny(missing_docs)]
 
 pub mod ablation;
 pub mod batch;
 pub mod checkpoint;
 pub mod clip;
+pub mod collective;
 mod config;
+pub mod data_parallel;
 pub mod ema;
+pub mod gradient_exchange;
 pub mod paper_report;
 pub mod paper_tables;
 pub mod params;
@@ -35,7 +44,8 @@ pub mod trainer;
 pub mod validate;
 pub mod verify_step;
 
+pub use collective::{Collective, SingleProcess};
 pub use config::{DataSource, PhotoTextures, SyntheticScenes, TrainingConfig, TrainingDataConfig, ValidationConfig};
-pub use run::{RunOptions, RunSummary, train};
+pub use run::{RunOptions, RunSummary, train, train_among};
 pub use schedule::OneCycleLr;
 pub use trainer::{StepInternals, StepReport, TrainParts, Trainer};

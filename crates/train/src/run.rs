@@ -22,6 +22,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
 use crate::checkpoint::{list_checkpoints, load_checkpoint, save_checkpoint};
+use crate::collective::{Collective, SingleProcess, agree, writes_files};
+use crate::data_parallel::check_batch_divides;
 use crate::plot::{Curves, write_plot};
 use crate::trainer::{StepReport, TrainParts, Trainer};
 use crate::validate::ValidationSet;
@@ -107,29 +109,54 @@ fn metrics_json(m: &dgstereo_eval::Metrics) -> serde_json::Value {
     m.to_json()
 }
 
-/// Trains `parts` on `device` into `options.out`.
+/// Trains `parts` on `device` into `options.out`, in this process alone.
 ///
 /// A fresh run refuses a folder that already holds checkpoints (use `resume`). NaN or inf in
 /// the loss or gradients stops the run with an error; the checkpoints already written stay.
 pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result<RunSummary> {
+    train_among(parts, device, options, &SingleProcess)
+}
+
+/// Trains `parts` with every rank of `ranks`, each on its own `device`, into `options.out`.
+///
+/// `train.batch_size` is the global batch and must divide by the number of ranks
+/// ([`Trainer::step_among`]). Every rank starts from rank 0's weights; a resumed run's ranks
+/// must read the same checkpoint (the output folder is one folder every rank sees). Rank 0
+/// alone writes the log, plot, validation, checkpoints and final model. A step that fails on
+/// any rank fails on all of them with an error naming the rank; in one process this is
+/// [`train`].
+pub fn train_among(
+    parts: TrainParts,
+    device: &Device,
+    options: &RunOptions,
+    ranks: &dyn Collective,
+) -> Result<RunSummary> {
+    check_batch_divides(parts.train.batch_size, ranks.size())?;
+    let writes = writes_files(ranks);
     let out = &options.out;
     let ckpt_dir = checkpoint_dir(out);
-    std::fs::create_dir_all(&ckpt_dir).map_err(|e| Error::io(&ckpt_dir, e))?;
-    let existing = list_checkpoints(&ckpt_dir)?;
-    let mut trainer = if options.resume {
-        let (_, path) = existing.last().ok_or_else(|| {
-            Error::config("resume", format!("{} holds no checkpoint to resume from", ckpt_dir.display()))
-        })?;
+    let resumed_from = |path: &Path| -> Result<Trainer> {
         let stored = crate::checkpoint::read_metadata(path)?.remove("config").unwrap_or_default();
-        if stored != parts.resolved_toml {
+        if stored != parts.resolved_toml && writes {
             (options.notice)(&format!(
                 "warning: {} was saved with another resolved config; resuming with the current one",
                 path.display()
             ));
         }
-        load_checkpoint(parts, path, device)?
-    } else {
-        if let Some((_, p)) = existing.last() {
+        load_checkpoint(parts.clone(), path, device)
+    };
+    let setup = || -> Result<(Trainer, Option<PathBuf>)> {
+        if writes {
+            std::fs::create_dir_all(&ckpt_dir).map_err(|e| Error::io(&ckpt_dir, e))?;
+        }
+        let existing = list_checkpoints(&ckpt_dir)?;
+        if options.resume {
+            let (_, path) = existing.last().ok_or_else(|| {
+                Error::config("resume", format!("{} holds no checkpoint to resume from", ckpt_dir.display()))
+            })?;
+            return Ok((resumed_from(path)?, Some(path.clone())));
+        }
+        if let Some((_, p)) = existing.last().filter(|_| writes) {
             return Err(Error::config(
                 "out",
                 format!(
@@ -139,10 +166,17 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
                 ),
             ));
         }
-        Trainer::new(parts, device)?
+        Ok((Trainer::new(parts.clone(), device)?, None))
     };
-    for notice in trainer.notices.drain(..) {
+    let (mut trainer, resumed_checkpoint) = agree(ranks, setup())?;
+    if ranks.size() > 1 {
+        start_from_rank_zero(&mut trainer, ranks, options)?;
+    }
+    for notice in trainer.notices.drain(..).filter(|_| writes) {
         (options.notice)(&notice);
+    }
+    if !writes {
+        return follow(trainer, ranks, options);
     }
     let config_path = out.join("config.toml");
     crate::checkpoint::write_atomic(&config_path, trainer.parts.resolved_toml.as_bytes())?;
@@ -165,13 +199,13 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
         steps: trainer.step,
         last: None,
         validation: None,
-        checkpoint: existing.last().map(|e| e.1.clone()),
+        checkpoint: resumed_checkpoint,
         finished: false,
     };
     let mut interval_start = Instant::now();
     let mut interval_steps = 0usize;
     while trainer.step < end {
-        let report = match trainer.step() {
+        let report = match trainer.step_among(ranks, None) {
             Ok(r) => r,
             Err(e) => {
                 bar.abandon();
@@ -186,11 +220,13 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
         bar.set_position(done as u64);
         if done % t.log_every == 0 || done == end {
             let rate = interval_steps as f64 / interval_start.elapsed().as_secs_f64().max(1e-9);
-            append_line(
-                &log_path,
-                &json!({"kind": "train", "step": done, "loss": report.loss, "epe": report.epe, "bad3": report.bad3,
-                        "lr": report.lr, "steps_per_s": rate, "grad_norm": report.grad_norm}),
-            )?;
+            let mut line = json!({"kind": "train", "step": done, "loss": report.loss, "epe": report.epe,
+                                  "bad3": report.bad3, "lr": report.lr, "steps_per_s": rate, "grad_norm": report.grad_norm});
+            if ranks.size() > 1 {
+                line["world_size"] = json!(ranks.size());
+                line["all_reduce_s"] = json!(trainer.last_step_seconds().all_reduce);
+            }
+            append_line(&log_path, &line)?;
             bar.set_message(format!(
                 "loss {:.3} epe {:.3} bad3 {:.1}% lr {:.2e} {:.2} steps/s",
                 report.loss, report.epe, report.bad3, report.lr, rate
@@ -255,4 +291,48 @@ pub fn train(parts: TrainParts, device: &Device, options: &RunOptions) -> Result
         crate::checkpoint::write_atomic(&out.join("summary.json"), format!("{summary_json:#}\n").as_bytes())?;
     }
     Ok(summary)
+}
+
+/// Makes every rank hold rank 0's weights before the first step. A fresh run's rank that
+/// computed other initial weights takes rank 0's (and says so); a resumed run's ranks must
+/// have read the same checkpoint, else every rank fails naming the one that differs.
+fn start_from_rank_zero(trainer: &mut Trainer, ranks: &dyn Collective, options: &RunOptions) -> Result<()> {
+    let steps = ranks.all_gather(&[trainer.step as f64]);
+    let differing_step = steps.iter().position(|&s| s != steps[0]).map(|r| {
+        Err(Error::Other(format!(
+            "rank {r} resumed at step {}, rank 0 at step {}: the ranks read different checkpoints \
+             (the output folder must be one folder every rank sees)",
+            steps[r], steps[0]
+        )))
+    });
+    if let Some(e) = differing_step {
+        return e;
+    }
+    let check = trainer.share_weights(ranks)?;
+    let differs = match (&check.first_difference, options.resume) {
+        (None, _) => Ok(()),
+        (Some(param), true) => Err(Error::Other(format!(
+            "resumed weights differ from rank 0's from '{param}' on: the ranks read different checkpoints"
+        ))),
+        (Some(param), false) => {
+            (options.notice)(&format!(
+                "rank {}: initial weights differed from rank 0's from '{param}' on; training from rank 0's",
+                ranks.rank()
+            ));
+            Ok(())
+        }
+    };
+    agree(ranks, differs)
+}
+
+/// The loop of a rank other than 0: the same steps, no files. Its errors are those of the
+/// step, which every rank shares.
+fn follow(mut trainer: Trainer, ranks: &dyn Collective, options: &RunOptions) -> Result<RunSummary> {
+    let t = trainer.parts.train.clone();
+    let end = options.stop_after.map_or(t.steps, |s| s.min(t.steps));
+    let mut last = None;
+    while trainer.step < end {
+        last = Some(trainer.step_among(ranks, None)?);
+    }
+    Ok(RunSummary { steps: trainer.step, last, validation: None, checkpoint: None, finished: trainer.step >= t.steps })
 }

@@ -13,6 +13,8 @@ pub struct StepSeconds {
     pub forward: f64,
     /// `loss.backward()` and collecting the parameters' gradients.
     pub backward: f64,
+    /// Summing the gradients over the ranks of a data-parallel run (0 in one process).
+    pub all_reduce: f64,
     /// Clipping, the optimiser's update and the moving average.
     pub optimizer: f64,
 }
@@ -20,7 +22,7 @@ pub struct StepSeconds {
 impl StepSeconds {
     /// The whole step.
     pub fn total(&self) -> f64 {
-        self.forward + self.backward + self.optimizer
+        self.forward + self.backward + self.all_reduce + self.optimizer
     }
 }
 

@@ -105,9 +105,11 @@ pub struct Trainer {
     /// What the user should know about how the trainer was set up (see [`Trainer::notices`]).
     pub(crate) notices: Vec<String>,
     /// What the parts of the last step took.
-    last_step_seconds: StepSeconds,
-    data: TrainingData,
-    prior: Prior,
+    pub(crate) last_step_seconds: StepSeconds,
+    /// Bytes each rank gave the last step's gradient exchange (0 in one process).
+    pub(crate) last_exchange_bytes: usize,
+    pub(crate) data: TrainingData,
+    pub(crate) prior: Prior,
 }
 
 /// The AdamW of a recipe (decoupled weight decay, PyTorch's update).
@@ -259,6 +261,7 @@ impl Trainer {
             autodiff,
             notices: Vec::new(),
             last_step_seconds: StepSeconds::default(),
+            last_exchange_bytes: 0,
             data,
             prior,
         })
@@ -283,18 +286,8 @@ impl Trainer {
         observe: Option<&mut dyn FnMut(StepInternals<'_>)>,
     ) -> Result<StepReport> {
         let step = self.step;
-        let t = &self.parts.train;
         let started = Instant::now();
-        let prior = batch_prior(&self.prior, self.parts.model.needs_prior(), batch)?;
-        let predictions = forward_disparities(
-            &self.model,
-            &self.parts.model,
-            batch.left.clone(),
-            batch.right.clone(),
-            prior.as_ref(),
-            t.iters,
-            true,
-        )?;
+        let predictions = self.predictions(batch)?;
         let loss = self.parts.loss.loss(&predictions, &batch.target);
         let loss_value = f64::from(dgstereo_core::tensor::to_vec(loss.clone().detach())[0]);
         if !loss_value.is_finite() {
@@ -312,7 +305,41 @@ impl Trainer {
         if let Some(observe) = observe {
             observe(StepInternals { model: &self.model, predictions: &predictions, grads: &grads });
         }
-        let (grads, clip) = clip_global_norm(&self.model, grads, t.clip);
+        let seconds = StepSeconds {
+            forward: (forward_done - started).as_secs_f64(),
+            backward: (backward_done - forward_done).as_secs_f64(),
+            ..StepSeconds::default()
+        };
+        self.apply_gradients(grads, loss_value, &sums, seconds)
+    }
+
+    /// The batch's prior and the network's disparity after every training iteration.
+    pub(crate) fn predictions(&self, batch: &TensorBatch) -> Result<Vec<Tensor<4>>> {
+        let prior = batch_prior(&self.prior, self.parts.model.needs_prior(), batch)?;
+        forward_disparities(
+            &self.model,
+            &self.parts.model,
+            batch.left.clone(),
+            batch.right.clone(),
+            prior.as_ref(),
+            self.parts.train.iters,
+            true,
+        )
+    }
+
+    /// The end of every step: clipping by global norm, AdamW at the schedule's rate, the moving
+    /// average, the step counter and the report. `seconds` holds the parts already taken; the
+    /// optimiser's share is measured here. Fails, touching nothing, on a non-finite gradient.
+    pub(crate) fn apply_gradients(
+        &mut self,
+        grads: GradientsParams,
+        loss_value: f64,
+        sums: &MetricSums,
+        seconds: StepSeconds,
+    ) -> Result<StepReport> {
+        let step = self.step;
+        let started = Instant::now();
+        let (grads, clip) = clip_global_norm(&self.model, grads, self.parts.train.clip);
         if let Some(param) = clip.non_finite {
             return Err(Error::Other(format!(
                 "step {}: the gradient of '{param}' is not finite (loss {loss_value}); stopping with the weights after {step} completed steps",
@@ -325,11 +352,7 @@ impl Trainer {
         if let Some(ema) = &mut self.ema {
             ema.update(&self.model, self.step);
         }
-        self.last_step_seconds = StepSeconds {
-            forward: (forward_done - started).as_secs_f64(),
-            backward: (backward_done - forward_done).as_secs_f64(),
-            optimizer: backward_done.elapsed().as_secs_f64(),
-        };
+        self.last_step_seconds = StepSeconds { optimizer: started.elapsed().as_secs_f64(), ..seconds };
         let m = sums.metrics();
         Ok(StepReport { step, loss: loss_value, epe: m.epe, bad3: m.bad_3, lr, grad_norm: clip.total_norm })
     }
@@ -376,6 +399,11 @@ impl Trainer {
     /// What the parts of the last step took.
     pub fn last_step_seconds(&self) -> StepSeconds {
         self.last_step_seconds
+    }
+
+    /// Bytes each rank contributed to the last step's gradient exchange (0 in one process).
+    pub fn last_exchange_bytes(&self) -> usize {
+        self.last_exchange_bytes
     }
 
     /// The trained weights without autodiff (not averaged; see [`Trainer::shipped_model`]).

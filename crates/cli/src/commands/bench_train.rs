@@ -8,7 +8,9 @@
 //! its operations counted it in the step ([`dgstereo_kernels::count_work`]; the backward's
 //! products are twice the forward's), an estimate. `--stages` runs each stage
 //! alone as well ([`dgstereo_model::stage_backward`]), since one backward pass cannot be split by
-//! stage.
+//! stage. Under `mpirun` (a build with the `mpi` feature) `--batch` is the global batch, each
+//! rank steps on its part ([`Trainer::step_on_among`]), and the gradient exchange's seconds,
+//! bytes and share of the step are reported.
 
 use std::process::ExitCode;
 use std::time::Instant;
@@ -18,23 +20,26 @@ use dgstereo_core::DeviceChoice;
 use dgstereo_kernels::{Op, Path, Settings, count_work, path};
 use dgstereo_train::batch::TensorBatch;
 use dgstereo_train::step_timing::{StageBackward, StepSeconds, random_batch};
-use dgstereo_train::{TrainParts, Trainer};
+use dgstereo_train::{Collective, TrainParts, Trainer};
 
 use super::bench::{BenchArgs, machine_line, median, parse_size, peak_memory_bytes};
 use super::train::parts_of;
 
 /// Times `a.runs` training steps after `a.warmup` (`dgstereo bench --train`).
 pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
+    let world = dgstereo_distributed::join()?;
+    world.share_cores();
     let [h, w] = parse_size(&a.size)?;
     if a.iters == 0 || a.runs == 0 {
         bail!("--iters and --runs must be at least 1");
     }
     let settings: Settings = a.kernels.parse().with_context(|| format!("--kernels '{}'", a.kernels))?;
     dgstereo_kernels::configure(settings)?;
-    let device = &a.device.parse::<DeviceChoice>()?.device()?;
+    let device = &a.device.parse::<DeviceChoice>()?.device_for_local_rank(world.local_rank(), world.local_size())?;
     if a.batch == 0 {
         bail!("--batch must be at least 1");
     }
+    dgstereo_train::data_parallel::check_batch_divides(a.batch, world.size()).context("--batch")?;
     let config = match &a.experiment {
         Some(p) => {
             let runs = dgstereo_experiment::load(p)?;
@@ -53,7 +58,7 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     parts.train.batch_size = a.batch;
     parts.train.crop = [h, w];
     let mut trainer = Trainer::new(parts, device)?;
-    let batch = random_batch(a.batch, [h, w], (w / 4) as f32, trainer.autodiff_device());
+    let batch = random_batch(a.batch / world.size(), [h, w], (w / 4) as f32, trainer.autodiff_device());
     let kernels = match path(trainer.autodiff_device(), Op::Conv) {
         Path::Host => "host convolution backward",
         Path::Gpu | Path::Stock => "stock",
@@ -62,7 +67,7 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     let mut macs = 0;
     let mut step = || -> anyhow::Result<(f64, StepSeconds)> {
         let start = Instant::now();
-        let (stepped, work) = count_work(|| trainer.step_on(&batch, None));
+        let (stepped, work) = count_work(|| trainer.step_on_among(&batch, &world, None));
         stepped?;
         macs = work.macs;
         Ok((start.elapsed().as_secs_f64(), trainer.last_step_seconds()))
@@ -74,6 +79,10 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     let mut times: Vec<f64> = runs.iter().map(|r| r.0).collect();
     let part = |f: fn(&StepSeconds) -> f64| median(&mut runs.iter().map(|r| f(&r.1)).collect::<Vec<_>>());
     let (forward, backward, optimizer) = (part(|s| s.forward), part(|s| s.backward), part(|s| s.optimizer));
+    let all_reduce = part(|s| s.all_reduce);
+    if world.rank() != 0 {
+        return Ok(ExitCode::SUCCESS);
+    }
     let min = times.iter().copied().fold(f64::INFINITY, f64::min);
     let med = median(&mut times);
     println!(
@@ -82,7 +91,7 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         a.iters,
         trainer.parts().loss,
         a.device,
-        std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+        rayon::current_num_threads()
     );
     println!("{}", machine_line());
     println!(
@@ -92,6 +101,16 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         1.0 / med
     );
     println!("median split: forward {forward:.3} s, backward {backward:.3} s, optimizer {optimizer:.3} s");
+    if world.size() > 1 {
+        println!(
+            "ranks {} ({} on this machine, {} threads each): all-reduce median {all_reduce:.3} s of {:.1} MiB per rank, {:.1} % of the step",
+            world.size(),
+            world.local_size(),
+            rayon::current_num_threads(),
+            trainer.last_exchange_bytes() as f64 / (1024.0 * 1024.0),
+            100.0 * all_reduce / med
+        );
+    }
     println!(
         "work ~{:.1} GFLOP (3x the forward's direct convolutions): {:.1} GFLOP/s",
         6.0 * macs as f64 / 1e9,

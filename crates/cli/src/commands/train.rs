@@ -4,6 +4,11 @@
 //! `--out/<run name>` (characters other than letters, digits, `-`, `_`, `.`, `=`, `,` and `+`
 //! become `_`). `--steps N` replaces `train.steps` (and so the schedule's length) before the
 //! configuration is resolved and stored; `--resume` continues from the newest checkpoint.
+//!
+//! Started by `mpirun` or `srun` as several ranks (a build with the `mpi` feature), the ranks
+//! train one run together ([`dgstereo_train::train_among`]): the cores of a machine are divided
+//! among its ranks, a GPU rank takes its machine's adapter of its local rank, and an error on
+//! one rank ends every rank of the job (`MPI_Abort`), since the others would wait for it.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -11,7 +16,8 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::Args;
 use dgstereo_core::DeviceChoice;
-use dgstereo_train::{RunOptions, TrainParts};
+use dgstereo_distributed::World;
+use dgstereo_train::{Collective, RunOptions, TrainParts};
 
 /// Options of `dgstereo train`.
 #[derive(Args)]
@@ -57,7 +63,7 @@ pub fn parts_of(mut config: dgstereo_experiment::ExperimentConfig, steps: Option
     }
 }
 
-/// Trains one run into `out`.
+/// Trains one run into `out`, in this process alone.
 pub fn train_one(
     parts: TrainParts,
     out: &Path,
@@ -65,10 +71,26 @@ pub fn train_one(
     progress: bool,
     device: &burn::tensor::Device,
 ) -> anyhow::Result<dgstereo_train::RunSummary> {
+    train_one_among(parts, out, resume, progress, device, &dgstereo_train::SingleProcess)
+}
+
+/// Trains one run into `out` with every rank of `ranks`; rank 0 prints.
+fn train_one_among(
+    parts: TrainParts,
+    out: &Path,
+    resume: bool,
+    progress: bool,
+    device: &burn::tensor::Device,
+    ranks: &dyn Collective,
+) -> anyhow::Result<dgstereo_train::RunSummary> {
     let name = parts.name.clone();
     let options =
         RunOptions { out: out.to_path_buf(), resume, stop_after: None, progress, notice: |n| eprintln!("{n}") };
-    let summary = dgstereo_train::train(parts, device, &options).with_context(|| format!("run '{name}'"))?;
+    let summary =
+        dgstereo_train::train_among(parts, device, &options, ranks).with_context(|| format!("run '{name}'"))?;
+    if ranks.rank() != 0 {
+        return Ok(summary);
+    }
     if let Some(r) = summary.last {
         println!(
             "{name}: {} steps, loss {:.4}, train EPE {:.3} px, bad-3 {:.2} %",
@@ -83,12 +105,34 @@ pub fn train_one(
 }
 
 pub fn run(a: TrainArgs) -> anyhow::Result<ExitCode> {
+    let world = dgstereo_distributed::join()?;
+    world.share_cores();
+    let result = train_all(&a, &world);
+    if let Err(e) = &result
+        && world.size() > 1
+    {
+        // An error every rank returned together (it names the failing rank) is reported by
+        // rank 0, and every rank ends normally. An error of this rank alone is reported here,
+        // and ends every rank of the job: the others may be waiting for this one.
+        let line = crate::engine::error_line(e);
+        if !dgstereo_train::collective::is_agreed(&line, world.size()) {
+            eprintln!("error: rank {} of {}: {line}", world.rank(), world.size());
+            world.abort(1);
+        } else if world.rank() != 0 {
+            return Ok(ExitCode::FAILURE);
+        }
+    }
+    result
+}
+
+fn train_all(a: &TrainArgs, world: &World) -> anyhow::Result<ExitCode> {
     let runs = dgstereo_experiment::load(&a.experiment)?;
-    let device = a.device.device()?;
+    let device = a.device.device_for_local_rank(world.local_rank(), world.local_size())?;
     let several = runs.len() > 1;
     for run in runs {
         let out = if several { a.out.join(folder_name(&run.name)) } else { a.out.clone() };
-        train_one(parts_of(run.config, a.steps), &out, a.resume, !a.quiet, &device)?;
+        let progress = !a.quiet && world.rank() == 0;
+        train_one_among(parts_of(run.config, a.steps), &out, a.resume, progress, &device, world)?;
     }
     Ok(ExitCode::SUCCESS)
 }

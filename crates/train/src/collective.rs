@@ -1,0 +1,108 @@
+//! Where the processes of a data-parallel run meet: the trainer's one seam to a launcher.
+//!
+//! Design decision: the trainer knows a run as `size` ranks that exchange numbers, not which
+//! library moves them. [`Collective`] is the four exchanges data parallelism needs, and
+//! [`SingleProcess`] is the world of one; the `dgstereo-distributed` crate implements it over
+//! MPI. An exchange blocks until every rank has called it, so every rank must make the same
+//! calls in the same order: where one rank can fail alone (a sample it cannot read, a loss that
+//! is not finite), [`agree`] turns its error into the same error on every rank, and all ranks
+//! stop together instead of waiting for each other.
+
+use dgstereo_core::{Error, Result};
+
+/// The exchanges between the ranks of one run. Every rank calls each in the same order.
+pub trait Collective {
+    /// This process's rank, `0..size`.
+    fn rank(&self) -> usize;
+    /// The number of ranks.
+    fn size(&self) -> usize;
+    /// Sums `values` element-wise over all ranks, in place; every rank passes the same length.
+    fn all_reduce_sum(&self, values: &mut [f32]);
+    /// Every rank's `values` (the same length on all), concatenated in rank order.
+    fn all_gather(&self, values: &[f64]) -> Vec<f64>;
+    /// Every rank's `bytes` (lengths may differ), in rank order.
+    fn all_gather_bytes(&self, bytes: &[u8]) -> Vec<Vec<u8>>;
+    /// Replaces `values` with rank `root`'s on every rank.
+    fn broadcast(&self, values: &mut [f32], root: usize);
+}
+
+/// The world of one process: every exchange is the identity.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SingleProcess;
+
+impl Collective for SingleProcess {
+    fn rank(&self) -> usize {
+        0
+    }
+    fn size(&self) -> usize {
+        1
+    }
+    fn all_reduce_sum(&self, _values: &mut [f32]) {}
+    fn all_gather(&self, values: &[f64]) -> Vec<f64> {
+        values.to_vec()
+    }
+    fn all_gather_bytes(&self, bytes: &[u8]) -> Vec<Vec<u8>> {
+        vec![bytes.to_vec()]
+    }
+    fn broadcast(&self, _values: &mut [f32], _root: usize) {}
+}
+
+/// Every rank's outcome of a phase that can fail on some ranks only: `result` where all ranks
+/// succeeded, else on every rank the error of the lowest failing rank, naming it
+/// (`rank 1 of 2: ...`). In a world of one, `result` unchanged.
+pub fn agree<T>(ranks: &dyn Collective, result: Result<T>) -> Result<T> {
+    if ranks.size() == 1 {
+        return result;
+    }
+    let failed = ranks.all_gather(&[if result.is_err() { 1.0 } else { 0.0 }]);
+    let Some(first) = failed.iter().position(|&f| f != 0.0) else {
+        return result;
+    };
+    let message = result.as_ref().err().map(ToString::to_string).unwrap_or_default();
+    let messages = ranks.all_gather_bytes(message.as_bytes());
+    let text = String::from_utf8_lossy(&messages[first]);
+    Err(Error::Other(format!("rank {first} of {}: {text}", ranks.size())))
+}
+
+/// Whether `message` holds an error [`agree`] made, which every rank of a world of `size`
+/// returned at once (so no rank is left waiting for another).
+pub fn is_agreed(message: &str, size: usize) -> bool {
+    let marker = format!(" of {size}: ");
+    message.match_indices(&marker).any(|(at, _)| {
+        let before = &message[..at];
+        let digits = before.len() - before.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+        digits > 0 && before[..before.len() - digits].ends_with("rank ")
+    })
+}
+
+/// Rank 0 of the world: the one that writes a run's files.
+pub fn writes_files(ranks: &dyn Collective) -> bool {
+    ranks.rank() == 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_world_of_one_passes_results_through() {
+        let ok: Result<u8> = Ok(3);
+        assert_eq!(agree(&SingleProcess, ok).unwrap(), 3);
+        let err: Result<u8> = Err(Error::config("train.lr", "bad"));
+        let e = agree(&SingleProcess, err).unwrap_err();
+        assert!(matches!(e, Error::Config(_)), "{e}");
+        let mut values = [1.0, 2.0];
+        SingleProcess.all_reduce_sum(&mut values);
+        SingleProcess.broadcast(&mut values, 0);
+        assert_eq!(values, [1.0, 2.0]);
+        assert_eq!(SingleProcess.all_gather(&[4.0]), vec![4.0]);
+        assert!(writes_files(&SingleProcess));
+    }
+
+    #[test]
+    fn agreed_errors_are_recognised_inside_a_longer_message() {
+        assert!(is_agreed("run 'x': training stopped: rank 1 of 2: step 2: cannot read", 2));
+        assert!(!is_agreed("run 'x': rank 1 of 2: step 2", 4));
+        assert!(!is_agreed("cannot write /tmp/a of 2: full", 2));
+    }
+}
