@@ -9,6 +9,7 @@ mod engine;
 mod inputs;
 mod outputs;
 mod sigpipe;
+mod stop_signals;
 mod visualize;
 
 use std::process::ExitCode;

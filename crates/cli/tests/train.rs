@@ -132,7 +132,7 @@ fn training_is_reproducible_across_processes() {
 }
 
 #[test]
-fn ablate_scores_benchmarks_and_reuses_finished_runs() {
+fn ablate_scores_benchmarks_reuses_finished_runs_and_rescores_new_benchmarks() {
     let dir = tempfile::tempdir().unwrap();
     let exp = tiny_experiment(dir.path(), "tiny", &cones_dir(), "");
     let out = dir.path().join("ablation");
@@ -141,32 +141,90 @@ fn ablate_scores_benchmarks_and_reuses_finished_runs() {
     assert!(o.status.success(), "{}", text(&o));
     let csv = std::fs::read_to_string(out.join("ablation.csv")).unwrap();
     let header = csv.lines().next().unwrap();
-    for column in ["synthetic", "cones"] {
-        assert!(header.contains(column), "column {column} in {header}");
-    }
+    assert!(header.starts_with("run,n,steps,synthetic epe,synthetic epe std,"), "{header}");
+    assert!(header.contains("cones bad-2 std"), "{header}");
     let row = csv.lines().nth(1).expect("one row");
-    assert!(row.starts_with("tiny,"), "{row}");
-    let values: Vec<f64> = row.split(',').skip(1).map(|v| v.parse().unwrap()).collect();
-    assert_eq!(values.len(), 3 + 3, "synthetic epe/bad-1/bad-3 and cones epe/bad-2/bad-3: {header}");
+    assert!(row.starts_with("tiny,1,3,"), "{row}");
+    let values: Vec<f64> = row.split(',').skip(3).map(|v| v.parse().unwrap()).collect();
+    assert_eq!(
+        values.len(),
+        2 * (3 + 3),
+        "synthetic epe/bad-1/bad-3 and cones epe/bad-2/bad-3, each with std: {header}"
+    );
     assert!(values.iter().all(|v| v.is_finite() && *v >= 0.0), "{row}");
-    assert!(out.join("ablation.md").is_file() && out.join("ablation.json").is_file());
+    let md = std::fs::read_to_string(out.join("ablation.md")).unwrap();
+    assert!(md.contains("Lower is better") && md.contains("Pairs scored: synthetic 1, cones 1."), "{md}");
+    assert!(out.join("ablation.json").is_file() && out.join("ablation.png").is_file());
+    assert!(!out.join("paper-tables.md").exists(), "no row is one of the paper's");
 
     let modified = |p: &Path| std::fs::metadata(p).unwrap().modified().unwrap();
     let model = out.join("tiny/model.safetensors");
     let before = modified(&model);
-    // The paper's tables are written too; the run matches none of their rows.
-    let tables = std::fs::read_to_string(out.join("paper-tables.md")).unwrap();
-    assert!(tables.contains("### Table 5: EALS's threshold tau") && !tables.contains("1.81"), "{tables}");
-    let o = dgstereo(&[&args[..], &["--paper"]].concat());
+    let o = dgstereo(&args);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(text(&o).contains("reusing it"), "{}", text(&o));
+    assert!(text(&o).contains("reusing it") && text(&o).contains("scores reused"), "{}", text(&o));
     assert_eq!(modified(&model), before, "a finished run is not trained again");
     assert_eq!(std::fs::read_to_string(out.join("ablation.csv")).unwrap(), csv, "same scores on reuse");
-    // --paper sets the published figures beside ours: Table 2's baseline row reads 1.81.
-    let tables = std::fs::read_to_string(out.join("paper-tables.md")).unwrap();
-    assert!(tables.contains("| | | paper | 1.81 | 8.34 |"), "{tables}");
-    let table2 = std::fs::read_to_string(out.join("paper-table2.csv")).unwrap();
-    assert!(table2.contains("Baseline,baseline,paper,1.81,8.34,"), "{table2}");
+
+    // A benchmark added to the finished study: scored, nothing trained.
+    let again = format!(
+        "[[benchmarks]]\nname = \"cones-small\"\ndataset = \"folder\"\nroot = '{}'\niters = 2\nmax_size = 64\n",
+        cones_dir().display()
+    );
+    tiny_experiment(dir.path(), "tiny", &cones_dir(), &again);
+    let o = dgstereo(&args);
+    let said = text(&o);
+    assert!(o.status.success(), "{said}");
+    assert!(said.contains("reusing it") && !said.contains("scores reused") && said.contains("cones-small"), "{said}");
+    assert_eq!(modified(&model), before, "adding a benchmark trains nothing");
+    let csv = std::fs::read_to_string(out.join("ablation.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().contains("cones-small epe"), "{csv}");
+    // --rescore scores again without training.
+    let o = dgstereo(&[&args[..], &["--rescore"]].concat());
+    assert!(o.status.success() && !text(&o).contains("scores reused"), "{}", text(&o));
+    assert_eq!(modified(&model), before);
+}
+
+#[test]
+fn ablate_makes_one_row_of_a_seed_sweep() {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = tiny_experiment(dir.path(), "seeds", &cones_dir(), "[sweep]\n\"train.seed\" = [1, 2, 3]\n");
+    let out = dir.path().join("ablation");
+    let o = dgstereo(&["ablate", exp.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let csv = std::fs::read_to_string(out.join("ablation.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 2, "one row: {csv}");
+    assert!(csv.lines().nth(1).unwrap().starts_with("seeds,3,3,"), "{csv}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
+    assert_eq!(json["rows"][0]["seeds"].as_array().unwrap().len(), 3);
+    assert!(json["rows"][0]["std"]["synthetic/epe"].as_f64().unwrap() > 0.0, "three seeds differ");
+    assert!(std::fs::read_to_string(out.join("ablation.md")).unwrap().contains(" ± "));
+}
+
+/// A benchmark root relative to the experiment file resolves from any working directory.
+#[test]
+fn paths_in_an_experiment_are_relative_to_its_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data/cones");
+    std::fs::create_dir_all(&data).unwrap();
+    for entry in std::fs::read_dir(cones_dir()).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_file() {
+            std::fs::copy(&path, data.join(path.file_name().unwrap())).unwrap();
+        }
+    }
+    let folder = dir.path().join("exp");
+    std::fs::create_dir_all(&folder).unwrap();
+    let exp = tiny_experiment(&folder, "relative", Path::new("../data/cones"), "");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dgstereo"))
+        .args(["experiment", "check", exp.to_str().unwrap(), "--show"])
+        .current_dir("/")
+        .output()
+        .unwrap();
+    let said = text(&o);
+    assert!(o.status.success(), "{said}");
+    assert!(said.contains(&format!("root = \"{}\"", data.display())), "{said}");
 }
 
 #[test]
@@ -180,14 +238,22 @@ fn bad_experiment_files_name_the_file_and_key() {
     assert!(t.contains("typo.toml") && t.contains("schedule"), "{t}");
     assert!(!t.contains("panicked"), "{t}");
 
-    // A benchmark folder that does not exist fails the ablation with its path, after training.
+    // A benchmark folder that does not exist fails the ablation with its path and key, before
+    // any run trains (the good run listed first included).
+    let good = tiny_experiment(dir.path(), "good", &cones_dir(), "");
     let missing = dir.path().join("no-such-benchmark");
     let exp = tiny_experiment(dir.path(), "nobench", &missing, "");
-    let o = dgstereo(&["ablate", exp.to_str().unwrap(), "--out", dir.path().join("abl").to_str().unwrap(), "--quiet"]);
+    let abl = dir.path().join("abl");
+    let o =
+        dgstereo(&["ablate", good.to_str().unwrap(), exp.to_str().unwrap(), "--out", abl.to_str().unwrap(), "--quiet"]);
     assert!(!o.status.success());
     let t = text(&o);
-    assert!(t.contains("no-such-benchmark") && t.contains("cones"), "{t}");
+    assert!(
+        t.contains(&missing.display().to_string()) && t.contains("benchmarks[0]") && t.contains("nobench.toml"),
+        "{t}"
+    );
     assert!(!t.contains("panicked"), "{t}");
+    assert!(!abl.join("good").exists(), "nothing trained before the check failed");
 }
 
 #[test]

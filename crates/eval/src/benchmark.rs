@@ -247,21 +247,29 @@ impl BenchmarkConfig {
     /// Lists the samples to score (the first `limit`), with a clear error when the folder is
     /// missing or holds no sample with ground truth.
     pub fn dataset(&self) -> Result<(FileDataset, Vec<usize>)> {
+        let shown = std::path::absolute(&self.root).unwrap_or_else(|_| self.root.clone());
         if !self.root.is_dir() {
             return Err(Error::config(
                 "root",
-                format!("{} is not a folder (benchmark '{}')", self.root.display(), self.label()),
+                format!("{} is not a folder (benchmark '{}')", shown.display(), self.label()),
             ));
         }
         let dataset = self.load()?;
-        if !dataset.files.iter().any(|f| f.disparity.is_some()) {
+        if dataset.files.is_empty() {
             return Err(Error::config(
                 "root",
                 format!(
-                    "no sample in {} has ground truth disparity (benchmark '{}')",
-                    self.root.display(),
+                    "{} holds no pair of the {} layout (benchmark '{}')",
+                    shown.display(),
+                    self.dataset,
                     self.label()
                 ),
+            ));
+        }
+        if !dataset.files.iter().any(|f| f.disparity.is_some()) {
+            return Err(Error::config(
+                "root",
+                format!("no sample in {} has ground truth disparity (benchmark '{}')", shown.display(), self.label()),
             ));
         }
         let n = self.limit.unwrap_or(usize::MAX).min(dataset.files.len());

@@ -87,6 +87,7 @@ fn read_chain(path: &Path, chain: &mut Vec<PathBuf>) -> Result<Document> {
         provenance = parent.provenance;
     }
     debug_assert!(PER_FILE.iter().all(|k| !table.contains_key(*k)));
+    crate::paths::resolve_paths(&mut table, path.parent().unwrap_or(Path::new("")));
     merge(&mut merged, table, &mut Vec::new(), &mut provenance, path);
     Ok(Document { source: path.to_path_buf(), name, description, table: merged, provenance })
 }

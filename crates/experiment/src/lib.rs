@@ -46,8 +46,12 @@
 //!   such as a baseline inheriting the paper's `[prior]`). Files named in the configuration
 //!   (checkpoints, data folders) need not exist: validation is about the configuration, and
 //!   existence is checked when the provider or data set is built.
-//! - Relative paths inside a configuration (prior weights, data roots) are relative to the
-//!   working directory, like paths given on the command line.
+//! - **Paths are relative to the file that writes them** ([`mod@paths`]): prior weights, data and
+//!   benchmark roots, photo folders and `train.init` are made absolute against the declaring
+//!   file's folder as it is read, so an experiment works from any working directory and a file
+//!   inheriting from another folder finds its base's data.
+//! - A list (`[[benchmarks]]`, `[[data.sources]]`) is a value: a file that writes it replaces the
+//!   inherited list whole.
 //! - [`smoke`] builds a run's model, counts its parameters and runs a tiny forward pass
 //!   (`dgstereo experiment check`).
 #![deny(missing_docs)]
@@ -55,6 +59,7 @@
 pub mod config;
 pub mod inherit;
 pub mod keys;
+pub mod paths;
 pub mod smoke;
 pub mod sweep;
 

@@ -123,6 +123,11 @@ pub fn save_safetensors(model: &RaftStereo, path: &Path, metadata: &[(&str, &str
     model
         .save_into(&mut store)
         .map_err(|e| Error::Checkpoint { path: path.into(), message: format!("cannot write: {e}") })?;
+    // The store orders the metadata by hash: sort it, so equal weights make equal files.
+    let bytes = std::fs::read(&tmp).map_err(|e| Error::io(&tmp, e))?;
+    let canonical = crate::canonical_safetensors::canonical_header(&bytes)
+        .map_err(|e| Error::Checkpoint { path: path.into(), message: e.to_string() })?;
+    std::fs::write(&tmp, canonical).map_err(|e| Error::io(&tmp, e))?;
     finish_atomic(&tmp, path)
 }
 

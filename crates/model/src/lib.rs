@@ -9,6 +9,7 @@
 //! [`verify`] compares a forward pass with the activations the official code computed.
 #![deny(missing_docs)]
 
+pub mod canonical_safetensors;
 pub mod checkpoint;
 pub mod checkpoint_config;
 pub mod config;

@@ -136,7 +136,8 @@ pub fn checkpoint_bytes(trainer: &Trainer) -> Result<Vec<u8>> {
     if let Some(ema) = &trainer.ema {
         meta.insert("ema_decay".into(), ema.decay().to_string());
     }
-    safetensors::serialize(views, &Some(meta)).map_err(|e| fail(e.to_string()))
+    let bytes = safetensors::serialize(views, &Some(meta)).map_err(|e| fail(e.to_string()))?;
+    dgstereo_model::canonical_safetensors::canonical_header(&bytes)
 }
 
 /// A value as a JSON string (plain configuration data always serialises).

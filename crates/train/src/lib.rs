@@ -25,6 +25,8 @@
 #![deny(missing_docs)]
 
 pub mod ablation;
+pub mod ablation_plot;
+pub mod ablation_table;
 pub mod batch;
 pub mod checkpoint;
 pub mod clip;
@@ -37,7 +39,9 @@ pub mod paper_report;
 pub mod paper_tables;
 pub mod params;
 pub mod plot;
+pub mod preflight;
 pub mod run;
+pub mod run_identity;
 pub mod schedule;
 pub mod step_timing;
 pub mod trainer;

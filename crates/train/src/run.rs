@@ -14,6 +14,8 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use burn::tensor::Device;
@@ -25,6 +27,7 @@ use crate::checkpoint::{list_checkpoints, load_checkpoint, save_checkpoint};
 use crate::collective::{Collective, SingleProcess, agree, writes_files};
 use crate::data_parallel::check_batch_divides;
 use crate::plot::{Curves, write_plot};
+use crate::run_identity::{another_run, training_differences};
 use crate::trainer::{StepReport, TrainParts, Trainer};
 use crate::validate::ValidationSet;
 
@@ -39,9 +42,11 @@ pub struct RunOptions {
     pub stop_after: Option<usize>,
     /// Show a progress bar on the terminal.
     pub progress: bool,
-    /// Shown what the user should know before the run goes on (a resumed run's changed config,
+    /// Shown what the user should know before the run goes on (where a resumed run resumes,
     /// weights that kept their initialisation): the binary prints them; the library never does.
     pub notice: fn(&str),
+    /// Set (by a signal handler) to end the run after the current step, with a checkpoint.
+    pub stop: Option<Arc<AtomicBool>>,
 }
 
 /// What a run returns.
@@ -57,6 +62,9 @@ pub struct RunSummary {
     pub checkpoint: Option<PathBuf>,
     /// Whether all configured steps are done.
     pub finished: bool,
+    /// Whether the run ended early because [`RunOptions::stop`] was set (its checkpoint holds
+    /// the last completed step).
+    pub stopped: bool,
 }
 
 /// The checkpoint folder of a run folder.
@@ -137,13 +145,16 @@ pub fn train_among(
     let ckpt_dir = checkpoint_dir(out);
     let resumed_from = |path: &Path| -> Result<Trainer> {
         let stored = crate::checkpoint::read_metadata(path)?.remove("config").unwrap_or_default();
-        if stored != parts.resolved_toml && writes {
-            (options.notice)(&format!(
-                "warning: {} was saved with another resolved config; resuming with the current one",
-                path.display()
-            ));
+        let differences =
+            if stored.is_empty() { Vec::new() } else { training_differences(&stored, &parts.resolved_toml)? };
+        if !differences.is_empty() {
+            return Err(another_run(out, &differences));
         }
-        load_checkpoint(parts.clone(), path, device)
+        let trainer = load_checkpoint(parts.clone(), path, device)?;
+        if writes {
+            (options.notice)(&format!("resuming at step {} from {}", trainer.step, path.display()));
+        }
+        Ok(trainer)
     };
     let setup = || -> Result<(Trainer, Option<PathBuf>)> {
         if writes {
@@ -201,6 +212,7 @@ pub fn train_among(
         validation: None,
         checkpoint: resumed_checkpoint,
         finished: false,
+        stopped: false,
     };
     let mut interval_start = Instant::now();
     let mut interval_steps = 0usize;
@@ -260,8 +272,15 @@ pub fn train_among(
             write_plot(&curves, &plot_path)?;
             summary.validation = Some(m);
         }
-        if (t.checkpoint_every > 0 && done % t.checkpoint_every == 0) || done == end {
+        let stop = stop_requested(options, ranks) && done < end;
+        if (t.checkpoint_every > 0 && done % t.checkpoint_every == 0) || done == end || stop {
             summary.checkpoint = Some(save_checkpoint(&trainer, &ckpt_dir, t.keep_checkpoints)?);
+        }
+        if stop {
+            bar.abandon();
+            summary.steps = trainer.step;
+            summary.stopped = true;
+            return Ok(summary);
         }
     }
     bar.finish();
@@ -331,8 +350,21 @@ fn follow(mut trainer: Trainer, ranks: &dyn Collective, options: &RunOptions) ->
     let t = trainer.parts.train.clone();
     let end = options.stop_after.map_or(t.steps, |s| s.min(t.steps));
     let mut last = None;
-    while trainer.step < end {
+    let mut stopped = false;
+    while trainer.step < end && !stopped {
         last = Some(trainer.step_among(ranks, None)?);
+        stopped = stop_requested(options, ranks) && trainer.step < end;
     }
-    Ok(RunSummary { steps: trainer.step, last, validation: None, checkpoint: None, finished: trainer.step >= t.steps })
+    let finished = trainer.step >= t.steps;
+    Ok(RunSummary { steps: trainer.step, last, validation: None, checkpoint: None, finished, stopped })
+}
+
+/// Whether any rank was asked to stop ([`RunOptions::stop`]); every rank calls it after every
+/// step, so all stop after the same one.
+fn stop_requested(options: &RunOptions, ranks: &dyn Collective) -> bool {
+    let here = options.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
+    if ranks.size() == 1 {
+        return here;
+    }
+    ranks.all_gather(&[f64::from(u8::from(here))]).iter().any(|&s| s != 0.0)
 }

@@ -20,7 +20,8 @@ use crate::visualize::{colorize, display_range, side_by_side};
 /// Experiment-file tools.
 #[derive(Subcommand)]
 pub enum ExperimentCommand {
-    /// Resolves and validates files, builds each model and runs one small forward pass.
+    /// Resolves and validates files, checks the data, weights and benchmark folders they name,
+    /// builds each model and runs one small forward pass.
     Check {
         /// Experiment files.
         #[arg(required = true)]
@@ -34,6 +35,9 @@ pub enum ExperimentCommand {
         /// Print each run's resolved configuration (TOML) after its line.
         #[arg(long)]
         show: bool,
+        /// Check the configuration only, not the data, weights and benchmark folders it names.
+        #[arg(long)]
+        config_only: bool,
     },
     /// Writes training pairs as the trainer draws them: left | right | ground truth, one PNG each.
     Samples {
@@ -67,7 +71,9 @@ fn parse_size(text: &str) -> Result<[usize; 2], String> {
 
 pub fn run(command: ExperimentCommand) -> anyhow::Result<ExitCode> {
     match command {
-        ExperimentCommand::Check { files, size, iters, show } => check(&files, size, iters as usize, show),
+        ExperimentCommand::Check { files, size, iters, show, config_only } => {
+            check(&files, size, iters as usize, show, config_only)
+        }
         ExperimentCommand::Samples { file, out, count } => samples(&file, &out, count as usize),
         ExperimentCommand::Validate { file, weights } => validate(&file, weights.as_deref()),
     }
@@ -120,7 +126,7 @@ fn samples(file: &Path, out: &Path, count: usize) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool) -> anyhow::Result<ExitCode> {
+fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool, config_only: bool) -> anyhow::Result<ExitCode> {
     let device = dgstereo_core::default_device();
     let mut failures = 0usize;
     for file in files {
@@ -133,7 +139,14 @@ fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool) -> anyho
             }
         };
         for run in runs {
-            match dgstereo_experiment::smoke_test(&run.config, size, iters, &device) {
+            let parts = super::train::parts_of(run.config.clone(), None);
+            let on_disk = if config_only {
+                Ok(())
+            } else {
+                dgstereo_train::preflight::preflight(&parts, &run.config.benchmarks).map(drop)
+            };
+            let checked = on_disk.and_then(|()| dgstereo_experiment::smoke_test(&run.config, size, iters, &device));
+            match checked {
                 Ok(report) => println!("{:<44} {:>22}  OK", run.name, parameters(report.parameters)),
                 Err(e) => {
                     failures += 1;

@@ -17,6 +17,8 @@ use anyhow::Context;
 use clap::Args;
 use dgstereo_core::DeviceChoice;
 use dgstereo_distributed::World;
+
+use crate::stop_signals::StopSignals;
 use dgstereo_train::{Collective, RunOptions, TrainParts};
 
 /// Options of `dgstereo train`.
@@ -63,15 +65,16 @@ pub fn parts_of(mut config: dgstereo_experiment::ExperimentConfig, steps: Option
     }
 }
 
-/// Trains one run into `out`, in this process alone.
+/// Trains one run into `out`, in this process alone, until done or `stop` is set.
 pub fn train_one(
     parts: TrainParts,
     out: &Path,
     resume: bool,
     progress: bool,
     device: &burn::tensor::Device,
+    stop: &StopSignals,
 ) -> anyhow::Result<dgstereo_train::RunSummary> {
-    train_one_among(parts, out, resume, progress, device, &dgstereo_train::SingleProcess)
+    train_one_among(parts, out, resume, progress, device, stop, &dgstereo_train::SingleProcess)
 }
 
 /// Trains one run into `out` with every rank of `ranks`; rank 0 prints.
@@ -81,14 +84,30 @@ fn train_one_among(
     resume: bool,
     progress: bool,
     device: &burn::tensor::Device,
+    stop: &StopSignals,
     ranks: &dyn Collective,
 ) -> anyhow::Result<dgstereo_train::RunSummary> {
     let name = parts.name.clone();
-    let options =
-        RunOptions { out: out.to_path_buf(), resume, stop_after: None, progress, notice: |n| eprintln!("{n}") };
+    let options = RunOptions {
+        out: out.to_path_buf(),
+        resume,
+        stop_after: None,
+        progress,
+        notice: |n| eprintln!("{n}"),
+        stop: Some(stop.flag()),
+    };
     let summary =
         dgstereo_train::train_among(parts, device, &options, ranks).with_context(|| format!("run '{name}'"))?;
     if ranks.rank() != 0 {
+        return Ok(summary);
+    }
+    if summary.stopped {
+        let at = summary.checkpoint.as_ref().map_or(String::new(), |p| format!(" ({})", p.display()));
+        eprintln!(
+            "{name}: {}: stopped at step {}, checkpoint written{at}; resume with --resume",
+            stop.name(),
+            summary.steps
+        );
         return Ok(summary);
     }
     if let Some(r) = summary.last {
@@ -126,13 +145,17 @@ pub fn run(a: TrainArgs) -> anyhow::Result<ExitCode> {
 }
 
 fn train_all(a: &TrainArgs, world: &World) -> anyhow::Result<ExitCode> {
+    let stop = StopSignals::install()?;
     let runs = dgstereo_experiment::load(&a.experiment)?;
     let device = a.device.device_for_local_rank(world.local_rank(), world.local_size())?;
     let several = runs.len() > 1;
     for run in runs {
         let out = if several { a.out.join(folder_name(&run.name)) } else { a.out.clone() };
         let progress = !a.quiet && world.rank() == 0;
-        train_one_among(parts_of(run.config, a.steps), &out, a.resume, progress, &device, world)?;
+        let summary = train_one_among(parts_of(run.config, a.steps), &out, a.resume, progress, &device, &stop, world)?;
+        if summary.stopped {
+            return Ok(stop.exit_code());
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

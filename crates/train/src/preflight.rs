@@ -1,0 +1,48 @@
+//! What a run reads from disk, checked before anything trains.
+//!
+//! Design decision: an ablation is hours to days of training per row, and a benchmark is only
+//! read after its row has trained. A benchmark folder that does not exist, or holds no pair with
+//! ground truth, must stop the study before its first step, not after its first row: `ablate`
+//! and `experiment check` run [`preflight`] on every run first. It lists the training sources
+//! (as the trainer does), checks the initial weights, and opens every benchmark; each error names
+//! the key and the absolute path it looked at.
+
+use dgstereo_core::{Error, Result};
+use dgstereo_eval::BenchmarkConfig;
+
+use crate::batch::TrainingData;
+use crate::trainer::TrainParts;
+
+/// What [`preflight`] found.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Preflight {
+    /// The number of pairs each benchmark scores (its limit applied), in order.
+    pub benchmark_pairs: Vec<usize>,
+}
+
+/// `path` made absolute against the working directory, for messages.
+fn absolute(path: &std::path::Path) -> std::path::PathBuf {
+    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
+}
+
+/// Checks that every file and folder a run of `parts` scored on `benchmarks` reads is there:
+/// the training sources (listed, with ground truth), `train.init`, and each benchmark (its
+/// folder holds pairs with ground truth).
+///
+/// # Errors
+/// [`Error::Config`] naming the key (`data.sources[0].root`, `train.init`,
+/// `benchmarks[1].root`) and the absolute path.
+pub fn preflight(parts: &TrainParts, benchmarks: &[BenchmarkConfig]) -> Result<Preflight> {
+    TrainingData::new(&parts.data, &parts.train)?;
+    if let Some(init) = &parts.train.init
+        && !init.is_file()
+    {
+        return Err(Error::config("train.init", format!("{}: no such file", absolute(init).display())));
+    }
+    let mut benchmark_pairs = Vec::with_capacity(benchmarks.len());
+    for (i, b) in benchmarks.iter().enumerate() {
+        let (_, indices) = b.dataset().map_err(|e| e.within(&format!("benchmarks[{i}]")))?;
+        benchmark_pairs.push(indices.len());
+    }
+    Ok(Preflight { benchmark_pairs })
+}

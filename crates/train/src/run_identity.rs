@@ -1,0 +1,116 @@
+//! A run's identity: the keys of its resolved configuration that change what it trains.
+//!
+//! Design decision: a run folder belongs to one training. Its name, its description and the
+//! benchmarks it is scored on (their folders, iterations and sizes) do not change a single
+//! weight, so they may change between the run and a later `--resume` or `ablate`; every other
+//! key does, and a difference there means the folder holds another run.
+
+use dgstereo_core::{Error, Result};
+use toml::Value;
+
+/// Top-level keys that describe or score a run and do not change its training.
+pub const SCORING_KEYS: [&str; 3] = ["name", "description", "benchmarks"];
+
+/// Every leaf of `value` under `prefix`, as `(dotted key, value)`; arrays of tables are entered
+/// by index (`data.sources[0].root`), other arrays are values.
+fn leaves(prefix: &str, value: &Value, out: &mut Vec<(String, Value)>) {
+    match value {
+        Value::Table(table) => {
+            for (key, v) in table {
+                let key = if prefix.is_empty() { key.clone() } else { format!("{prefix}.{key}") };
+                leaves(&key, v, out);
+            }
+        }
+        Value::Array(items) if !items.is_empty() && items.iter().all(Value::is_table) => {
+            for (i, v) in items.iter().enumerate() {
+                leaves(&format!("{prefix}[{i}]"), v, out);
+            }
+        }
+        other => out.push((prefix.to_string(), other.clone())),
+    }
+}
+
+fn training_leaves(text: &str, what: &str) -> Result<Vec<(String, Value)>> {
+    let table: toml::Table =
+        toml::from_str(text).map_err(|e| Error::Other(format!("{what}: not a resolved configuration: {e}")))?;
+    let mut out = Vec::new();
+    for (key, value) in table.iter().filter(|(k, _)| !SCORING_KEYS.contains(&k.as_str())) {
+        leaves(key, value, &mut out);
+    }
+    Ok(out)
+}
+
+/// The training keys that differ between the configuration a run was trained with (`run`) and
+/// the one given now (`here`), each as `key: <value here> here, <value in the run> in the run`
+/// (`absent` where a side lacks the key), in key order.
+///
+/// # Errors
+/// Either text is not TOML.
+pub fn training_differences(run: &str, here: &str) -> Result<Vec<String>> {
+    let run = training_leaves(run, "the run's configuration")?;
+    let here = training_leaves(here, "this configuration")?;
+    let mut keys: Vec<&String> = run.iter().chain(&here).map(|(k, _)| k).collect();
+    keys.sort();
+    keys.dedup();
+    let find = |side: &[(String, Value)], key: &str| side.iter().find(|(k, _)| k == key).map(|(_, v)| v.clone());
+    let show = |v: Option<Value>| v.map_or("absent".to_string(), |v| v.to_string());
+    Ok(keys
+        .into_iter()
+        .filter_map(|key| {
+            let (a, b) = (find(&here, key), find(&run, key));
+            (a != b).then(|| format!("{key}: {} here, {} in the run", show(a), show(b)))
+        })
+        .collect())
+}
+
+/// The error for a folder whose run was trained with another configuration: the first
+/// differing key is the error's key, every difference is listed.
+pub fn another_run(folder: &std::path::Path, differences: &[String]) -> Error {
+    let key = differences.first().and_then(|d| d.split(':').next()).unwrap_or("config").to_string();
+    Error::config(
+        key,
+        format!(
+            "{} holds a run trained with another configuration ({}); nothing was changed: \
+             train into another folder, or restore the run's configuration",
+            folder.display(),
+            differences.join("; ")
+        ),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const RUN: &str = r#"
+name = "a"
+[train]
+lr = 0.0002
+steps = 10
+[[data.sources]]
+kind = "synthetic"
+width = 96
+[[benchmarks]]
+name = "cones"
+root = "/x"
+"#;
+
+    #[test]
+    fn scoring_keys_may_change_and_training_keys_are_named() {
+        let renamed = RUN.replace("name = \"a\"", "name = \"b\"").replace("root = \"/x\"", "root = \"/y\"");
+        assert!(training_differences(RUN, &renamed).unwrap().is_empty());
+        let faster = RUN.replace("lr = 0.0002", "lr = 0.0004").replace("width = 96", "width = 128");
+        let d = training_differences(RUN, &faster).unwrap();
+        assert_eq!(
+            d,
+            vec!["data.sources[0].width: 128 here, 96 in the run", "train.lr: 0.0004 here, 0.0002 in the run"]
+        );
+        let more = format!("{RUN}\n[loss]\nkind = \"edge-aware\"\n");
+        assert_eq!(
+            training_differences(RUN, &more).unwrap(),
+            vec!["loss.kind: \"edge-aware\" here, absent in the run"]
+        );
+        let e = another_run(std::path::Path::new("runs/x"), &d).to_string();
+        assert!(e.contains("data.sources[0].width") && e.contains("runs/x") && e.contains("train.lr"), "{e}");
+    }
+}
