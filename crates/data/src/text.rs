@@ -25,6 +25,12 @@ pub fn glyph(c: char) -> [u8; 5] {
         '%' => [5, 1, 2, 4, 5],
         ':' => [0, 2, 0, 2, 0],
         '/' => [1, 1, 2, 4, 4],
+        '+' => [0, 2, 7, 2, 0],
+        '(' => [1, 2, 2, 2, 1],
+        ')' => [4, 2, 2, 2, 4],
+        '=' => [0, 7, 0, 7, 0],
+        ',' => [0, 0, 0, 2, 4],
+        '_' => [0, 0, 0, 0, 7],
         'A' => [2, 5, 7, 5, 5],
         'B' => [6, 5, 6, 5, 6],
         'C' => [3, 4, 4, 4, 3],
@@ -99,7 +105,7 @@ mod tests {
 
     #[test]
     fn every_listed_character_has_a_distinct_glyph() {
-        let chars: Vec<char> = "0123456789.-%:/ABCDEFGHIJKLMNOPQRSTUVWXYZ".chars().collect();
+        let chars: Vec<char> = "0123456789.-%:/+()=,_ABCDEFGHIJKLMNOPQRSTUVWXYZ".chars().collect();
         for (i, a) in chars.iter().enumerate() {
             assert_ne!(glyph(*a), [0; 5], "{a} is blank");
             for b in &chars[i + 1..] {

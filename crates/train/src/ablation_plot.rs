@@ -80,29 +80,39 @@ pub fn render(rows: &[RowCurves]) -> RgbImage {
     let mut img = RgbImage::from_pixel(PANEL_W, height, Rgb([255, 255, 255]));
     let summaries: Vec<_> = rows.iter().map(summary).collect();
     let max_step = summaries.iter().flatten().map(|p| p.0).fold(1.0f64, f64::max);
-    let means: Vec<Series> = summaries.iter().map(|s| s.iter().map(|p| (p.0, p.1)).collect()).collect();
     let highs: Vec<Series> = summaries.iter().map(|s| s.iter().map(|p| (p.0, p.3)).collect()).collect();
-    // The highest seed sets the axis; drawn in white first so the panel scales to it.
-    let mut series: Vec<(&Series, Rgb<u8>, bool, &str)> =
+    // The panel's axes and grid, scaled to the highest seed; the curves are drawn below.
+    let series: Vec<(&Series, Rgb<u8>, bool, &str)> =
         highs.iter().map(|h| (h, Rgb([255, 255, 255]), false, "")).collect();
-    series.extend(means.iter().enumerate().map(|(i, m)| (m, PALETTE[i % PALETTE.len()], true, "")));
     panel(&mut img, 0, "VALIDATION EPE PX / STEP", &series, max_step);
     let top = highs.iter().flatten().map(|p| p.1).filter(|v| v.is_finite()).fold(0.0f64, f64::max);
     let top = if top > 0.0 { top } else { 1.0 };
     let (x0, x1) = (f64::from(crate::plot::LEFT), f64::from(PANEL_W - 14));
     let (y0, y1) = (f64::from(HEIGHT - crate::plot::BOTTOM), f64::from(crate::plot::TOP));
     let to_px = |s: f64, v: f64| (x0 + (x1 - x0) * s / max_step, y0 + (y1 - y0) * (v / top).clamp(0.0, 1.0));
+    // Bands first, each row's beside the others' at a step, then every mean line over them.
+    let several = rows.len() as f64;
     for (i, summary) in summaries.iter().enumerate().filter(|(i, _)| rows[*i].seeds.len() > 1) {
         let band = light(PALETTE[i % PALETTE.len()]);
+        let offset = (i as f64 - (several - 1.0) / 2.0) * 6.0;
         for &(step, _, low, high) in summary {
             let ((x, ylow), (_, yhigh)) = (to_px(step, low), to_px(step, high));
-            for dx in -3..=3 {
-                line(&mut img, (x + f64::from(dx), ylow), (x + f64::from(dx), yhigh), band);
+            for dx in -2..=2 {
+                let x = x + offset + f64::from(dx);
+                line(&mut img, (x, ylow), (x, yhigh), band);
             }
         }
+    }
+    for (i, summary) in summaries.iter().enumerate() {
+        let colour = PALETTE[i % PALETTE.len()];
         let means: Vec<_> = summary.iter().map(|p| to_px(p.0, p.1)).collect();
         for w in means.windows(2) {
-            line(&mut img, w[0], w[1], PALETTE[i % PALETTE.len()]);
+            line(&mut img, w[0], w[1], colour);
+        }
+        for &(x, y) in &means {
+            for dx in -2..=2 {
+                line(&mut img, (x + f64::from(dx), y - 2.0), (x + f64::from(dx), y + 2.0), colour);
+            }
         }
     }
     line(&mut img, (0.0, f64::from(HEIGHT + 2)), (f64::from(PANEL_W - 1), f64::from(HEIGHT + 2)), GRID);

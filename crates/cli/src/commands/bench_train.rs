@@ -111,8 +111,9 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
             100.0 * all_reduce / med
         );
     }
+    let per_rank = if world.size() > 1 { " of this rank" } else { "" };
     println!(
-        "work ~{:.1} GFLOP (3x the forward's direct convolutions): {:.1} GFLOP/s",
+        "work{per_rank} ~{:.1} GFLOP (3x the forward's direct convolutions): {:.1} GFLOP/s",
         6.0 * macs as f64 / 1e9,
         6.0 * macs as f64 / med / 1e9
     );
