@@ -109,3 +109,50 @@ fn eval_says_which_root_and_options_a_data_set_takes() {
         }
     }
 }
+
+/// `--shard 0/2` and `1/2`, merged with `--merge`, write the unsharded evaluation's table.
+#[test]
+fn shards_merge_into_the_unsharded_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("scenes");
+    for (k, shift) in [1usize, 2, 3].into_iter().enumerate() {
+        let scene = root.join(format!("scene-{k}"));
+        std::fs::create_dir_all(&scene).unwrap();
+        let texture = |x: usize, y: usize| {
+            let v = ((x * 37 + y * 11 + k * 5) % 23) as f32 * 10.0;
+            [v, 255.0 - v, (x * 5 % 255) as f32]
+        };
+        save_rgb(scene.join("im0.png"), &RgbImage::from_fn(48, 32, texture)).unwrap();
+        save_rgb(scene.join("im1.png"), &RgbImage::from_fn(48, 32, |x, y| texture(x + shift, y))).unwrap();
+        write_disparity(scene.join("disp0GT.pfm"), &DisparityMap::filled(48, 32, shift as f32)).unwrap();
+    }
+    let run = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["eval", "--dataset", "folder", "--root", root.to_str().unwrap(), "--iters", "2"];
+        args.extend_from_slice(&["--min-size", "off", "--out", out.to_str().unwrap()]);
+        args.extend_from_slice(extra);
+        let o = dgstereo(&args);
+        assert!(o.status.success(), "{}", text(&o));
+    };
+    let (whole, first, second, merged) =
+        (dir.path().join("whole"), dir.path().join("s0"), dir.path().join("s1"), dir.path().join("merged"));
+    run(&whole, &[]);
+    run(&first, &["--shard", "0/2"]);
+    run(&second, &["--shard", "1/2"]);
+    assert_eq!(scored_rows(&first).len(), 2);
+    assert_eq!(scored_rows(&second).len(), 1);
+    let o = dgstereo(&[
+        "eval",
+        "--merge",
+        second.to_str().unwrap(),
+        first.to_str().unwrap(),
+        "--out",
+        merged.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    for file in ["eval.csv", "eval.json"] {
+        let (a, b) = (std::fs::read(whole.join(file)).unwrap(), std::fs::read(merged.join(file)).unwrap());
+        assert!(a == b, "{file}: merged differs from unsharded:\n{}", String::from_utf8_lossy(&b));
+    }
+    let o = dgstereo(&["eval", "--merge", first.to_str().unwrap(), "--out", merged.to_str().unwrap()]);
+    assert!(!o.status.success() && text(&o).contains("0..2"), "{}", text(&o));
+}

@@ -15,6 +15,7 @@ pub mod driver;
 pub mod files;
 pub mod metrics;
 pub mod protocol;
+pub mod shards;
 pub mod table;
 
 pub use benchmark::{BenchmarkConfig, DatasetKind};

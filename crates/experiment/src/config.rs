@@ -46,6 +46,9 @@ pub struct ExperimentConfig {
     /// held-out synthetic set. Their folders need to exist only when a run is evaluated.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub benchmarks: Vec<BenchmarkConfig>,
+    /// Scheduler options (`[launcher]`), for `dgstereo ablate --launcher slurm`.
+    #[serde(default, skip_serializing_if = "crate::launcher::LauncherConfig::is_default")]
+    pub launcher: crate::launcher::LauncherConfig,
 }
 
 impl ExperimentConfig {

@@ -59,6 +59,7 @@
 pub mod config;
 pub mod inherit;
 pub mod keys;
+pub mod launcher;
 pub mod paths;
 pub mod smoke;
 pub mod sweep;

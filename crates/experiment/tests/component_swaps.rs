@@ -113,6 +113,7 @@ fn experiment(c: &Combination) -> ExperimentConfig {
         train: Default::default(),
         data: Default::default(),
         benchmarks: Vec::new(),
+        launcher: Default::default(),
     }
 }
 
@@ -305,6 +306,7 @@ fn every_kind_is_checked_against_the_prior() {
                     train: Default::default(),
                     data: Default::default(),
                     benchmarks: Vec::new(),
+                    launcher: Default::default(),
                 };
                 let keys: Vec<String> = config.problems().into_iter().map(|p| p.key).collect();
                 let expected: &[&str] = match (model.needs_prior(), config.prior.gives_prior()) {

@@ -97,12 +97,14 @@ pub struct AblationTable {
     pub pairs: Vec<(String, usize)>,
     /// Remarks printed under the legend (rows trained with different losses).
     pub notes: Vec<String>,
+    /// Runs without scores (failed, or not finished), each with what is known of it.
+    pub missing: Vec<(String, String)>,
 }
 
 impl AblationTable {
     /// A table with the given columns and no rows.
     pub fn new(columns: Vec<(String, String)>) -> Self {
-        Self { columns, rows: Vec::new(), pairs: Vec::new(), notes: Vec::new() }
+        Self { columns, rows: Vec::new(), pairs: Vec::new(), notes: Vec::new(), missing: Vec::new() }
     }
 
     /// Records that `benchmark` scores `pairs` pairs (shown in the legend).
@@ -129,6 +131,12 @@ impl AblationTable {
             Some(row) => row.seeds.push(scores),
             None => self.rows.push(AblationRow { name, steps, seeds: vec![scores] }),
         }
+    }
+
+    /// Records run `run`, which has no scores, and why (`not finished (log: ...)`); it is a row of
+    /// its own in every format, never a silent gap.
+    pub fn push_missing(&mut self, run: &str, reason: &str) {
+        self.missing.push((run.to_string(), reason.to_string()));
     }
 
     /// Per column, the best and second-best rows by mean, each only where it beats the next row
@@ -198,6 +206,9 @@ impl AblationTable {
             }
             s.push('\n');
         }
+        for (run, reason) in &self.missing {
+            s += &format!("| {run} | 0 | – | {reason} |{}\n", " – |".repeat(self.columns.len().saturating_sub(1)));
+        }
         s.push('\n');
         s += &self.legend();
         s.push('\n');
@@ -219,6 +230,9 @@ impl AblationTable {
                 s += &number(row.std(c));
             }
             s.push('\n');
+        }
+        for (run, _) in &self.missing {
+            s += &format!("{},0,{}\n", run.replace(',', ";"), ",".repeat(2 * self.columns.len()));
         }
         s
     }
@@ -255,7 +269,8 @@ impl AblationTable {
                        "std": by_column(&|c| r.std(c)), "seeds": seeds})
             })
             .collect();
-        json!({"columns": columns, "rows": rows, "lower_is_better": true})
+        let missing: Vec<_> = self.missing.iter().map(|(run, reason)| json!({"run": run, "reason": reason})).collect();
+        json!({"columns": columns, "rows": rows, "missing": missing, "lower_is_better": true})
     }
 
     /// Writes `ablation.md`, `ablation.csv` and `ablation.json` into `dir` (atomically).

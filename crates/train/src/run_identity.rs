@@ -1,15 +1,15 @@
 //! A run's identity: the keys of its resolved configuration that change what it trains.
 //!
-//! Design decision: a run folder belongs to one training. Its name, its description and the
-//! benchmarks it is scored on (their folders, iterations and sizes) do not change a single
-//! weight, so they may change between the run and a later `--resume` or `ablate`; every other
+//! Design decision: a run folder belongs to one training. Its name, its description, the
+//! benchmarks it is scored on (their folders, iterations and sizes) and where a scheduler runs it
+//! do not change a single weight, so they may change between the run and a later `--resume` or `ablate`; every other
 //! key does, and a difference there means the folder holds another run.
 
 use dgstereo_core::{Error, Result};
 use toml::Value;
 
-/// Top-level keys that describe or score a run and do not change its training.
-pub const SCORING_KEYS: [&str; 3] = ["name", "description", "benchmarks"];
+/// Top-level keys that describe, score or place a run and do not change its training.
+pub const SCORING_KEYS: [&str; 4] = ["name", "description", "benchmarks", "launcher"];
 
 /// Every leaf of `value` under `prefix`, as `(dotted key, value)`; arrays of tables are entered
 /// by index (`data.sources[0].root`), other arrays are values.

@@ -32,11 +32,11 @@ pub struct EvalArgs {
     /// folders), eth3d (two-view training), kitti2012, kitti2015 (training folders), sceneflow
     /// (FlyingThings3D finalpass TEST), drivingstereo (weather subsets), folder (pairs with
     /// `*disp*` or disp0GT ground truth, e.g. assets/cones).
-    #[arg(long)]
-    dataset: DatasetKind,
+    #[arg(long, required_unless_present = "merge")]
+    dataset: Option<DatasetKind>,
     /// Root folder of the data set.
-    #[arg(long)]
-    root: PathBuf,
+    #[arg(long, required_unless_present = "merge")]
+    root: Option<PathBuf>,
     /// Middlebury: the MiddEval3 split Q, H or F (--root is then the MiddEval3 folder).
     #[arg(long)]
     split: Option<MiddleburySplit>,
@@ -52,6 +52,14 @@ pub struct EvalArgs {
     /// Evaluate only the first N samples.
     #[arg(long)]
     limit: Option<usize>,
+    /// Score only shard I of N (`--shard 0/4`): every Nth sample from the Ith; `eval --merge`
+    /// combines the shards' folders into the unsharded table.
+    #[arg(long)]
+    shard: Option<dgstereo_eval::shards::Shard>,
+    /// Merge the `eval-shard.json` of these shard output folders into one table in `--out`,
+    /// equal to the unsharded evaluation's (no model runs).
+    #[arg(long, num_args = 1.., conflicts_with_all = ["dataset", "root", "shard"])]
+    merge: Vec<PathBuf>,
     #[command(flatten)]
     model: ModelArgs,
 }
@@ -60,42 +68,77 @@ pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
     eval(a).map_err(|e| anyhow::anyhow!(error_line(&e)))
 }
 
+/// `eval --merge`: the shards' rows in the data set's order, aggregated as one evaluation.
+fn merge(a: &EvalArgs) -> anyhow::Result<ExitCode> {
+    let shards = a
+        .merge
+        .iter()
+        .map(|d| dgstereo_eval::shards::ShardResult::read(&d.join("eval-shard.json")))
+        .collect::<Result<Vec<_>, _>>()?;
+    let table = dgstereo_eval::shards::merge(&shards)?;
+    std::fs::create_dir_all(&a.out)
+        .map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", a.out.display()))?;
+    println!("{table}");
+    let (csv, json) = (a.out.join("eval.csv"), a.out.join("eval.json"));
+    table.write_csv(&csv)?;
+    table.write_json(&json)?;
+    println!(
+        "merged {} shard(s), {} sample(s); wrote {} and {}",
+        shards.len(),
+        table.rows.len(),
+        csv.display(),
+        json.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
 fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
+    if !a.merge.is_empty() {
+        return merge(&a);
+    }
     let start = Instant::now();
-    if !a.root.is_dir() {
-        bail!("{}: --root must be the data set's folder", a.root.display());
+    let (Some(dataset_kind), Some(root)) = (a.dataset, a.root.clone()) else {
+        bail!("--dataset and --root are required (or --merge)");
+    };
+    if !root.is_dir() {
+        bail!("{}: --root must be the data set's folder", root.display());
     }
     let benchmark = BenchmarkConfig {
         split: a.split,
         weather: a.weather,
         subset: a.subset,
-        ..BenchmarkConfig::new(a.dataset, &a.root)
+        ..BenchmarkConfig::new(dataset_kind, &root)
     };
     if let Some((key, message)) = benchmark.option_problems().into_iter().next() {
         bail!("--{key}: {message}");
     }
-    if a.dataset == DatasetKind::Middlebury && a.split.is_none() && !middeval3_splits_in(&a.root).is_empty() {
-        bail!("{}: a MiddEval3 folder: choose its split with --split Q, H or F", a.root.display());
+    if dataset_kind == DatasetKind::Middlebury && a.split.is_none() && !middeval3_splits_in(&root).is_empty() {
+        bail!("{}: a MiddEval3 folder: choose its split with --split Q, H or F", root.display());
     }
     let dataset = benchmark.load()?;
     if dataset.files.is_empty() {
-        bail!("{}: no {} samples found in this folder", a.root.display(), a.dataset);
+        bail!("{}: no {} samples found in this folder", root.display(), dataset_kind);
     }
     let without_gt: Vec<&str> =
         dataset.files.iter().filter(|f| f.disparity.is_none()).map(|f| f.name.as_str()).collect();
     if without_gt.len() == dataset.files.len() {
-        bail!("{}: no sample has ground truth disparity (is this a test split?)", a.root.display());
+        bail!("{}: no sample has ground truth disparity (is this a test split?)", root.display());
     }
-    let n = a.limit.unwrap_or(usize::MAX).min(dataset.len());
-    let protocol = a.dataset.protocol();
+    let total = a.limit.unwrap_or(usize::MAX).min(dataset.len());
+    let all: Vec<usize> = (0..total).collect();
+    let indices = a.shard.map_or_else(|| all.clone(), |s| s.select(&all));
+    let n = indices.len();
+    let names: Vec<String> = dataset.files.iter().map(|f| f.name.clone()).collect();
+    let protocol = dataset_kind.protocol();
     let (engine, options) = load_engine(&a.model)?;
     eprintln!("configuration: {}", describe(&engine, &options));
     std::fs::create_dir_all(&a.out)
         .map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", a.out.display()))?;
     eprintln!(
-        "{:?}: {n} of {} sample(s), protocol {}, weights {}, {} iterations{}{}",
-        a.dataset,
+        "{:?}: {n} of {} sample(s){}, protocol {}, weights {}, {} iterations{}{}",
+        dataset_kind,
         dataset.len(),
+        a.shard.map_or(String::new(), |s| format!(" (shard {}/{})", s.index, s.count)),
         protocol.name(),
         engine.weights().display(),
         options.iters,
@@ -109,7 +152,7 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
     let mut k = 0;
     let result = evaluate_dataset(
         Arc::new(dataset) as Arc<dyn Dataset>,
-        (0..n).collect(),
+        indices,
         protocol,
         |sample| {
             engine
@@ -132,6 +175,12 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
     let (csv, json) = (a.out.join("eval.csv"), a.out.join("eval.json"));
     result.table.write_csv(&csv)?;
     result.table.write_json(&json)?;
+    if let Some(shard) = a.shard {
+        let stored = dgstereo_eval::shards::ShardResult::new(&result.table, shard, total, |name| {
+            names.iter().position(|n| n == name)
+        })?;
+        stored.write(&a.out.join("eval-shard.json"))?;
+    }
     println!(
         "summary: {} of {n} sample(s) scored, {} failed, {:.1} s; wrote {} and {}",
         result.table.rows.len(),

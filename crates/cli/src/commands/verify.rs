@@ -106,6 +106,7 @@ fn recipe(experiment: Option<&Path>) -> anyhow::Result<TrainParts> {
             train: Default::default(),
             data: Default::default(),
             benchmarks: Vec::new(),
+            launcher: Default::default(),
         },
     };
     Ok(super::train::parts_of(config, None))

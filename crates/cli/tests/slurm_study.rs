@@ -1,0 +1,178 @@
+//! Studies on Slurm, against a real single-node cluster (`scripts/slurm-local.sh start`; where
+//! Slurm cannot be started the tests fail under `CI=true` and skip with a notice elsewhere).
+//!
+//! - Two tiny runs (a sweep of two seeds) submitted with `--launcher slurm --wait` write tables
+//!   byte-identical to a local `ablate`'s.
+//! - A task signalled with `scancel --signal=USR1 --batch` mid-run checkpoints, requeues, resumes
+//!   and ends with a `model.safetensors` byte-identical to an uninterrupted local run's.
+//! - An invalid run among valid ones submits nothing and names the file and the key.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use common::text;
+
+/// The tests share one cluster of two CPUs: one at a time.
+static CLUSTER: Mutex<()> = Mutex::new(());
+
+/// `SLURM_CONF` of the local cluster, started when needed; `None` (with a notice) where it cannot
+/// be, a failure under `CI=true`.
+fn local_slurm() -> Option<String> {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/slurm-local.sh");
+    let started = Command::new("bash").arg(&script).arg("start").output();
+    let conf = started.as_ref().ok().filter(|o| o.status.success()).and_then(|o| {
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .find_map(|l| l.strip_prefix("export SLURM_CONF=").map(str::to_string))
+    });
+    if conf.is_none() {
+        let why = started.map(|o| text(&o)).unwrap_or_else(|e| e.to_string());
+        assert!(std::env::var("CI").as_deref() != Ok("true"), "the local Slurm cluster did not start: {why}");
+        eprintln!("skipped: no local Slurm cluster ({})", why.trim());
+    }
+    conf
+}
+
+/// `dgstereo` with `args`, with the cluster's configuration.
+fn dgstereo(conf: &str, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dgstereo")).args(args).env("SLURM_CONF", conf).output().unwrap()
+}
+
+fn slurm(conf: &str, program: &str, args: &[&str]) -> String {
+    let o = Command::new(program).args(args).env("SLURM_CONF", conf).output().unwrap();
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// A tiny experiment of `steps` steps, checkpointing only at its end, with `extra` appended.
+fn experiment(dir: &Path, name: &str, steps: usize, extra: &str) -> PathBuf {
+    let toml = format!(
+        r#"name = "{name}"
+[model.encoder]
+feature_dim = 16
+trunk_dims = [8, 8, 8]
+[model.updater]
+hidden_dims = [16, 16, 16]
+n_gru_layers = 1
+[train]
+steps = {steps}
+batch_size = 1
+crop = [32, 64]
+iters = 2
+seed = 3
+log_every = 1
+checkpoint_every = 1000
+validate_every = 0
+[[data.sources]]
+kind = "synthetic"
+width = 96
+height = 48
+[data.validation]
+count = 1
+width = 64
+height = 32
+iters = 2
+{extra}
+"#
+    );
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, toml).unwrap();
+    path
+}
+
+#[test]
+fn a_slurm_study_writes_the_tables_of_a_local_one() {
+    let _one = CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(conf) = local_slurm() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let exp = experiment(dir.path(), "pair", 3, "[sweep]\n\"train.seed\" = [1, 2]\n");
+    let (local, cluster) = (dir.path().join("local"), dir.path().join("cluster"));
+    let o = dgstereo(&conf, &["ablate", exp.to_str().unwrap(), "--out", local.to_str().unwrap(), "--quiet"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = dgstereo(
+        &conf,
+        &["ablate", exp.to_str().unwrap(), "--out", cluster.to_str().unwrap(), "--launcher", "slurm", "--wait"],
+    );
+    let said = text(&o);
+    assert!(o.status.success(), "{said}");
+    assert!(said.contains("submitted array job"), "{said}");
+    for table in ["ablation.md", "ablation.csv", "ablation.json"] {
+        let (a, b) = (std::fs::read(local.join(table)).unwrap(), std::fs::read(cluster.join(table)).unwrap());
+        assert!(a == b, "{table} differs between the local and the Slurm study:\n{}", String::from_utf8_lossy(&b));
+    }
+    assert!(cluster.join("slurm/task-0.out").is_file() && cluster.join("slurm/task-1.out").is_file());
+}
+
+#[test]
+fn a_preempted_task_requeues_and_ends_as_an_uninterrupted_run() {
+    let _one = CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(conf) = local_slurm() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let steps = 40;
+    let exp = experiment(dir.path(), "long", steps, "");
+    let (study, whole) = (dir.path().join("study"), dir.path().join("whole"));
+    let o =
+        dgstereo(&conf, &["ablate", exp.to_str().unwrap(), "--out", study.to_str().unwrap(), "--launcher", "slurm"]);
+    let said = text(&o);
+    assert!(o.status.success(), "{said}");
+    let array =
+        said.split("submitted array job ").nth(1).and_then(|s| s.split_whitespace().next()).unwrap().to_string();
+    let task = format!("{array}_0");
+    let log = study.join("long/log.jsonl");
+    let lines = || std::fs::read_to_string(&log).map_or(0, |l| l.lines().filter(|l| l.contains("\"train\"")).count());
+    let started = Instant::now();
+    while lines() < 2 {
+        assert!(started.elapsed() < Duration::from_secs(180), "the task logged no step in 180 s");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    slurm(&conf, "scancel", &["--signal=USR1", "--batch", &task]);
+    // Requeued, the task waits for its begin time; let it start at once.
+    let started = Instant::now();
+    while !study.join("ablation.csv").is_file() {
+        assert!(started.elapsed() < Duration::from_secs(300), "the study did not finish in 300 s");
+        let _ = slurm(&conf, "scontrol", &["update", &format!("jobid={task}"), "starttime=now"]);
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    let task_log = std::fs::read_to_string(study.join("slurm/task-0.out")).unwrap();
+    assert!(task_log.contains("SIGUSR1: stopped at step"), "{task_log}");
+    assert!(task_log.contains("resuming at step"), "{task_log}");
+    let o = dgstereo(&conf, &["train", exp.to_str().unwrap(), "--out", whole.to_str().unwrap(), "--quiet"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let (a, b) = (
+        std::fs::read(study.join("long/model.safetensors")).unwrap(),
+        std::fs::read(whole.join("model.safetensors")).unwrap(),
+    );
+    assert!(a == b, "the requeued run's model.safetensors differs from the uninterrupted run's");
+}
+
+#[test]
+fn an_invalid_run_submits_nothing_and_names_the_file_and_key() {
+    let _one = CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(conf) = local_slurm() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let good = experiment(dir.path(), "good", 3, "");
+    let bad = experiment(dir.path(), "bad", 3, "[loss]\nkind = \"edge-aware\"\ntau = -1.0\n");
+    let study = dir.path().join("study");
+    let jobs = || slurm(&conf, "squeue", &["-h", "-o", "%i"]).lines().count();
+    let before = jobs();
+    let o = dgstereo(
+        &conf,
+        &[
+            "ablate",
+            good.to_str().unwrap(),
+            bad.to_str().unwrap(),
+            "--out",
+            study.to_str().unwrap(),
+            "--launcher",
+            "slurm",
+        ],
+    );
+    let said = text(&o);
+    assert!(!o.status.success(), "{said}");
+    assert!(said.contains("bad.toml") && said.contains("loss.tau"), "{said}");
+    assert!(!study.join("slurm").exists(), "nothing is written");
+    assert_eq!(jobs(), before, "nothing is submitted");
+}
