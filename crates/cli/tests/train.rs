@@ -183,6 +183,19 @@ fn ablate_scores_benchmarks_reuses_finished_runs_and_rescores_new_benchmarks() {
     let o = dgstereo(&[&args[..], &["--rescore"]].concat());
     assert!(o.status.success() && !text(&o).contains("scores reused"), "{}", text(&o));
     assert_eq!(modified(&model), before);
+
+    // --collect builds the same tables from the run folders; a run without its model is a row
+    // saying so, with its log, and the status is a failure.
+    let csv = std::fs::read_to_string(out.join("ablation.csv")).unwrap();
+    let o = dgstereo(&["ablate", "--collect", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(std::fs::read_to_string(out.join("ablation.csv")).unwrap(), csv);
+    std::fs::remove_file(&model).unwrap();
+    let o = dgstereo(&["ablate", "--collect", "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success(), "{}", text(&o));
+    let md = std::fs::read_to_string(out.join("ablation.md")).unwrap();
+    let log = out.join("tiny/log.jsonl");
+    assert!(md.contains(&format!("| tiny | 0 | – | not finished (log: {}) |", log.display())), "{md}");
 }
 
 #[test]

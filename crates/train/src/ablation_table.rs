@@ -298,3 +298,20 @@ pub fn mean_metrics(metrics: &[Metrics]) -> Metrics {
         valid_pixels: metrics.iter().map(|m| m.valid_pixels).sum(),
     }
 }
+
+/// The field-wise sample standard deviation of `metrics` (`n - 1`; a row's seeds).
+pub fn std_metrics(metrics: &[Metrics]) -> Metrics {
+    let mean = mean_metrics(metrics);
+    let n = metrics.len().saturating_sub(1).max(1) as f64;
+    let std = |f: fn(&Metrics) -> f64| (metrics.iter().map(|m| (f(m) - f(&mean)).powi(2)).sum::<f64>() / n).sqrt();
+    Metrics {
+        epe: std(|m| m.epe),
+        bad_0_5: std(|m| m.bad_0_5),
+        bad_1: std(|m| m.bad_1),
+        bad_2: std(|m| m.bad_2),
+        bad_3: std(|m| m.bad_3),
+        bad_4: std(|m| m.bad_4),
+        d1_all: std(|m| m.d1_all),
+        valid_pixels: mean.valid_pixels,
+    }
+}

@@ -9,7 +9,8 @@
 //! a pure function of what `dgstereo ablate` scored, so the same runs always give the same
 //! tables, and a partial ablation (some rows trained, some benchmarks present) still fills what it
 //! can. With the published figures, each row is three lines: ours, the paper's, and ours minus the
-//! paper's (every metric is an error, so a positive difference is worse than published).
+//! paper's (every metric is an error, so a positive difference is worse than published). A row of
+//! several seeds shows its mean `± std`, as the ablation table does.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -25,8 +26,12 @@ use crate::paper_tables::{PAPER_SOURCE, PAPER_TABLES, PaperTable};
 pub struct RunScores {
     /// The run's name (an experiment file's `name`, with a sweep suffix).
     pub run: String,
-    /// `(benchmark name, metrics)` for each benchmark the run was scored on.
+    /// `(benchmark name, metrics)` for each benchmark the run was scored on (for a row of
+    /// several seeds, their mean).
     pub scores: Vec<(String, Metrics)>,
+    /// For a row of several seeds, `(benchmark name, standard deviation of each metric)`; empty
+    /// for a single run.
+    pub spread: Vec<(String, Metrics)>,
 }
 
 /// One of the paper's tables filled with our values.
@@ -38,6 +43,8 @@ pub struct PaperComparison {
     pub ours: Vec<Vec<f64>>,
     /// Per row, whether its run is among the results.
     pub found: Vec<bool>,
+    /// The standard deviation over seeds per row and column (NaN for a single run).
+    pub spread: Vec<Vec<f64>>,
 }
 
 impl PaperComparison {
@@ -45,22 +52,25 @@ impl PaperComparison {
     pub fn new(table: &'static PaperTable, runs: &[RunScores]) -> Self {
         let mut ours = Vec::with_capacity(table.rows.len());
         let mut found = Vec::with_capacity(table.rows.len());
+        let mut spread = Vec::with_capacity(table.rows.len());
         for row in table.rows {
             let run = runs.iter().find(|r| r.run == row.run);
             found.push(run.is_some());
-            ours.push(
+            let values = |of: fn(&RunScores) -> &Vec<(String, Metrics)>| -> Vec<f64> {
                 table
                     .columns
                     .iter()
                     .map(|c| {
-                        run.and_then(|r| r.scores.iter().find(|(b, _)| b == c.benchmark))
+                        run.and_then(|r| of(r).iter().find(|(b, _)| b == c.benchmark))
                             .and_then(|(_, m)| m.get(c.metric))
                             .unwrap_or(f64::NAN)
                     })
-                    .collect(),
-            );
+                    .collect()
+            };
+            ours.push(values(|r| &r.scores));
+            spread.push(values(|r| &r.spread));
         }
-        Self { table, ours, found }
+        Self { table, ours, found, spread }
     }
 
     /// Whether any row's run is among the results.
@@ -89,6 +99,9 @@ impl PaperComparison {
     /// difference.
     fn lines(&self, r: usize, with_paper: bool) -> Vec<(&'static str, Vec<f64>)> {
         let mut lines = vec![("ours", self.ours[r].clone())];
+        if self.spread[r].iter().any(|v| v.is_finite()) {
+            lines.push(("ours std", self.spread[r].clone()));
+        }
         if with_paper {
             let paper = self.table.rows[r].values;
             lines.push(("paper", paper.to_vec()));
@@ -112,15 +125,18 @@ impl PaperComparison {
         s.push('\n');
         for (r, row) in t.rows.iter().enumerate() {
             let run = if self.found[r] { format!("`{}`", row.run) } else { format!("`{}` (not run)", row.run) };
-            for (k, (source, values)) in self.lines(r, with_paper).into_iter().enumerate() {
+            let lines = self.lines(r, with_paper).into_iter().filter(|(source, _)| *source != "ours std");
+            for (k, (source, values)) in lines.enumerate() {
                 s += &if k == 0 { format!("| {} | {run} |", row.label) } else { "| | |".to_string() };
                 if with_paper {
                     let _ = write!(s, " {source} |");
                 }
-                for v in values {
+                for (c, v) in values.into_iter().enumerate() {
+                    let spread = self.spread[r][c];
                     let text = match (v.is_finite(), source) {
                         (false, _) => "–".to_string(),
                         (true, "difference") => format!("{v:+.2}"),
+                        (true, "ours") if spread.is_finite() => format!("{v:.2} ± {spread:.2}"),
                         (true, _) => format!("{v:.2}"),
                     };
                     let _ = write!(s, " {text} |");
@@ -135,8 +151,8 @@ impl PaperComparison {
     }
 
     /// The table as CSV: `row,run,source,<benchmark heading> <metric heading>,...`, one line per
-    /// row (`source` = `ours`) and, `with_paper`, `paper` and `difference` lines; unknown values
-    /// are empty cells.
+    /// row (`source` = `ours`), an `ours std` line for a row of several seeds and, `with_paper`,
+    /// `paper` and `difference` lines; unknown values are empty cells.
     pub fn to_csv(&self, with_paper: bool) -> String {
         let t = self.table;
         let mut s = String::from("row,run,source");

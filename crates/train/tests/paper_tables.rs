@@ -97,9 +97,13 @@ fn fake_runs_fill_the_papers_layout() {
     paper_scores.push(("middlebury-h".into(), metrics(1.234, 8.0)));
     paper_scores.push(("synthetic".into(), metrics(9.0, 9.0)));
     let runs = [
-        RunScores { run: "paper".into(), scores: paper_scores },
+        RunScores { run: "paper".into(), scores: paper_scores, spread: Vec::new() },
         // A run the paper's tables do not name is ignored.
-        RunScores { run: "smoke/baseline".into(), scores: vec![("middlebury-h".into(), metrics(5.0, 50.0))] },
+        RunScores {
+            run: "smoke/baseline".into(),
+            scores: vec![("middlebury-h".into(), metrics(5.0, 50.0))],
+            spread: Vec::new(),
+        },
     ];
     let tables = compare_with_paper(&runs);
     assert_eq!(tables.len(), 4);
@@ -164,7 +168,11 @@ fn fake_runs_fill_the_papers_layout() {
 #[test]
 fn the_tables_are_written_as_markdown_and_csv() {
     let dir = tempfile::tempdir().unwrap();
-    let runs = [RunScores { run: "+dgia".into(), scores: vec![("eth3d".into(), metrics(0.25, 2.0))] }];
+    let runs = [RunScores {
+        run: "+dgia".into(),
+        scores: vec![("eth3d".into(), metrics(0.25, 2.0))],
+        spread: vec![("eth3d".into(), metrics(0.05, 0.5))],
+    }];
     let tables = compare_with_paper(&runs);
     write_paper_tables(&tables, dir.path(), true).unwrap();
     let md = std::fs::read_to_string(dir.path().join("paper-tables.md")).unwrap();
@@ -189,4 +197,8 @@ fn the_tables_are_written_as_markdown_and_csv() {
     assert!(ours.ends_with(",0.25,2"), "{ours}");
     let difference = table3.lines().find(|l| l.starts_with("Depth+DCN+both,+dgia,difference")).unwrap();
     assert!(difference.ends_with(",0.040000,0.250000"), "{difference}");
+    // A row of several seeds: its spread is a line of the CSV and `± std` in the Markdown.
+    let std = table3.lines().find(|l| l.starts_with("Depth+DCN+both,+dgia,ours std")).unwrap();
+    assert!(std.ends_with(",0.05,0.5"), "{std}");
+    assert!(md.contains("0.25 ± 0.05 | 2.00 ± 0.50 |"), "{md}");
 }

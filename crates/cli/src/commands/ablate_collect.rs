@@ -14,7 +14,7 @@ use anyhow::Context;
 use dgstereo_experiment::ResolvedRun;
 use dgstereo_train::ablation::{AblationTable, TABLE_METRICS};
 use dgstereo_train::ablation_plot::{RowCurves, validation_series, write_ablation_plot};
-use dgstereo_train::ablation_table::mean_metrics;
+use dgstereo_train::ablation_table::{mean_metrics, std_metrics};
 use dgstereo_train::paper_report::{RunScores, compare_with_paper, write_paper_tables};
 use dgstereo_train::run::is_finished;
 use serde::{Deserialize, Serialize};
@@ -83,6 +83,11 @@ pub fn collect(runs: &[ResolvedRun], study: &Study, out: &Path) -> anyhow::Resul
     }
     let mut table = AblationTable::new(columns);
     table.set_pairs(&synthetic, runs.first().map_or(0, |r| r.config.data.validation.count));
+    for b in runs.iter().flat_map(|r| &r.config.benchmarks) {
+        if let Ok((_, pairs)) = b.dataset() {
+            table.set_pairs(b.label(), pairs.len());
+        }
+    }
     let losses: Vec<&str> = runs.iter().map(|r| r.config.loss.kind()).collect();
     if losses.iter().any(|k| *k != losses[0]) {
         let mut kinds = losses.clone();
@@ -99,7 +104,7 @@ pub fn collect(runs: &[ResolvedRun], study: &Study, out: &Path) -> anyhow::Resul
         match cached_scores(&folder, &parts, &run.config.benchmarks) {
             Some(scores) => {
                 table.push(&run.name, parts.train.seed, parts.train.steps, &scores);
-                scored.push(RunScores { run: run.name.clone(), scores });
+                scored.push(RunScores { run: run.name.clone(), scores, spread: Vec::new() });
             }
             None => table.push_missing(&run.name, &why_missing(&folder)),
         }
@@ -148,7 +153,8 @@ fn row_curves(table: &AblationTable, out: &std::path::Path) -> Vec<RowCurves> {
         .collect()
 }
 
-/// Each row's scores: per benchmark, the mean of its seeds' metrics.
+/// Each row's scores: per benchmark, the mean of its seeds' metrics and, for several seeds,
+/// their standard deviation.
 fn rows_of(table: &AblationTable, runs: &[RunScores]) -> Vec<RunScores> {
     table
         .rows
@@ -161,16 +167,17 @@ fn rows_of(table: &AblationTable, runs: &[RunScores]) -> Vec<RunScores> {
                     benchmarks.push(b.clone());
                 }
             }
-            let scores = benchmarks
-                .into_iter()
-                .map(|b| {
-                    let all: Vec<_> =
-                        seeds.iter().filter_map(|r| r.scores.iter().find(|(n, _)| *n == b).map(|(_, m)| *m)).collect();
-                    let mean = mean_metrics(&all);
-                    (b, mean)
-                })
-                .collect();
-            RunScores { run: row.name.clone(), scores }
+            let mut scores = Vec::new();
+            let mut spread = Vec::new();
+            for b in benchmarks {
+                let all: Vec<_> =
+                    seeds.iter().filter_map(|r| r.scores.iter().find(|(n, _)| *n == b).map(|(_, m)| *m)).collect();
+                scores.push((b.clone(), mean_metrics(&all)));
+                if all.len() > 1 {
+                    spread.push((b, std_metrics(&all)));
+                }
+            }
+            RunScores { run: row.name.clone(), scores, spread }
         })
         .collect()
 }
