@@ -159,7 +159,8 @@ fn smoke_files_build_and_run() {
     let device = dgstereo_core::default_device();
     let mut files = Vec::new();
     toml_files(&experiments_dir().join("smoke"), &mut files);
-    assert_eq!(files.len(), 4);
+    // The four rows of the smoke ablation and the two of the three-seed study (seeds/).
+    assert_eq!(files.len(), 6);
     let mut counts = Vec::new();
     for file in files {
         for run in load(&file).unwrap() {

@@ -105,7 +105,19 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
     let study = Study { files, steps: a.steps, paper: a.paper };
     study.write(&a.out)?;
     if a.launcher == Launcher::Slurm {
-        return super::ablate_slurm::submit(&runs, &a);
+        let device = match a.device {
+            DeviceChoice::Cpu => "cpu",
+            DeviceChoice::Gpu => "gpu",
+        };
+        let submission = super::ablate_slurm::Submission {
+            files: &a.files,
+            out: &a.out,
+            steps: a.steps,
+            device,
+            sbatch: a.sbatch.as_deref(),
+            wait: a.wait,
+        };
+        return super::ablate_slurm::submit(&runs, &submission);
     }
     for run in &runs {
         let status = train_and_score(run, &a, &stop)?;

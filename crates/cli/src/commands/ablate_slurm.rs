@@ -16,7 +16,21 @@ use std::process::{Command, ExitCode};
 use anyhow::{Context, bail};
 use dgstereo_experiment::ResolvedRun;
 
-use super::ablate::AblateArgs;
+/// What a Slurm study is submitted with (from `ablate`'s arguments).
+pub struct Submission<'a> {
+    /// The experiment files, in order.
+    pub files: &'a [std::path::PathBuf],
+    /// The output folder.
+    pub out: &'a Path,
+    /// `--steps`.
+    pub steps: Option<u64>,
+    /// `--device`, as the tasks' flag (`cpu`, `gpu`).
+    pub device: &'static str,
+    /// `--sbatch`.
+    pub sbatch: Option<&'a str>,
+    /// `--wait`.
+    pub wait: bool,
+}
 
 /// `text` as one word of a POSIX shell.
 fn quoted(text: &str) -> String {
@@ -37,15 +51,11 @@ fn sbatch_options(runs: &[ResolvedRun], extra: Option<&str>) -> Vec<String> {
 }
 
 /// The batch script of the array's tasks.
-fn task_script(a: &AblateArgs, count: usize, exe: &Path, out: &Path) -> String {
+fn task_script(a: &Submission<'_>, count: usize, exe: &Path, out: &Path) -> String {
     let mut command =
         vec![quoted(&exe.display().to_string()), "ablate".into(), "--task".into(), "\"$SLURM_ARRAY_TASK_ID\"".into()];
     command.extend(["--out".into(), quoted(&out.display().to_string()), "--quiet".into()]);
-    let device = match a.device {
-        dgstereo_core::DeviceChoice::Cpu => "cpu",
-        dgstereo_core::DeviceChoice::Gpu => "gpu",
-    };
-    command.extend(["--device".into(), device.into()]);
+    command.extend(["--device".into(), a.device.into()]);
     if let Some(steps) = a.steps {
         command.extend(["--steps".into(), steps.to_string()]);
     }
@@ -98,8 +108,8 @@ fn sbatch(args: &[String]) -> anyhow::Result<std::process::Output> {
 
 /// Writes the scripts and submits the array and the collecting job; with `--wait`, returns the
 /// collecting job's status once the tables are written.
-pub fn submit(runs: &[ResolvedRun], a: &AblateArgs) -> anyhow::Result<ExitCode> {
-    let out = std::path::absolute(&a.out).unwrap_or_else(|_| a.out.clone());
+pub fn submit(runs: &[ResolvedRun], a: &Submission<'_>) -> anyhow::Result<ExitCode> {
+    let out = std::path::absolute(a.out).unwrap_or_else(|_| a.out.to_path_buf());
     let dir = out.join("slurm");
     std::fs::create_dir_all(&dir).map_err(|e| dgstereo_core::Error::io(&dir, e))?;
     let exe = std::env::current_exe().context("cannot find this dgstereo binary")?;
@@ -108,7 +118,7 @@ pub fn submit(runs: &[ResolvedRun], a: &AblateArgs) -> anyhow::Result<ExitCode> 
     dgstereo_train::checkpoint::write_atomic(&tasks, task_script(a, runs.len(), &exe, &out).as_bytes())?;
     dgstereo_train::checkpoint::write_atomic(&collect, collect_script(&exe, &out).as_bytes())?;
 
-    let options = sbatch_options(runs, a.sbatch.as_deref());
+    let options = sbatch_options(runs, a.sbatch);
     let mut args: Vec<String> = vec!["--parsable".into()];
     args.extend(options.iter().cloned());
     args.push(tasks.display().to_string());
