@@ -2,7 +2,8 @@
 //!
 //! Inputs are read through `ndarray` views, so any strides work (C or Fortran order, slices,
 //! negative steps) and nothing is copied on the Python side. Images are `HxW` (grey, repeated
-//! into the three channels) or `HxWx3`, `uint8`, `float32` or `float64` in 0..255; the
+//! into the three channels), `HxWx3` or `HxWx4` (alpha dropped), `uint8`, `float32` or `float64`
+//! in 0..255; the
 //! pure-Python layer converts other dtypes first. Every check happens here, before the library
 //! sees the data, and fails with a `dgstereo.InputError` naming the argument.
 
@@ -114,9 +115,10 @@ fn image_from_view<T: Copy>(v: ArrayViewD<'_, T>, f: impl Fn(T) -> f32, what: &s
     }
     .map_err(|e| input(format!("`{what}`: {e}")))?;
     let (h, w, c) = v3.dim();
-    if c != 1 && c != 3 {
+    // RGBA drops its alpha, as the command line does when it reads an RGBA file.
+    if c != 1 && c != 3 && c != 4 {
         return Err(input(format!(
-            "`{what}`: expected 3 colour channels (HxWx3) or a grey HxW image, got shape ({h}, {w}, {c})"
+            "`{what}`: expected 3 colour channels (HxWx3, or HxWx4 whose alpha is dropped) or a grey HxW image, got shape ({h}, {w}, {c})"
         )));
     }
     if h == 0 || w == 0 {

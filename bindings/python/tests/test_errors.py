@@ -15,7 +15,8 @@ def test_error_classes():
     "left, right, message",
     [
         (np.zeros((48, 64, 3)), np.zeros((48, 60, 3)), "one size"),
-        (np.zeros((48, 64, 4)), np.zeros((48, 64, 4)), "3 colour channels"),
+        (np.zeros((48, 64, 5)), np.zeros((48, 64, 5)), "3 colour channels"),
+        (np.full((48, 64, 3), 0.5), np.full((48, 64, 3), 0.5), r"0\.\.1 .*multiply by 255"),
         (np.zeros((2, 48, 64, 3)), np.zeros((2, 48, 64, 3)), "HxWx3 or HxW"),
         (np.zeros((0, 64, 3)), np.zeros((0, 64, 3)), "empty"),
         (np.full((48, 64, 3), np.nan), np.zeros((48, 64, 3)), "non-finite"),

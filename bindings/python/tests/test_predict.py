@@ -44,6 +44,13 @@ def test_every_input_kind_gives_the_same_disparity(small, model):
     }
     for kind, (l, r) in variants.items():
         np.testing.assert_array_equal(model.predict(l, r, **QUICK), ref, err_msg=kind)
+    # RGBA drops its alpha; images in 0..1 are read with `scale`.
+    alpha = np.full(left.shape[:2] + (1,), 7, dtype=left.dtype)
+    rgba = (np.concatenate([left, alpha], -1), np.concatenate([right, alpha], -1))
+    np.testing.assert_array_equal(model.predict(*rgba, **QUICK), ref, err_msg="rgba")
+    unit = (left.astype(np.float32) / 255.0, right.astype(np.float32) / 255.0)
+    scaled = model.predict(*unit, scale=255.0, **QUICK)
+    np.testing.assert_allclose(scaled, ref, atol=1e-3, err_msg="scale=255")
     # Grey images repeat into the three channels.
     grey_l, grey_r = left[..., 1], right[..., 1]
     np.testing.assert_array_equal(

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use common::text;
+use common::{SYNTHETIC_SOURCE, TINY_VALIDATION, text, tiny_train, write_experiment};
 use dgstereo_train::gradient_exchange::{flat_gradients, flat_weights};
 use dgstereo_train::{Collective, SingleProcess, StepInternals, TrainParts, Trainer};
 use serde::{Deserialize, Serialize};
@@ -46,37 +46,8 @@ fn two_ranks(mpirun: &Path) -> Command {
 
 /// A small experiment: global batch 2, three steps of two iterations on 32x64 crops.
 fn experiment(dir: &Path, data: &str) -> PathBuf {
-    let toml = format!(
-        r#"name = "mpi"
-[model.encoder]
-feature_dim = 16
-trunk_dims = [8, 8, 8]
-[model.updater]
-hidden_dims = [16, 16, 16]
-n_gru_layers = 1
-[train]
-steps = 3
-batch_size = 2
-crop = [32, 64]
-iters = 2
-seed = 11
-log_every = 1
-checkpoint_every = 1
-validate_every = 0
-[data.validation]
-count = 1
-width = 64
-height = 32
-iters = 2
-{data}
-"#
-    );
-    let path = dir.join("mpi.toml");
-    std::fs::write(&path, toml).unwrap();
-    path
+    write_experiment(dir, "mpi.toml", "mpi", &tiny_train(3, 2, 11, 1, ""), &format!("{TINY_VALIDATION}{data}"), "")
 }
-
-const SYNTHETIC: &str = "[[data.sources]]\nkind = \"synthetic\"\nwidth = 96\nheight = 48\n";
 
 /// What a run of three steps showed: the first step's gradient (summed over the ranks), the
 /// logged losses, and the weights before and after.
@@ -143,7 +114,7 @@ fn rank_of_the_exactness_run() {
 fn two_ranks_take_the_single_process_steps() {
     let Some(mpirun) = mpirun() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let experiment = experiment(dir.path(), SYNTHETIC);
+    let experiment = experiment(dir.path(), SYNTHETIC_SOURCE);
     let out = dir.path().join("rank0.json");
     let ranks = two_ranks(&mpirun)
         .args(["-x", "DGSTEREO_MPI_TEST_OUT", "-x", "DGSTEREO_MPI_TEST_EXPERIMENT"])

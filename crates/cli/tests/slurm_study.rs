@@ -14,7 +14,7 @@ use std::process::{Command, Output};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use common::text;
+use common::{SYNTHETIC_SOURCE, TINY_VALIDATION, text, tiny_train, write_experiment};
 
 /// The tests share one cluster of two CPUs: one at a time.
 static CLUSTER: Mutex<()> = Mutex::new(());
@@ -49,38 +49,8 @@ fn slurm(conf: &str, program: &str, args: &[&str]) -> String {
 
 /// A tiny experiment of `steps` steps, checkpointing only at its end, with `extra` appended.
 fn experiment(dir: &Path, name: &str, steps: usize, extra: &str) -> PathBuf {
-    let toml = format!(
-        r#"name = "{name}"
-[model.encoder]
-feature_dim = 16
-trunk_dims = [8, 8, 8]
-[model.updater]
-hidden_dims = [16, 16, 16]
-n_gru_layers = 1
-[train]
-steps = {steps}
-batch_size = 1
-crop = [32, 64]
-iters = 2
-seed = 3
-log_every = 1
-checkpoint_every = 1000
-validate_every = 0
-[[data.sources]]
-kind = "synthetic"
-width = 96
-height = 48
-[data.validation]
-count = 1
-width = 64
-height = 32
-iters = 2
-{extra}
-"#
-    );
-    let path = dir.join(format!("{name}.toml"));
-    std::fs::write(&path, toml).unwrap();
-    path
+    let data = format!("{SYNTHETIC_SOURCE}{TINY_VALIDATION}");
+    write_experiment(dir, &format!("{name}.toml"), name, &tiny_train(steps, 1, 3, 1000, ""), &data, extra)
 }
 
 #[test]

@@ -9,42 +9,12 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{dgstereo, text};
+use common::{SYNTHETIC_SOURCE, TINY_VALIDATION, dgstereo, text, tiny_train, write_experiment};
 
 /// A tiny run of `steps` steps that checkpoints only at its end, with learning rate `lr`.
 fn experiment(dir: &Path, file: &str, steps: usize, lr: &str) -> PathBuf {
-    let toml = format!(
-        r#"name = "stop"
-[model.encoder]
-feature_dim = 16
-trunk_dims = [8, 8, 8]
-[model.updater]
-hidden_dims = [16, 16, 16]
-n_gru_layers = 1
-[train]
-steps = {steps}
-batch_size = 1
-crop = [32, 64]
-iters = 2
-lr = {lr}
-seed = 5
-log_every = 1
-checkpoint_every = 1000
-validate_every = 0
-[[data.sources]]
-kind = "synthetic"
-width = 96
-height = 48
-[data.validation]
-count = 1
-width = 64
-height = 32
-iters = 2
-"#
-    );
-    let path = dir.join(file);
-    std::fs::write(&path, toml).unwrap();
-    path
+    let train = tiny_train(steps, 1, 5, 1000, &format!("lr = {lr}\n"));
+    write_experiment(dir, file, "stop", &train, &format!("{SYNTHETIC_SOURCE}{TINY_VALIDATION}"), "")
 }
 
 fn train_lines(out: &Path) -> usize {

@@ -30,9 +30,16 @@ fn asset_roots() -> Vec<PathBuf> {
 
 /// A file under `assets/`, wherever the assets are.
 pub fn asset(relative: &str) -> Result<PathBuf> {
-    asset_roots().into_iter().map(|r| r.join(relative)).find(|p| p.exists()).ok_or_else(|| {
+    asset_in(&asset_roots(), relative)
+}
+
+/// A file under one of `roots`, or an error listing where it was looked for.
+fn asset_in(roots: &[PathBuf], relative: &str) -> Result<PathBuf> {
+    roots.iter().map(|r| r.join(relative)).find(|p| p.exists()).ok_or_else(|| {
+        let looked: Vec<String> = roots.iter().map(|r| r.display().to_string()).collect();
         Error::Other(format!(
-            "bundled asset '{relative}' not found (set DGSTEREO_ASSETS to the repository's assets/ folder)"
+            "bundled asset '{relative}' not found (looked in {}; set DGSTEREO_ASSETS to a folder holding it)",
+            looked.join(", ")
         ))
     })
 }
@@ -44,38 +51,29 @@ pub const DEFAULT_PLAIN: &str = "weights/raft-stereo-default.safetensors";
 pub const DEFAULT_WITH_PRIOR: &str = "weights/paper-default.safetensors";
 
 /// The weights used when none are given: the bundled default without a prior, or with
-/// `with_prior` (the user gave a prior) the bundled paper model. Without bundled weights, the
-/// reference checkpoint of `../shared/golden` (random weights) stands in for the plain model,
-/// and the second value is a note saying so.
+/// `with_prior` (the user gave a prior) the bundled paper model. Nothing stands in for them:
+/// without the bundled file this is an error saying what is missing and how to give weights.
+/// The second value is a note for the caller (none today).
 pub fn default_weights(with_prior: bool) -> Result<(PathBuf, Option<String>)> {
-    if with_prior {
-        let p = asset(DEFAULT_WITH_PRIOR).map_err(|e| {
-            Error::config(
-                "weights",
-                format!(
-                    "no bundled default for a model with a depth prior: set `weights` (a model trained with a prior), or leave out `prior` ({e})"
-                ),
-            )
-        })?;
-        return Ok((p, None));
-    }
-    if let Ok(p) = asset(DEFAULT_PLAIN) {
-        return Ok((p, None));
-    }
-    if let Some(shared) = dgstereo_core::shared::shared_dir() {
-        let p = shared.join("golden/raft_stereo_random.pth");
-        if p.is_file() {
-            let note = format!(
-                "no trained default weights are bundled; using the reference checkpoint {} (random weights)",
-                p.display()
-            );
-            return Ok((p, Some(note)));
-        }
-    }
-    Err(Error::config(
-        "weights",
-        "no default weights found: set `weights` (an official RAFT-Stereo .pth or a dgstereo .safetensors)",
-    ))
+    default_weights_in(&asset_roots(), with_prior)
+}
+
+fn default_weights_in(roots: &[PathBuf], with_prior: bool) -> Result<(PathBuf, Option<String>)> {
+    let (file, what) = if with_prior {
+        (DEFAULT_WITH_PRIOR, "the bundled paper model (for a run with a prior)")
+    } else {
+        (DEFAULT_PLAIN, "the bundled default weights")
+    };
+    let path = asset_in(roots, file).map_err(|e| {
+        Error::config(
+            "weights",
+            format!(
+                "{what} are missing: {e}. Give weights (an official RAFT-Stereo .pth or a dgstereo \
+                 .safetensors), or install a build that carries assets/weights"
+            ),
+        )
+    })?;
+    Ok((path, None))
 }
 
 /// Loads weights (`.pth` official layout or our `.safetensors`) into a model of `config`.
@@ -129,4 +127,25 @@ pub fn load_model(
     // The stores keep the file's dtype: bring the weights to the device's (see [`crate::EngineConfig::precision`]).
     let network = cast_float_params(network, float_dtype(device));
     Ok((StereoModel::new(network, config, device.clone()), detected))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn missing_default_weights_are_an_error_naming_them_never_a_stand_in() {
+        let empty = tempfile::tempdir().unwrap();
+        let roots = [empty.path().to_path_buf()];
+        for (with_prior, file) in [(false, DEFAULT_PLAIN), (true, DEFAULT_WITH_PRIOR)] {
+            let e = default_weights_in(&roots, with_prior).unwrap_err().to_string();
+            assert!(e.contains(file) && e.contains("DGSTEREO_ASSETS") && e.contains("weights"), "{e}");
+            assert!(e.contains(&empty.path().display().to_string()), "{e}");
+        }
+        let weights = empty.path().join("weights");
+        std::fs::create_dir_all(&weights).unwrap();
+        std::fs::write(weights.join("raft-stereo-default.safetensors"), b"x").unwrap();
+        let (found, note) = default_weights_in(&roots, false).unwrap();
+        assert_eq!((found, note), (weights.join("raft-stereo-default.safetensors"), None));
+    }
 }

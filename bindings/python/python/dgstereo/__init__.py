@@ -5,7 +5,8 @@
 >>> disp = model.predict(left, right, iters=32)  # HxW float32, positive disparity (px)
 >>> dgstereo.metrics(disp, gt)["epe"]
 
-Images are ``HxWx3`` (RGB) or ``HxW`` (grey) arrays, ``uint8`` or float in 0..255, of any
+Images are ``HxWx3`` (RGB), ``HxWx4`` (alpha dropped) or ``HxW`` (grey) arrays, ``uint8`` or
+float in 0..255 (a float image in 0..1 is refused unless ``scale=`` says how to read it), of any
 strides. Errors are :class:`dgstereo.Error`; bad arguments also are ``ValueError``
 (:class:`InputError`), files also ``OSError`` (:class:`FileError`).
 """
@@ -57,6 +58,24 @@ def _array(x: Any, what: str) -> np.ndarray:
     if a.dtype.kind in "uif":
         return a.astype(np.float32)
     raise InputError(f"`{what}`: expected a numeric array, got dtype {a.dtype}")
+
+
+def _image(x: Any, what: str, scale: Optional[float]) -> np.ndarray:
+    """An image for the native module: ``scale`` multiplies the values when given; without it, a
+    float image whose values all lie in 0..1 is refused (it would be read as almost black in
+    0..255), naming the fixes."""
+    a = _array(x, what)
+    if scale is not None:
+        return a.astype(np.float32) * np.float32(scale)
+    finite = a[np.isfinite(a)] if a.dtype.kind == "f" else a
+    if a.dtype.kind == "f" and finite.size:
+        top = float(finite.max())
+        if 0.0 < top <= 1.0:
+            raise InputError(
+                f"`{what}` holds values in 0..1 (largest {top:g}) where 0..255 is expected: multiply by 255, "
+                "pass uint8, or give `scale=255.0` (or `scale=1.0` if 0..1 is meant)"
+            )
+    return a
 
 
 def _bytes(budget: Union[int, str]) -> int:
@@ -154,13 +173,16 @@ class Model:
         lr_check: Union[bool, float] = False,
         name: str = "pair",
         return_info: bool = False,
+        scale: Optional[float] = None,
     ):
         """The disparity of a rectified pair: ``HxW`` float32, in pixels, positive
         (``x_right = x_left - d``), at the left image's size. The same as ``dgstereo infer``
         with the same options.
 
         Args:
-            left, right: ``HxWx3`` or ``HxW`` arrays, uint8 or float in 0..255, one size.
+            left, right: ``HxWx3``, ``HxWx4`` (alpha dropped) or ``HxW`` arrays, uint8 or float in
+                0..255, one size; a float image in 0..1 is refused unless ``scale`` says how to
+                read it.
             iters: update iterations (default :attr:`default_iters`).
             prior: ``(left, right)`` ``HxW`` relative inverse depth maps (larger = nearer) of a
                 model with a depth prior, computed elsewhere (any size; resized bilinearly).
@@ -172,6 +194,8 @@ class Model:
             name: the pair's name, by which a ``file:`` prior finds its maps.
             return_info: also return a dict (``network_size``, ``corr``, ``rejected`` mask of
                 the pixels the check replaced, ``prior_seconds``).
+            scale: multiply the images' values by this first (``255.0`` for images in 0..1;
+                ``1.0`` to pass them as they are).
         """
         if iters is None:
             iters = self.default_iters
@@ -192,8 +216,8 @@ class Model:
                 raise InputError("`prior`: expected a pair (left, right) of HxW arrays")
             prior = (_array(prior[0], "prior[0]"), _array(prior[1], "prior[1]"))
         disp, info = self._engine.predict(
-            _array(left, "left"),
-            _array(right, "right"),
+            _image(left, "left", scale),
+            _image(right, "right", scale),
             int(iters),
             None if max_size is None else int(max_size),
             str(min_size),
