@@ -9,6 +9,7 @@
 //! - Failure: `mpirun -np 2 dgstereo train` where the sample rank 1 reads at step 2 is corrupt
 //!   ends every rank with an error naming rank 1, well within 30 s, and leaves step 1's
 //!   checkpoint readable; repaired, the run resumes on both ranks and finishes.
+//! - A rank killed (SIGKILL) mid-run ends the job within 30 s; the newest checkpoint is readable.
 #![cfg(feature = "mpi")]
 
 mod common;
@@ -215,4 +216,61 @@ fn a_rank_that_cannot_read_its_sample_ends_the_job_and_keeps_the_checkpoint() {
     let log = std::fs::read_to_string(out.join("log.jsonl")).unwrap();
     let last_train = log.lines().rev().find(|l| l.contains("\"kind\":\"train\"")).unwrap();
     assert!(last_train.contains("\"step\":3"), "{log}");
+}
+
+/// The pid of the process of rank `rank` running `binary`, from `/proc`.
+fn rank_pid(binary: &str, rank: usize) -> Option<u32> {
+    let wanted = format!("OMPI_COMM_WORLD_RANK={rank}");
+    std::fs::read_dir("/proc").ok()?.flatten().find_map(|entry| {
+        let pid: u32 = entry.file_name().to_str()?.parse().ok()?;
+        let cmdline = std::fs::read(entry.path().join("cmdline")).ok()?;
+        let environ = std::fs::read(entry.path().join("environ")).ok()?;
+        let has = |bytes: &[u8], text: &str| bytes.split(|&b| b == 0).any(|part| part == text.as_bytes());
+        (cmdline.split(|&b| b == 0).next() == Some(binary.as_bytes()) && has(&environ, &wanted)).then_some(pid)
+    })
+}
+
+#[test]
+fn a_killed_rank_ends_the_job_and_keeps_the_checkpoints() {
+    let Some(mpirun) = mpirun() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let exp = write_experiment(
+        dir.path(),
+        "killed.toml",
+        "killed",
+        &tiny_train(400, 2, 11, 1, ""),
+        &format!("{TINY_VALIDATION}{SYNTHETIC_SOURCE}"),
+        "",
+    );
+    let out = dir.path().join("run");
+    let binary = env!("CARGO_BIN_EXE_dgstereo");
+    let mut job = two_ranks(&mpirun)
+        .arg(binary)
+        .args(["train", exp.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    let steps = || std::fs::read_to_string(out.join("log.jsonl")).map_or(0, |l| l.lines().count());
+    while steps() < 2 {
+        assert!(started.elapsed() < Duration::from_secs(120), "no step logged in 120 s");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let pid = rank_pid(binary, 1).expect("rank 1 is running");
+    assert!(Command::new("kill").args(["-KILL", &pid.to_string()]).status().unwrap().success());
+    let killed = Instant::now();
+    let status = loop {
+        if let Some(status) = job.try_wait().unwrap() {
+            break status;
+        }
+        assert!(killed.elapsed() < Duration::from_secs(30), "the job still runs 30 s after rank 1 was killed");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    eprintln!("the job ended {:?} after rank 1 was killed", killed.elapsed());
+    assert!(!status.success());
+    let checkpoints = dgstereo_train::checkpoint::list_checkpoints(&out.join("checkpoints")).unwrap();
+    let (_, newest) = checkpoints.last().expect("a checkpoint was written");
+    let bytes = std::fs::read(newest).unwrap();
+    assert!(safetensors::SafeTensors::deserialize(&bytes).is_ok(), "{} is not readable", newest.display());
 }
