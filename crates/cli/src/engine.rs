@@ -33,8 +33,9 @@ pub const DEFAULT_ITERS: usize = 32;
 /// Model options shared by `infer` and `eval`.
 #[derive(Args, Clone, Debug)]
 pub struct ModelArgs {
-    /// Weights: a dgstereo `.safetensors` or an official RAFT-Stereo `.pth` (default: the
-    /// project's default model).
+    /// Weights: a dgstereo `.safetensors`, an official RAFT-Stereo `.pth`, or the name of an
+    /// official checkpoint (`raftstereo-middlebury`; `dgstereo weights list`), fetched on first
+    /// use (default: the project's default model).
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// Experiment file whose model (and prior) configuration the weights were trained with.
@@ -55,7 +56,8 @@ pub struct ModelArgs {
     /// `depth-anything-v2:WEIGHTS` (default: the experiment's `[prior]`, else none).
     #[arg(long)]
     pub prior: Option<String>,
-    /// Depth Anything V2 weights (`depth_anything_v2_vit{s,b,l}.pth`) for the prior: the same as
+    /// Depth Anything V2 weights (`depth_anything_v2_vit{s,b,l}.pth`, or a name:
+    /// `depth-anything-v2-small`, `-base`, `-large`, fetched on first use) for the prior: the same as
     /// `--prior depth-anything-v2:WEIGHTS`, or the weights of the experiment's Depth Anything prior.
     #[arg(long, conflicts_with = "prior")]
     pub prior_weights: Option<PathBuf>,
@@ -228,6 +230,7 @@ pub fn load_engine(a: &ModelArgs) -> anyhow::Result<(Engine, PredictOptions)> {
         device,
         precision: a.precision,
         slow_fast_gru: a.slow_fast_gru,
+        bundled_assets: None,
     };
     let engine = Engine::load(&config).map_err(|e| match &a.experiment {
         Some(experiment) => with_flags(e).context(experiment.display().to_string()),

@@ -20,6 +20,10 @@ use clap::{Parser, Subcommand};
 #[derive(Parser)]
 #[command(name = "dgstereo", version, about, propagate_version = true)]
 struct Cli {
+    /// Never download: a weights name missing from the cache is an error (also
+    /// `DGSTEREO_OFFLINE=1`).
+    #[arg(long, global = true)]
+    offline: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -46,12 +50,17 @@ enum Command {
     /// Compares a model with activations computed by the official PyTorch code.
     #[command(subcommand)]
     Verify(commands::verify::VerifyCommand),
+    /// Official checkpoints by name: lists them, fetches them into the cache.
+    #[command(subcommand)]
+    Weights(commands::weights::WeightsCommand),
 }
 
 fn main() -> ExitCode {
     sigpipe::restore_default_sigpipe();
     let cli = Cli::parse();
     dgstereo_kernels::allocator::retain_freed_memory();
+    dgstereo_weights::set_offline(cli.offline);
+    dgstereo_weights::set_progress(true);
     // `bench --kernels` configures the kernels itself; every other command takes
     // `DGSTEREO_KERNELS`, and a malformed value is an error naming the variable and the value,
     // before any work.
@@ -72,6 +81,7 @@ fn main() -> ExitCode {
         Command::Bench(a) => commands::bench::run(a),
         Command::Metrics(a) => commands::metrics::run(a),
         Command::Verify(c) => commands::verify::run(c),
+        Command::Weights(c) => commands::weights::run(c),
     };
     match result {
         Ok(code) => code,

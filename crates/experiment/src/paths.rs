@@ -42,8 +42,10 @@ pub fn resolve(folder: &Path, path: &str) -> PathBuf {
 }
 
 fn resolve_value(value: &mut Value, folder: &Path) {
+    // The name of an official checkpoint (`depth-anything-v2-base`) stays a name.
     if let Value::String(text) = value
         && !text.is_empty()
+        && !dgstereo_weights::is_name(text)
     {
         *text = resolve(folder, text).display().to_string();
     }
@@ -136,5 +138,20 @@ root = "../../assets/cones"
         assert_eq!(get(&table, &["data", "sources", "0", "root"]), "/work/exp/smoke/pairs");
         assert_eq!(get(&table, &["data", "sources", "0", "photos", "dir"]), "/work/exp/smoke/photos");
         assert_eq!(get(&table, &["benchmarks", "0", "root"]), "/work/assets/cones");
+    }
+
+    #[test]
+    fn names_of_official_checkpoints_stay_names() {
+        let mut table: Table = toml::from_str(
+            "[train]\ninit = \"raftstereo-sceneflow\"\n[prior]\nkind = \"depth-anything-v2\"\nweights = \"depth-anything-v2-base\"\n",
+        )
+        .unwrap();
+        resolve_paths(&mut table, Path::new("/work/exp"));
+        assert_eq!(table["train"]["init"].as_str(), Some("raftstereo-sceneflow"));
+        assert_eq!(table["prior"]["weights"].as_str(), Some("depth-anything-v2-base"));
+        // A file of that name in a folder is a path.
+        let mut table: Table = toml::from_str("[train]\ninit = \"w/raftstereo-sceneflow\"\n").unwrap();
+        resolve_paths(&mut table, Path::new("/work/exp"));
+        assert_eq!(table["train"]["init"].as_str(), Some("/work/exp/w/raftstereo-sceneflow"));
     }
 }

@@ -33,7 +33,7 @@ use crate::consistency::{fill_rejected, mirror_disparity, mirror_rgb, rejected_p
 use crate::convert::{disparity_map, image_tensor};
 use crate::cost_volume::corr_for;
 use crate::options::{EngineConfig, PredictOptions};
-use crate::weights::{default_weights, load_model};
+use crate::weights::{default_weights_at, load_model};
 use crate::working_size::working_scale;
 
 /// What happened on one pair.
@@ -165,18 +165,20 @@ impl Engine {
 
     fn load_inner(config: &EngineConfig, priors_given: bool) -> Result<Self> {
         let device = config.device.device_with_precision(config.precision)?;
-        let prior_config = &config.prior;
-        if config.precision != Precision::F32 && prior_config.gives_prior() {
+        if config.precision != Precision::F32 && config.prior.gives_prior() {
             return Err(Error::config(
                 "precision",
                 format!("{}: the depth prior runs in f32 only; leave out `precision` or the prior", config.precision),
             ));
         }
+        // Names of official checkpoints become files (fetched on first use).
+        let prior_config = &dgstereo_weights::resolve_prior(config.prior.clone(), "prior")?;
         let mut notes = Vec::new();
         let weights = match &config.weights {
-            Some(w) => w.clone(),
+            Some(w) => dgstereo_weights::resolve_stereo(w, "weights")?,
             None => {
-                let (path, note) = default_weights(prior_config.gives_prior() && config.model.is_none())?;
+                let with_prior = prior_config.gives_prior() && config.model.is_none();
+                let (path, note) = default_weights_at(config.bundled_assets.as_deref(), with_prior)?;
                 notes.extend(note);
                 path
             }

@@ -39,6 +39,10 @@ pub struct EngineConfig {
     /// The slow-fast GRU schedule, replacing the configuration's (an official checkpoint's
     /// preset or the experiment's) where given.
     pub slow_fast_gru: Option<bool>,
+    /// A folder holding the bundled `weights/` (a Python package's data), searched for the
+    /// default weights instead of the checkout's and the binary's `assets/` (`DGSTEREO_ASSETS`
+    /// still first); `None` for those.
+    pub bundled_assets: Option<PathBuf>,
 }
 
 impl Default for EngineConfig {
@@ -50,6 +54,7 @@ impl Default for EngineConfig {
             device: DeviceChoice::default(),
             precision: Precision::F32,
             slow_fast_gru: None,
+            bundled_assets: None,
         }
     }
 }

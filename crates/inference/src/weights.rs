@@ -58,6 +58,19 @@ pub fn default_weights(with_prior: bool) -> Result<(PathBuf, Option<String>)> {
     default_weights_in(&asset_roots(), with_prior)
 }
 
+/// As [`default_weights`], looking only in `DGSTEREO_ASSETS` and in `bundled` (a package's data
+/// folder holding `weights/`), where one is given.
+pub fn default_weights_at(bundled: Option<&Path>, with_prior: bool) -> Result<(PathBuf, Option<String>)> {
+    match bundled {
+        Some(dir) => {
+            let mut roots: Vec<PathBuf> = std::env::var_os("DGSTEREO_ASSETS").map(PathBuf::from).into_iter().collect();
+            roots.push(dir.to_path_buf());
+            default_weights_in(&roots, with_prior)
+        }
+        None => default_weights(with_prior),
+    }
+}
+
 fn default_weights_in(roots: &[PathBuf], with_prior: bool) -> Result<(PathBuf, Option<String>)> {
     let (file, what) = if with_prior {
         (DEFAULT_WITH_PRIOR, "the bundled paper model (for a run with a prior)")
@@ -68,8 +81,9 @@ fn default_weights_in(roots: &[PathBuf], with_prior: bool) -> Result<(PathBuf, O
         Error::config(
             "weights",
             format!(
-                "{what} are missing: {e}. Give weights (an official RAFT-Stereo .pth or a dgstereo \
-                 .safetensors), or install a build that carries assets/weights"
+                "{what} are missing: {e}. Give weights (an official RAFT-Stereo .pth, a dgstereo \
+                 .safetensors, or a name such as raftstereo-sceneflow: `dgstereo weights list`), or \
+                 install a build that carries assets/weights"
             ),
         )
     })?;

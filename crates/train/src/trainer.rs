@@ -43,6 +43,18 @@ pub struct TrainParts {
 }
 
 impl TrainParts {
+    /// These parts with the official checkpoints they name (`train.init =
+    /// "raftstereo-sceneflow"`, the prior's `weights = "depth-anything-v2-base"`) resolved to
+    /// files, fetched on first use ([`dgstereo_weights`]); `resolved_toml` keeps the names.
+    pub fn with_named_weights(self) -> Result<Self> {
+        let init = match self.train.init {
+            Some(init) => Some(dgstereo_weights::resolve_stereo(&init, "train.init")?),
+            None => None,
+        };
+        let prior = dgstereo_weights::resolve_prior(self.prior, "prior.weights")?;
+        Ok(Self { prior, train: TrainingConfig { init, ..self.train }, ..self })
+    }
+
     /// Checks every part; the message names the key.
     pub fn validate(&self) -> Result<()> {
         self.model.validate().map_err(|e| e.within("model"))?;
@@ -209,6 +221,7 @@ impl Trainer {
     /// A fresh run: weights initialised from `train.seed` on `device`.
     pub fn new(parts: TrainParts, device: &Device) -> Result<Self> {
         parts.validate()?;
+        let parts = parts.with_named_weights()?;
         let model = init_model(&parts.model, device, Some(parts.train.seed))?;
         let mut notices = Vec::new();
         let model = match &parts.train.init {
@@ -243,6 +256,7 @@ impl Trainer {
         step: usize,
     ) -> Result<Self> {
         parts.validate()?;
+        let parts = parts.with_named_weights()?;
         let autodiff = device.clone().autodiff();
         let model = model.fork(&autodiff).train();
         let schedule =

@@ -71,7 +71,8 @@ pub struct BenchArgs {
     /// f32-only, so a half precision on the CPU runs burn's operations).
     #[arg(long, default_value = "f32")]
     pub precision: Precision,
-    /// Depth Anything V2 weights (`depth_anything_v2_vit{s,b,l}.pth`): every run also computes
+    /// Depth Anything V2 weights (`depth_anything_v2_vit{s,b,l}.pth` or a name such as
+    /// `depth-anything-v2-small`): every run also computes
     /// the depth prior of both views, as `infer` does, and its time is reported apart (the model
     /// configuration, `--config`, must use a prior). Without it a model with a prior gets a
     /// synthetic one, outside the timed runs.
@@ -189,9 +190,16 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
             )
         }
         Some(weights) => Some(
-            PriorConfig::DepthAnythingV2 { weights: weights.clone(), encoder: None, input_size: DEFAULT_INPUT_SIZE }
-                .init(&device)
-                .with_context(|| format!("--prior-weights {}", weights.display()))?,
+            dgstereo_weights::resolve_prior(
+                PriorConfig::DepthAnythingV2 {
+                    weights: weights.clone(),
+                    encoder: None,
+                    input_size: DEFAULT_INPUT_SIZE,
+                },
+                "prior_weights",
+            )
+            .and_then(|prior| prior.init(&device))
+            .with_context(|| format!("--prior-weights {}", weights.display()))?,
         ),
         None => None,
     };

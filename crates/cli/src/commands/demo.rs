@@ -21,7 +21,8 @@ pub struct DemoArgs {
     /// Output folder.
     #[arg(short, long, default_value = "out/demo")]
     out: PathBuf,
-    /// Weights (default: the project's default model).
+    /// Weights: a file or an official checkpoint's name (`dgstereo weights list`); default: the
+    /// project's default model.
     #[arg(long)]
     weights: Option<PathBuf>,
     /// Update iterations (default: the official preset of a `.pth` checkpoint's architecture,

@@ -13,3 +13,4 @@ pub mod infer;
 pub mod metrics;
 pub mod train;
 pub mod verify;
+pub mod weights;

@@ -1,0 +1,94 @@
+//! Where named weights are kept: `$DGSTEREO_CACHE`, else the platform's cache folder
+//! (`~/.cache/dgstereo` on Linux). Hub files are kept in the Hugging Face cache layout
+//! (`models--owner--name/{blobs,snapshots,refs}`): in the Hugging Face cache itself
+//! (`$HF_HOME/hub`, else `~/.cache/huggingface/hub`) unless `DGSTEREO_CACHE` is set, and a file
+//! Python's `huggingface_hub` already downloaded there is used as it is.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use dgstereo_core::{Error, Result};
+
+use crate::catalog::{NamedWeights, Source};
+
+/// The folders named weights are kept in and looked up in.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Cache {
+    /// Our own folder: `models.zip`'s checkpoints and the locks.
+    root: PathBuf,
+    /// The Hugging Face cache new hub files go to.
+    hub: PathBuf,
+    /// Another Hugging Face cache searched for hub files (Python's, when `hub` is ours).
+    shared_hub: Option<PathBuf>,
+}
+
+impl Cache {
+    /// The cache the environment chooses (see the module's documentation).
+    pub fn from_env() -> Result<Self> {
+        let python_hub = hf_hub::Cache::from_env().path().clone();
+        match std::env::var_os("DGSTEREO_CACHE").filter(|v| !v.is_empty()) {
+            Some(root) => Ok(Self::at(PathBuf::from(root)).with_shared_hub(python_hub)),
+            None => {
+                let base = dirs::cache_dir().ok_or_else(|| {
+                    Error::config("DGSTEREO_CACHE", "this platform has no cache folder: set DGSTEREO_CACHE to one")
+                })?;
+                Ok(Self { root: base.join("dgstereo"), hub: python_hub, shared_hub: None })
+            }
+        }
+    }
+
+    /// A cache wholly inside `root` (hub files in `root/huggingface/hub`).
+    pub fn at(root: PathBuf) -> Self {
+        let hub = root.join("huggingface").join("hub");
+        Self { root, hub, shared_hub: None }
+    }
+
+    /// This cache, also looking for hub files in the Hugging Face cache `hub`.
+    pub fn with_shared_hub(self, hub: PathBuf) -> Self {
+        let shared_hub = (hub != self.hub).then_some(hub);
+        Self { shared_hub, ..self }
+    }
+
+    /// Our own folder.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// The Hugging Face cache new hub files go to.
+    pub fn hub(&self) -> &Path {
+        &self.hub
+    }
+
+    /// The folder `models.zip`'s checkpoints are kept in.
+    pub fn raft_stereo_dir(&self) -> PathBuf {
+        self.root.join("raft-stereo")
+    }
+
+    /// Where `w` is, if it is in the cache.
+    pub fn find(&self, w: &NamedWeights) -> Option<PathBuf> {
+        match w.source {
+            Source::ModelsZip { member } => Some(self.raft_stereo_dir().join(member)).filter(|p| p.is_file()),
+            Source::Hub { repo, file } => std::iter::once(&self.hub)
+                .chain(self.shared_hub.as_ref())
+                .find_map(|hub| hf_hub::Cache::new(hub.clone()).model(repo.to_string()).get(file))
+                .filter(|p| p.is_file()),
+        }
+    }
+
+    /// Holds the lock of `key` until the guard is dropped, waiting for another process or
+    /// thread that holds it: two fetches of one name download it once.
+    pub fn lock(&self, key: &str) -> Result<FetchLock> {
+        let dir = self.root.join("locks");
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        let path = dir.join(format!("{key}.lock"));
+        let file = File::create(&path).map_err(|e| Error::io(&path, e))?;
+        file.lock().map_err(|e| Error::io(&path, e))?;
+        Ok(FetchLock { _file: file })
+    }
+}
+
+/// An exclusive lock on one fetch, released when dropped (or when the process ends).
+#[derive(Debug)]
+pub struct FetchLock {
+    _file: File,
+}
