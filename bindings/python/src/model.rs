@@ -38,7 +38,7 @@ impl Engine {
     #[new]
     // One argument per keyword of the Python constructor.
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (weights=None, experiment=None, run=None, prior=None, device="cpu", precision="f32", slow_fast_gru=None))]
+    #[pyo3(signature = (weights=None, experiment=None, run=None, prior=None, device="cpu", precision="f32", slow_fast_gru=None, bundled_assets=None))]
     fn new(
         py: Python<'_>,
         weights: Option<PathBuf>,
@@ -48,6 +48,7 @@ impl Engine {
         device: &str,
         precision: &str,
         slow_fast_gru: Option<bool>,
+        bundled_assets: Option<PathBuf>,
     ) -> PyResult<Self> {
         let device = device.parse().map_err(|e: dgstereo_core::Error| input(format!("`device`: {e}")))?;
         let precision = precision.parse().map_err(|e| input(format!("`precision`: {e}")))?;
@@ -67,6 +68,7 @@ impl Engine {
             device,
             precision,
             slow_fast_gru,
+            bundled_assets,
         };
         let inner = py.detach(|| guarded(|| LibEngine::load_with_given_priors(&config)));
         Ok(Self { inner: Box::new(from_library(inner, Kind::Error)?) })

@@ -38,6 +38,10 @@ __all__ = [
 #: Bytes the materialised cost volume may take with ``corr="auto"`` (4 GiB).
 DEFAULT_MEMORY_BUDGET: int = _dgstereo.DEFAULT_MEMORY_BUDGET
 
+#: The folder of the data this package carries: ``weights/`` holds the default weights and
+#: their model card.
+BUNDLED_ASSETS: str = os.path.join(os.path.dirname(os.path.abspath(__file__)), "assets")
+
 #: Update iterations when neither ``iters`` nor a checkpoint's preset gives them.
 DEFAULT_ITERS = 32
 
@@ -93,13 +97,16 @@ class Model:
     """A stereo model loaded once, predicting the disparity of rectified pairs.
 
     Args:
-        weights: a dgstereo ``.safetensors`` file or an official RAFT-Stereo ``.pth``
-            checkpoint (its architecture read from its tensors); ``None`` for the bundled
-            default.
+        weights: a dgstereo ``.safetensors`` file, an official RAFT-Stereo ``.pth``
+            checkpoint (its architecture read from its tensors), or an official checkpoint's
+            name (``"raftstereo-middlebury"``; ``dgstereo weights list``), fetched into the
+            cache on first use unless ``DGSTEREO_OFFLINE=1``; ``None`` for the default weights
+            this package carries (``dgstereo/assets/weights``).
         experiment: an experiment ``.toml`` whose model (and prior) configuration the weights
             were trained with; ``run`` picks one run of a sweep.
         prior: the depth prior, replacing the experiment's: ``"none"``, ``"file:DIR"`` or
-            ``"depth-anything-v2:WEIGHTS"``. A model with a prior and none configured takes
+            ``"depth-anything-v2:WEIGHTS"`` (a file or a name such as
+            ``depth-anything-v2-small``). A model with a prior and none configured takes
             the prior maps with each :meth:`predict` call (``prior=(left, right)``).
         device: ``"cpu"`` or ``"gpu"`` (a build with the GPU backend).
         precision: ``"f32"``, ``"f16"`` or ``"bf16"``.
@@ -122,7 +129,8 @@ class Model:
     ) -> None:
         path = lambda p: None if p is None else os.fspath(p)  # noqa: E731
         self._engine = _dgstereo.Engine(
-            path(weights), path(experiment), run, prior, device, precision, slow_fast_gru
+            path(weights), path(experiment), run, prior, device, precision, slow_fast_gru,
+            BUNDLED_ASSETS,
         )
         self._config = json.loads(self._engine.config_json)
 

@@ -20,6 +20,7 @@ class Engine:
         device: str = "cpu",
         precision: str = "f32",
         slow_fast_gru: Optional[bool] = None,
+        bundled_assets: Optional[_Path] = None,
     ) -> None: ...
     @property
     def weights(self) -> str: ...
