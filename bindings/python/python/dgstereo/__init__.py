@@ -39,7 +39,8 @@ __all__ = [
 DEFAULT_MEMORY_BUDGET: int = _dgstereo.DEFAULT_MEMORY_BUDGET
 
 #: The folder of the data this package carries: ``weights/`` holds the default weights and
-#: their model card.
+#: their model card (in the checkout, a link per file to ``assets/weights``: maturin copies
+#: linked files into the wheel, not linked folders).
 BUNDLED_ASSETS: str = os.path.join(os.path.dirname(os.path.abspath(__file__)), "assets")
 
 #: Update iterations when neither ``iters`` nor a checkpoint's preset gives them.
