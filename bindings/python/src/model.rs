@@ -116,6 +116,31 @@ impl Engine {
         self.inner.takes_given_priors()
     }
 
+    /// Writes the model as an ONNX file for pairs of `height x width`, `iters` iterations
+    /// unrolled; returns `(opset, nodes, inputs, outputs)`, each boundary as `(name, shape)`.
+    #[allow(clippy::type_complexity)]
+    fn export_onnx(
+        &self,
+        py: Python<'_>,
+        path: PathBuf,
+        height: usize,
+        width: usize,
+        iters: usize,
+    ) -> PyResult<(i64, usize, Vec<(String, Vec<usize>)>, Vec<(String, Vec<usize>)>)> {
+        let engine = &self.inner;
+        let result = py.detach(|| {
+            guarded(|| {
+                let exported = dgstereo_export::export_onnx(engine.stereo_model(), height, width, iters)?;
+                let tmp = path.with_extension("onnx.tmp");
+                std::fs::write(&tmp, &exported.bytes).map_err(|e| dgstereo_core::Error::io(&tmp, e))?;
+                dgstereo_core::atomic_file::commit_file(&tmp, &path)?;
+                Ok(exported)
+            })
+        });
+        let e = from_library(result, Kind::Error)?;
+        Ok((dgstereo_export::OPSET, e.nodes, e.inputs, e.outputs))
+    }
+
     /// The disparity of a pair and what happened (a dict).
     #[pyo3(signature = (left, right, iters, max_size=None, min_size="auto", memory_budget=dgstereo_inference::DEFAULT_MEMORY_BUDGET, corr="auto", lr_check=None, prior=None, name="pair"))]
     #[allow(clippy::too_many_arguments)]

@@ -53,6 +53,9 @@ enum Command {
     /// Official checkpoints by name: lists them, fetches them into the cache.
     #[command(subcommand)]
     Weights(commands::weights::WeightsCommand),
+    /// Writes a model in another format: `export onnx`.
+    #[command(subcommand)]
+    Export(commands::export::ExportCommand),
 }
 
 fn main() -> ExitCode {
@@ -82,6 +85,7 @@ fn main() -> ExitCode {
         Command::Metrics(a) => commands::metrics::run(a),
         Command::Verify(c) => commands::verify::run(c),
         Command::Weights(c) => commands::weights::run(c),
+        Command::Export(c) => commands::export::run(c),
     };
     match result {
         Ok(code) => code,

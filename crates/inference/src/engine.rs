@@ -241,6 +241,11 @@ impl Engine {
         &self.device
     }
 
+    /// The loaded network with its configuration (for an exporter that records its forward).
+    pub fn stereo_model(&self) -> &StereoModel {
+        &self.model
+    }
+
     /// The model's configuration.
     pub fn model_config(&self) -> &ModelConfig {
         &self.model.config

@@ -168,6 +168,11 @@ pub(crate) fn plan<C: Call>(device: &Device, call: &C) -> Plan<C::Inference, C::
     plan.unwrap_or(Plan::Stock)
 }
 
+/// Whether `device` records operations instead of running them (burn's capture device).
+pub fn is_capture(device: &Device) -> bool {
+    matches!(device.as_dispatch(), burn::backend::DispatchDevice::Capture(_))
+}
+
 thread_local! {
     static PINNED: Cell<Option<Path>> = const { Cell::new(None) };
 }
@@ -183,6 +188,10 @@ thread_local! {
 /// allows it, and gives [`Path::Stock`] where it does not.
 pub fn path(device: &Device, op: Op) -> Path {
     let settings = settings();
+    // A capture device records burn's operations for an exporter: only burn's own, no kernel.
+    if is_capture(device) {
+        return Path::Stock;
+    }
     let autodiff = device.is_autodiff();
     let cpu = *device == Device::flex();
     let host_possible =
@@ -216,6 +225,17 @@ pub fn with_path<T>(pinned: Path, f: impl FnOnce() -> T) -> T {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// On burn's capture device (the ONNX exporter's) every operation is burn's own, whatever
+    /// the pin: a recorded graph holds burn-ir operations only.
+    #[test]
+    fn the_capture_device_takes_burns_operations() {
+        let capture = Device::capture();
+        for op in [Op::Conv, Op::Norm, Op::Resize, Op::Pool, Op::Lookup, Op::Deform, Op::GruStep, Op::Upsample] {
+            assert_eq!(path(&capture, op), Path::Stock, "{op:?}");
+            with_path(Path::Gpu, || assert_eq!(path(&capture, op), Path::Stock, "{op:?} pinned"));
+        }
+    }
 
     /// With the default settings: the host kernels on the f32 CPU, burn's operations under
     /// autodiff, GPU formulations only where pinned on the CPU.

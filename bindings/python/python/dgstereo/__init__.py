@@ -168,6 +168,24 @@ class Model:
     def __repr__(self) -> str:
         return f"dgstereo.Model({self.weights!r}, {self.summary})"
 
+    def export_onnx(
+        self, path: Union[str, "os.PathLike[str]"], size: Tuple[int, int], iters: Optional[int] = None
+    ) -> dict:
+        """Writes the model as an ONNX file (opset 19) for pairs of ``size = (height, width)``,
+        ``iters`` update iterations unrolled (default :attr:`default_iters`), as ``dgstereo
+        export onnx`` does. Inputs ``left``, ``right`` (``1x3xHxW`` float32, RGB 0..255) and, for
+        a model with a depth prior, ``left_prior``, ``right_prior`` (``1x1xHxW``); output
+        ``disparity`` (``1x1xHxW``, positive, what :meth:`predict` gives with ``min_size=None``).
+
+        Returns:
+            ``{"opset", "nodes", "inputs", "outputs"}``, each boundary a ``(name, shape)`` pair.
+        """
+        height, width = size
+        if iters is None:
+            iters = self.default_iters
+        opset, nodes, inputs, outputs = self._engine.export_onnx(os.fspath(path), height, width, iters)
+        return {"opset": opset, "nodes": nodes, "inputs": inputs, "outputs": outputs}
+
     def predict(
         self,
         left: Any,

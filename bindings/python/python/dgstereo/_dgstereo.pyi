@@ -49,6 +49,9 @@ class Engine:
         prior: Optional[Tuple[npt.NDArray, npt.NDArray]] = None,
         name: str = "pair",
     ) -> Tuple[npt.NDArray[np.float32], dict]: ...
+    def export_onnx(
+        self, path: str, height: int, width: int, iters: int
+    ) -> Tuple[int, int, list[Tuple[str, list[int]]], list[Tuple[str, list[int]]]]: ...
 
 def metrics(
     pred: npt.NDArray, gt: npt.NDArray, mask: Optional[npt.NDArray[np.bool_]] = None, max_disp: Optional[float] = None

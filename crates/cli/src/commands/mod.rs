@@ -9,6 +9,7 @@ pub mod bench_train;
 pub mod demo;
 pub mod eval;
 pub mod experiment;
+pub mod export;
 pub mod infer;
 pub mod metrics;
 pub mod train;

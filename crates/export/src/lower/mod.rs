@@ -1,0 +1,92 @@
+//! Lowering a captured burn-ir graph to an ONNX model: the graph's boundaries and values first,
+//! then one ONNX node pattern per burn-ir operation (`lower/table.rs`; [`LOWERED`] lists them).
+//! An operation the table lacks is an error naming it, never a file.
+//!
+//! The model is static: every shape is the captured one (reshape targets, expand shapes and
+//! created tensors take their sizes from the capture), as TensorRT's static engines want.
+
+mod builder;
+mod table;
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+
+use builder::{Lowering, onnx_dtype};
+use burn::backend::ir::{OperationIr, TensorId, TensorIr};
+use burn::tensor::TensorData;
+use dgstereo_core::{Error, Result};
+use onnx_ir::{ModelProto, TensorProto};
+use protobuf::{Message, MessageField};
+
+pub use table::LOWERED;
+
+/// The operator set the files declare (ONNX 1.14): `ReduceMean` and `ReduceSum` take their
+/// axes as an input, and `DeformConv` exists.
+pub const OPSET: i64 = 19;
+
+/// The ONNX IR version the files declare (the lowest that opset 19 allows).
+const IR_VERSION: i64 = 9;
+
+/// A captured graph's boundaries, by the names the ONNX file gives them.
+#[derive(Debug, Clone)]
+pub struct Boundaries {
+    /// `(tensor, name)` of each runtime input, in order.
+    pub inputs: Vec<(TensorId, String)>,
+    /// `(tensor, name)` of each output, in order.
+    pub outputs: Vec<(TensorId, String)>,
+}
+
+/// The ONNX model of `operations` with `values` (the captured constants and weights) embedded
+/// and the runtime inputs and outputs named by `boundaries`.
+pub fn lower_graph(
+    operations: &[OperationIr],
+    values: &BTreeMap<TensorId, TensorData>,
+    boundaries: &Boundaries,
+    producer: &str,
+) -> Result<ModelProto> {
+    let mut names = HashMap::new();
+    for (id, name) in boundaries.inputs.iter().chain(&boundaries.outputs) {
+        names.insert(*id, name.clone());
+    }
+    let tensors: HashMap<TensorId, &TensorIr> =
+        operations.iter().flat_map(OperationIr::nodes).map(|t| (t.id, t)).collect();
+    let mut lowering = Lowering::new(producer, names);
+    for (id, name) in &boundaries.inputs {
+        let t = tensors.get(id).ok_or_else(|| Error::Other(format!("input {name} is used by no operation")))?;
+        lowering.input(name.clone(), t)?;
+    }
+    for (id, name) in &boundaries.outputs {
+        let t = tensors.get(id).ok_or_else(|| Error::Other(format!("output {name} is made by no operation")))?;
+        lowering.output(name.clone(), t)?;
+    }
+    let runtime: HashSet<TensorId> = boundaries.inputs.iter().map(|(id, _)| *id).collect();
+    // Only the values an operation reads (a shared backbone leaves some weights unread).
+    let read: HashSet<TensorId> = operations
+        .iter()
+        .filter(|op| !matches!(op, OperationIr::Init(_) | OperationIr::Drop(_)))
+        .flat_map(OperationIr::inputs)
+        .map(|t| t.id)
+        .collect();
+    for (id, data) in values.iter().filter(|(id, _)| !runtime.contains(id) && read.contains(id)) {
+        let mut t = TensorProto::new();
+        t.name = lowering.name(*id);
+        t.data_type = onnx_dtype(data.dtype())?;
+        t.dims = data.shape().iter().map(|&d| d as i64).collect();
+        t.raw_data = bytes::Bytes::copy_from_slice(data.as_bytes());
+        lowering.initializer(t);
+    }
+    for (index, operation) in operations.iter().enumerate() {
+        table::lower(&mut lowering, index, operation)?;
+    }
+    let mut model = ModelProto::new();
+    model.ir_version = IR_VERSION;
+    model.producer_name = producer.into();
+    model.graph = MessageField::some(lowering.finish());
+    model.opset_import.push(Default::default());
+    model.opset_import[0].version = OPSET;
+    Ok(model)
+}
+
+/// The bytes of `model`, as an `.onnx` file holds them.
+pub fn to_bytes(model: &ModelProto) -> Result<Vec<u8>> {
+    model.write_to_bytes().map_err(|e| Error::Other(format!("serialising the ONNX model: {e}")))
+}
