@@ -7,8 +7,8 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::{DepthPrior, Error, Result};
 use dgstereo_costvolume::CorrelationImplementation;
-use dgstereo_model::StereoModel;
 use dgstereo_model::inference::padded_disparities;
+use dgstereo_model::{ForwardOptions, Probe, StereoModel, Trace};
 
 use crate::lower::Boundaries;
 
@@ -18,6 +18,9 @@ pub struct Captured {
     pub graph: CapturedGraph,
     /// The runtime inputs and the outputs, named.
     pub boundaries: Boundaries,
+    /// `(tensor, name)` of the named activations of the forward pass (`fnet.left`,
+    /// `context.hidden.0`, `iter.3.corr`, ...), by which an error places an operation.
+    pub landmarks: Vec<(TensorId, String)>,
 }
 
 fn id_of(t: &Tensor<4>) -> Result<TensorId> {
@@ -34,8 +37,9 @@ pub fn capture_disparity(model: &StereoModel, height: usize, width: usize, iters
     let host = Device::flex();
     let with_prior = model.config.needs_prior();
     let mut outcome = None;
+    let mut trace = Trace::new();
     let graph = device.capture_scope(|scope| {
-        let run = || -> Result<Boundaries> {
+        let mut run = || -> Result<Boundaries> {
             let network = model.network.clone().to_device(&device);
             let image = || Tensor::<4>::zeros([1, 3, height, width], &host).to_device(&device);
             let map = || Tensor::<4>::zeros([1, 1, height, width], &host).to_device(&device);
@@ -49,16 +53,12 @@ pub fn capture_disparity(model: &StereoModel, height: usize, width: usize, iters
             } else {
                 None
             };
-            let out = padded_disparities(
-                &network,
-                &model.config,
-                left,
-                right,
-                prior.as_ref(),
-                iters,
-                Some(CorrelationImplementation::Reg),
-                false,
-            )?;
+            let options = ForwardOptions {
+                implementation: Some(CorrelationImplementation::Reg),
+                probe: Probe::new(Some(&mut trace), None),
+                ..ForwardOptions::default()
+            };
+            let out = padded_disparities(&network, &model.config, left, right, prior.as_ref(), iters, options)?;
             let last = out.last().ok_or_else(|| Error::Other("the forward pass gave no disparity".into()))?;
             Ok(Boundaries { inputs, outputs: vec![(id_of(last)?, "disparity".to_string())] })
         };
@@ -77,5 +77,6 @@ pub fn capture_disparity(model: &StereoModel, height: usize, width: usize, iters
     });
     let boundaries = outcome.ok_or_else(|| Error::Other("the capture did not run".into()))??;
     let graph = graph.map_err(|e| Error::Other(format!("recording the forward pass: {e}")))?;
-    Ok(Captured { graph, boundaries })
+    let landmarks = trace.iter().map(|(name, t)| Ok((id_of(t)?, name.clone()))).collect::<Result<_>>()?;
+    Ok(Captured { graph, boundaries, landmarks })
 }

@@ -42,8 +42,13 @@ pub fn export_onnx(model: &StereoModel, height: usize, width: usize, iters: usiz
         return Err(Error::config("iters", "must be at least 1"));
     }
     let captured = capture::capture_disparity(model, height, width, iters)?;
-    let proto =
-        lower::lower_graph(&captured.graph.graph.operations, &captured.graph.values, &captured.boundaries, "dgstereo")?;
+    let proto = lower::lower_graph(
+        &captured.graph.graph.operations,
+        &captured.graph.values,
+        &captured.boundaries,
+        &captured.landmarks,
+        "dgstereo",
+    )?;
     let shape = |name: &str| {
         let input = proto.graph.input.iter().chain(&proto.graph.output).find(|v| v.name == name);
         input

@@ -124,7 +124,7 @@ fn export(program: Program, xs: &[Tensor<4>]) -> Vec<u8> {
             scope.complete(ids.0, ids.1)
         })
         .unwrap();
-    let model = lower_graph(&captured.graph.operations, &captured.values, &names.unwrap(), "test").unwrap();
+    let model = lower_graph(&captured.graph.operations, &captured.values, &names.unwrap(), &[], "test").unwrap();
     to_bytes(&model).unwrap()
 }
 
@@ -226,6 +226,6 @@ fn an_operation_the_table_lacks_is_an_error_naming_it() {
         inputs: vec![(captured.graph.inputs[0], "x".into())],
         outputs: vec![(captured.graph.outputs[0], "y".into())],
     };
-    let e = lower_graph(&captured.graph.operations, &captured.values, &names, "test").unwrap_err().to_string();
+    let e = lower_graph(&captured.graph.operations, &captured.values, &names, &[], "test").unwrap_err().to_string();
     assert!(e.contains("CumSum") && e.contains("no lowering"), "{e}");
 }

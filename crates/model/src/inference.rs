@@ -75,16 +75,18 @@ impl StereoModel {
             return Err(Error::config("iters", "must be at least 1"));
         }
         self.config.check_prior(prior.is_some())?;
-        let disparities =
-            padded_disparities(&self.network, &self.config, left, right, prior, iters, implementation, all_iterations)?;
+        let options = ForwardOptions { implementation, all_iterations, ..ForwardOptions::default() };
+        let disparities = padded_disparities(&self.network, &self.config, left, right, prior, iters, options)?;
         Ok(IterationDisparities { disparities })
     }
 }
 
 /// Runs `network` on inputs of any size: pads them (and the prior) by replicating the border to
 /// a multiple of [`ModelConfig::pad_divisor`], and returns positive disparity, cropped back, for
-/// every iteration kept. Inputs are not checked: [`StereoModel::predict`] is the checked entry
-/// point; training calls this directly on batches it built itself.
+/// every iteration kept (`options`: the cost volume, every iteration or the last, a probe; the
+/// initial flow is at the padded grid). Inputs are not checked: [`StereoModel::predict`] is the
+/// checked entry point; training calls this directly on batches it built itself, and the ONNX
+/// exporter records it.
 ///
 /// # Errors
 /// As [`RaftStereo::forward_flow`]: the fusion needs the prior and `prior` is `None`.
@@ -92,7 +94,6 @@ impl StereoModel {
 /// # Shapes
 /// - `left`, `right`: `[N, 3, H, W]`, RGB 0..255; prior maps `[N, 1, H, W]`
 /// - each output: `[N, 1, H, W]`
-#[allow(clippy::too_many_arguments)]
 pub fn padded_disparities(
     network: &RaftStereo,
     config: &ModelConfig,
@@ -100,19 +101,12 @@ pub fn padded_disparities(
     right: Tensor<4>,
     prior: Option<&DepthPrior>,
     iters: usize,
-    implementation: Option<CorrelationImplementation>,
-    all_iterations: bool,
+    options: ForwardOptions<'_>,
 ) -> Result<Vec<Tensor<4>>> {
     let [_, _, h, w] = left.dims();
     let padder = InputPadder::new(h, w, config.pad_divisor());
     let padded_prior =
         prior.map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
-    let out = network.forward_flow(
-        padder.pad(left),
-        padder.pad(right),
-        padded_prior.as_ref(),
-        iters,
-        ForwardOptions { implementation, all_iterations, ..ForwardOptions::default() },
-    )?;
+    let out = network.forward_flow(padder.pad(left), padder.pad(right), padded_prior.as_ref(), iters, options)?;
     Ok(out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect())
 }

@@ -192,7 +192,8 @@ pub fn forward_disparities(
     iters: usize,
     all_iterations: bool,
 ) -> Result<Vec<Tensor<4>>> {
-    dgstereo_model::padded_disparities(model, config, left, right, prior, iters, None, all_iterations)
+    let options = dgstereo_model::ForwardOptions { all_iterations, ..Default::default() };
+    dgstereo_model::padded_disparities(model, config, left, right, prior, iters, options)
 }
 
 /// Metric sums of a `[N, 1, H, W]` prediction against ground truth and a 0/1 validity map.

@@ -35,12 +35,46 @@ pub struct Boundaries {
     pub outputs: Vec<(TensorId, String)>,
 }
 
+/// The operations the outputs depend on (what a probe recorded on the side is left out).
+fn needed(operations: &[OperationIr], outputs: &[TensorId]) -> Vec<bool> {
+    let mut wanted: HashSet<TensorId> = outputs.iter().copied().collect();
+    let mut keep = vec![false; operations.len()];
+    for (i, op) in operations.iter().enumerate().rev() {
+        if matches!(op, OperationIr::Init(_) | OperationIr::Drop(_)) {
+            continue;
+        }
+        if op.outputs().any(|t| wanted.contains(&t.id)) {
+            keep[i] = true;
+            wanted.extend(op.inputs().map(|t| t.id));
+        }
+    }
+    keep
+}
+
+/// Where operation `index` stands in the forward pass: after the last of `landmarks` (named
+/// activations) that an earlier operation made.
+pub fn place(operations: &[OperationIr], landmarks: &[(TensorId, String)], index: usize) -> String {
+    let names: HashMap<TensorId, &str> = landmarks.iter().map(|(id, n)| (*id, n.as_str())).collect();
+    let last = operations[..index.min(operations.len())]
+        .iter()
+        .rev()
+        .filter(|op| !matches!(op, OperationIr::Init(_) | OperationIr::Drop(_)))
+        .find_map(|op| op.outputs().find_map(|t| names.get(&t.id)));
+    match last {
+        Some(name) => format!("after `{name}`"),
+        None => "before `fnet.left` (in the fusion or the encoders)".to_string(),
+    }
+}
+
 /// The ONNX model of `operations` with `values` (the captured constants and weights) embedded
-/// and the runtime inputs and outputs named by `boundaries`.
+/// and the runtime inputs and outputs named by `boundaries`; only the operations the outputs
+/// depend on are written. `landmarks` (named activations) place an operation the table lacks
+/// in the error.
 pub fn lower_graph(
     operations: &[OperationIr],
     values: &BTreeMap<TensorId, TensorData>,
     boundaries: &Boundaries,
+    landmarks: &[(TensorId, String)],
     producer: &str,
 ) -> Result<ModelProto> {
     let mut names = HashMap::new();
@@ -59,13 +93,11 @@ pub fn lower_graph(
         lowering.output(name.clone(), t)?;
     }
     let runtime: HashSet<TensorId> = boundaries.inputs.iter().map(|(id, _)| *id).collect();
-    // Only the values an operation reads (a shared backbone leaves some weights unread).
-    let read: HashSet<TensorId> = operations
-        .iter()
-        .filter(|op| !matches!(op, OperationIr::Init(_) | OperationIr::Drop(_)))
-        .flat_map(OperationIr::inputs)
-        .map(|t| t.id)
-        .collect();
+    let outputs: Vec<TensorId> = boundaries.outputs.iter().map(|(id, _)| *id).collect();
+    let keep = needed(operations, &outputs);
+    // Only the values a kept operation reads (a shared backbone leaves some weights unread).
+    let read: HashSet<TensorId> =
+        operations.iter().zip(&keep).filter(|(_, k)| **k).flat_map(|(op, _)| op.inputs()).map(|t| t.id).collect();
     for (id, data) in values.iter().filter(|(id, _)| !runtime.contains(id) && read.contains(id)) {
         let mut t = TensorProto::new();
         t.name = lowering.name(*id);
@@ -74,8 +106,9 @@ pub fn lower_graph(
         t.raw_data = bytes::Bytes::copy_from_slice(data.as_bytes());
         lowering.initializer(t);
     }
-    for (index, operation) in operations.iter().enumerate() {
-        table::lower(&mut lowering, index, operation)?;
+    for (index, operation) in operations.iter().enumerate().filter(|(i, _)| keep[*i]) {
+        table::lower(&mut lowering, index, operation)
+            .map_err(|e| Error::Other(format!("{e}; the operation comes {}", place(operations, landmarks, index))))?;
     }
     let mut model = ModelProto::new();
     model.ir_version = IR_VERSION;

@@ -282,6 +282,11 @@ fn slice_bounds(start: isize, end: Option<isize>, step: isize) -> (i64, i64) {
     (onnx_start, onnx_end)
 }
 
+/// ONNX's `pads` (begins, then ends) of a padding that is the same at both ends of each axis.
+fn symmetric(padding: [usize; 2]) -> [usize; 4] {
+    [padding[0], padding[1], padding[0], padding[1]]
+}
+
 fn lower_module(l: &mut Lowering, index: usize, operation: &OperationIr, op: &ModuleOperationIr) -> Result<()> {
     let node = format!("n{index}");
     match op {
@@ -301,7 +306,7 @@ fn lower_module(l: &mut Lowering, index: usize, operation: &OperationIr, op: &Mo
             l.node(node, "AveragePool", vec![l.name(p.x.id)], vec![l.name(p.out.id)])
                 .ints("kernel_shape", p.kernel_size)
                 .ints("strides", p.stride)
-                .ints("pads", [p.padding[0], p.padding[1], p.padding[0], p.padding[1]])
+                .ints("pads", symmetric(p.padding))
                 .int("ceil_mode", p.ceil_mode as i64)
                 .int("count_include_pad", p.count_include_pad as i64);
         }
@@ -310,7 +315,7 @@ fn lower_module(l: &mut Lowering, index: usize, operation: &OperationIr, op: &Mo
                 .ints("kernel_shape", p.kernel_size)
                 .ints("strides", p.stride)
                 .ints("dilations", p.dilation)
-                .ints("pads", [p.padding[0], p.padding[1], p.padding[0], p.padding[1]])
+                .ints("pads", symmetric(p.padding))
                 .int("ceil_mode", p.ceil_mode as i64);
         }
         ModuleOperationIr::Interpolate(i) => {
@@ -352,14 +357,14 @@ fn lower_module(l: &mut Lowering, index: usize, operation: &OperationIr, op: &Mo
                 .ints("kernel_shape", [kh, kw])
                 .ints("strides", o.stride)
                 .ints("dilations", o.dilation)
-                .ints("pads", [o.padding[0], o.padding[1], o.padding[0], o.padding[1]])
+                .ints("pads", symmetric(o.padding))
                 .int("group", o.weight_groups as i64)
                 .int("offset_group", o.offset_groups as i64);
         }
         ModuleOperationIr::Unfold4d(u) => {
             // ONNX has no unfold: a grouped convolution whose kernels pick one tap each (one-hot,
             // exact) gives the patches as channels, `c * kh * kw + i * kw + j`, then a reshape.
-            let [n, c, _, _] = [u.x.shape[0], u.x.shape[1], u.x.shape[2], u.x.shape[3]];
+            let c = u.x.shape[1];
             let [kh, kw] = u.kernel_size;
             let taps = kh * kw;
             let mut weight = vec![0f32; c * taps * taps];
@@ -374,9 +379,8 @@ fn lower_module(l: &mut Lowering, index: usize, operation: &OperationIr, op: &Mo
             l.node(format!("n{index}_conv"), "Conv", vec![l.name(u.x.id), weight], vec![patches.clone()])
                 .ints("strides", o.stride)
                 .ints("dilations", o.dilation)
-                .ints("pads", [o.padding[0], o.padding[1], o.padding[0], o.padding[1]])
+                .ints("pads", symmetric(o.padding))
                 .int("group", c as i64);
-            let _ = n;
             let shape = l.i64s(format!("n{index}_shape"), &dims(&u.out.shape));
             l.node(node, "Reshape", vec![patches, shape], vec![l.name(u.out.id)]);
         }
