@@ -41,6 +41,42 @@ pub enum Error {
     /// Tensors of incompatible shapes were given.
     #[error("shape: {0}")]
     Shape(String),
+    /// A download failed: the address, what arrived (or that nothing did) and why.
+    #[error("{url}: {cause}")]
+    Fetch {
+        /// The address requested.
+        url: String,
+        /// What went wrong, including what arrived before it did.
+        cause: String,
+    },
+    /// One rank of a data-parallel job failed in a phase every rank ends together (`agree`):
+    /// every rank returns this error, naming the failing one, so none waits for another.
+    #[error("rank {rank} of {size}: {cause}")]
+    Rank {
+        /// The lowest failing rank.
+        rank: usize,
+        /// The number of ranks.
+        size: usize,
+        /// That rank's error, as its text (it crossed the process boundary).
+        cause: String,
+    },
+    /// An operation this build, backend or exporter does not support.
+    #[error("{operation} is not supported: {reason}")]
+    Unsupported {
+        /// What was asked for (an ONNX operation, a backend feature).
+        operation: String,
+        /// Why not, and what to do instead where there is a way.
+        reason: String,
+    },
+    /// An error with what was being done when it happened (`reading pair 3`, `left image`).
+    #[error("{context}: {source}")]
+    Context {
+        /// What was being done.
+        context: String,
+        /// The error itself, its kind kept.
+        #[source]
+        source: Box<Error>,
+    },
     /// Anything else, with a message.
     #[error("{0}")]
     Other(String),
@@ -63,12 +99,38 @@ impl Error {
         Self::Config(Problem::new(key, reason))
     }
 
+    /// A failed download of `url`.
+    pub fn fetch(url: impl Into<String>, cause: impl Into<String>) -> Self {
+        Self::Fetch { url: url.into(), cause: cause.into() }
+    }
+
+    /// An operation that is not supported, and why.
+    pub fn unsupported(operation: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::Unsupported { operation: operation.into(), reason: reason.into() }
+    }
+
+    /// This error with `context` (what was being done) written before it; its kind stays
+    /// reachable through [`root`](Self::root).
+    #[must_use]
+    pub fn context(self, context: impl Into<String>) -> Self {
+        Self::Context { context: context.into(), source: Box::new(self) }
+    }
+
+    /// The error under every [`Context`](Self::Context) wrapper: what a caller branches on.
+    pub fn root(&self) -> &Error {
+        match self {
+            Self::Context { source, .. } => source.root(),
+            other => other,
+        }
+    }
+
     /// The error as seen from the table that holds the configuration under `table`: a
     /// configuration error's key is prefixed ([`Problem::within`]), other errors are unchanged.
     #[must_use]
     pub fn within(self, table: &str) -> Self {
         match self {
             Self::Config(problem) => Self::Config(problem.within(table)),
+            Self::Context { context, source } => Self::Context { context, source: Box::new(source.within(table)) },
             other => other,
         }
     }
@@ -132,3 +194,17 @@ impl From<Problem> for Error {
 
 /// Result with [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn context_keeps_the_kind_reachable_and_reads_outside_in() {
+        let e = Error::fetch("http://127.0.0.1:9/x.pth", "no answer in 60 s").context("fetching raftstereo-eth3d");
+        assert_eq!(e.to_string(), "fetching raftstereo-eth3d: http://127.0.0.1:9/x.pth: no answer in 60 s");
+        assert!(matches!(e.root(), Error::Fetch { url, .. } if url.ends_with("x.pth")));
+        let keyed = Error::config("tau", "must be positive").context("loss").within("model");
+        assert!(matches!(keyed.root(), Error::Config(p) if p.key == "model.tau"), "{keyed}");
+    }
+}
