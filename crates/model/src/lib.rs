@@ -19,6 +19,7 @@ pub mod inference;
 pub mod network;
 pub mod official_keys;
 pub mod profile;
+pub mod seeded;
 pub mod stage_backward;
 pub mod verify;
 
