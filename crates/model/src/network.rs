@@ -135,7 +135,7 @@ impl RaftStereo {
         let dims = u.hidden_dims;
         Ok(Self {
             fusion: config.fusion.init(device)?,
-            encoder: config.encoder.init(dims, u.n_downsample, device),
+            encoder: config.encoder.init(dims, u.n_downsample, None, device).map_err(|e| e.within("encoder"))?,
             // Level `i` counts from the finest (1/4, `hidden_dims[2]`) as the context does.
             context_zqr_convs: (0..u.n_gru_layers)
                 .map(|i| {
@@ -223,7 +223,7 @@ impl RaftStereo {
         probe: &mut Probe<'_>,
     ) -> dgstereo_core::Result<Encodings> {
         let Encoded { fmap1, fmap2, context } =
-            self.encoder.encode(self.fuse(left, right, prior, probe)?, self.n_gru_layers, probe);
+            self.encoder.encode(self.fuse(left, right, prior, probe)?, self.n_gru_layers, probe)?;
         probe.record("fnet.left", &fmap1);
         probe.record("fnet.right", &fmap2);
         let (hidden, gates) = self.gru_context(context, probe);
@@ -343,7 +343,7 @@ impl RaftStereo {
         } else {
             (left, right)
         };
-        Ok(EncoderInputs { context_left, features_left, features_right })
+        Ok(EncoderInputs { context_left, features_left, features_right, depth: None })
     }
 
     /// The GRUs' initial hidden states (tanh of the first heads) and their gate context terms
