@@ -23,7 +23,7 @@ use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementat
 use dgstereo_encoder::{ContextFeatures, Encoded, EncoderInputs, Encoders};
 use dgstereo_fusion::{Fusion, FusionTarget, ImageFusion};
 use dgstereo_kernels::{Numerics, UpdateLoop, conv2d_forward};
-use dgstereo_updater::{GateContext, GuidanceKind, MultiLevelUpdateBlock, Updater, convex_upsample};
+use dgstereo_updater::{GateContext, GuidanceKind, HeadOutput, MultiLevelUpdateBlock, Updater, convex_upsample};
 
 use crate::config::ModelConfig;
 
@@ -143,7 +143,7 @@ impl RaftStereo {
                     conv2d([d, d * 3], 3, 1, 1, ConvInit::TorchDefault, device)
                 })
                 .collect(),
-            update_block: MultiLevelUpdateBlock::new(u, config.correlation.channels(), device),
+            update_block: MultiLevelUpdateBlock::new(u, config.correlation.channels(), HeadOutput::Delta, device),
             correlation: config.correlation.clone(),
             guidance: u.guidance,
             fuse_features: config.fusion.target() == FusionTarget::Both,
@@ -309,7 +309,7 @@ impl RaftStereo {
         probe: &mut Probe<'_>,
     ) -> Tensor<4> {
         let flow = Tensor::cat(vec![cast_float(flow_x, grid.dtype), grid.zeros.clone()], 1);
-        self.update_block.step(hidden, gates, corr, flow, grid.guidance.as_ref(), probe).delta_x
+        self.update_block.step(hidden, gates, corr, flow, grid.guidance.as_ref(), probe).prediction
     }
 
     /// Stage 5a, the mask head: the convex upsampling's weights from the finest state.
