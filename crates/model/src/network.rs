@@ -7,7 +7,7 @@
 //!
 //! The pass is written once, as stage functions that [`RaftStereo::forward_flow`] calls in
 //! sequence: `encode` (monocular network, fusion, encoders, the GRUs' initial states and context,
-//! the initial disparity; [`crate::encode`]), then `correlation_volume` and `update_grid` once,
+//! the initial disparity; the `encode` module), then `correlation_volume` and `update_grid` once,
 //! per iteration `lookup` (or `scale_lookup`) and `update`, and `upsample_weights` with
 //! `upsample` where a flow is returned. The per-stage backward profile
 //! ([`crate::stage_backward`]) runs the same functions, one stage at a time.

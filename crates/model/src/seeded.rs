@@ -139,7 +139,9 @@ mod tests {
     #[test]
     fn values_are_those_of_the_reference_arithmetic() {
         assert_eq!(fnv1a64(b"fnet.conv1.weight"), 0x3c66_0885_1a7d_5acf);
-        let cases: [(&str, &[usize], &str, [(usize, u32); 3]); 8] = [
+        // (key, shape, salt, [(element, bits)])
+        type Case<'a> = (&'a str, &'a [usize], &'a str, [(usize, u32); 3]);
+        let cases: [Case; 8] = [
             ("fnet.conv1.weight", &[64, 3, 7, 7], "", [(0, 0x3cfa_f8a2), (1, 0x3d34_b23e), (9407, 0xbd71_0abf)]),
             ("cnet.norm1.running_var", &[64], "", [(0, 0x3f92_dd31), (1, 0x3fab_12b7), (63, 0x3faf_0b6e)]),
             ("cnet.norm1.weight", &[64], "", [(0, 0x3f67_79ce), (1, 0x3f8b_e84c), (63, 0x3f80_5799)]),
