@@ -51,7 +51,8 @@ pub struct BenchArgs {
     /// Cost volume (`auto`: within the 4 GiB that `infer --corr auto` allows by default).
     #[arg(long, value_enum, default_value_t = CorrChoice::Reg)]
     pub corr: CorrChoice,
-    /// Model configuration (a TOML file of `ModelConfig`; default RAFT-Stereo's).
+    /// Model configuration: a TOML file of `ModelConfig`, or an experiment file (its first run's
+    /// `[model]`, e.g. `experiments/zoo/defom-vits.toml`); default RAFT-Stereo's.
     #[arg(long)]
     pub config: Option<std::path::PathBuf>,
     /// Also time each stage of one forward pass (with `--train`: each stage's forward and backward, run alone).
@@ -164,11 +165,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     // The precision is set before the device's first tensor: burn fixes it there.
     let device = a.device.parse::<DeviceChoice>()?.device_with_precision(precision)?;
     let config = match &a.config {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
-            toml::from_str::<ModelConfig>(&text)
-                .with_context(|| format!("{}: not a model configuration", p.display()))?
-        }
+        Some(p) => model_config(p)?,
         None => ModelConfig::default(),
     };
     let implementation = corr_for(&config, a.corr, DEFAULT_MEMORY_BUDGET, w, h);
@@ -279,6 +276,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         a.device,
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );
+    println!("model: {}", dgstereo_model::checkpoint_config::summary(&config));
     println!("{}", machine_line());
     println!("runs {} after {} warm-up: median {med:.3} s, min {min:.3} s", a.runs, a.warmup);
     println!("CPU time per run (all threads): median {:.2} s", median(&mut cpu));
@@ -376,4 +374,19 @@ mod tests {
             assert!(process_cpu_seconds().unwrap() >= before);
         }
     }
+}
+
+/// The model configuration of `path`: an experiment file (it has a `[model]` table or a `name`;
+/// its first run's model, `base` files and sweeps resolved) or a bare `ModelConfig`.
+fn model_config(path: &std::path::Path) -> anyhow::Result<ModelConfig> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let table: toml::Table = toml::from_str(&text).with_context(|| format!("{}: not TOML", path.display()))?;
+    if table.contains_key("model") || table.contains_key("name") {
+        let run = dgstereo_experiment::load(path)?
+            .into_iter()
+            .next()
+            .ok_or_else(|| anyhow::anyhow!("{}: the file defines no run", path.display()))?;
+        return Ok(run.config.model);
+    }
+    toml::from_str::<ModelConfig>(&text).with_context(|| format!("{}: not a model configuration", path.display()))
 }
