@@ -10,6 +10,7 @@ mod inputs;
 mod outputs;
 mod sigpipe;
 mod stop_signals;
+mod train_progress;
 mod visualize;
 
 use std::process::ExitCode;
