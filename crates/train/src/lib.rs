@@ -16,7 +16,8 @@
 //! `train.ema_decay` adds a moving average of the weights ([`ema`]) that validation, checkpoints'
 //! model weights and the final model use. [`ablation`] scores finished runs into the ablation
 //! table, and [`paper_report`] lays them out in the paper's tables beside its published figures
-//! ([`paper_tables`]). [`verify_step`] checks two steps against the official training loop.
+//! ([`paper_tables`]), each column filled by the benchmark that scores its data set
+//! ([`paper_match`]). [`verify_step`] checks two steps against the official training loop.
 //!
 //! Data parallelism is one seam: a run is `N` ranks meeting through a [`Collective`] (the
 //! world of one is [`SingleProcess`]; MPI's lives in `dgstereo-distributed`).
@@ -36,6 +37,7 @@ mod config;
 pub mod data_parallel;
 pub mod ema;
 pub mod gradient_exchange;
+pub mod paper_match;
 pub mod paper_report;
 pub mod paper_tables;
 pub mod params;
