@@ -92,9 +92,9 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
     let runs = dgstereo_experiment::load_all(&a.files)?;
     // Everything every run reads, checked before the first one trains (or is submitted).
     for run in &runs {
-        let parts = parts_of(run.config.clone(), a.steps);
-        preflight(&parts, &run.config.benchmarks)
-            .with_context(|| format!("{}: run '{}'", run.source.display(), run.name))?;
+        let context = || format!("{}: run '{}'", run.source.display(), run.name);
+        let parts = crate::fetching::parts(parts_of(run.config.clone(), a.steps)).with_context(context)?;
+        preflight(&parts, &run.config.benchmarks).with_context(context)?;
     }
     if let Some(task) = a.task {
         let run = runs.get(task).with_context(|| format!("--task {task}: the study has {} runs", runs.len()))?;
@@ -135,7 +135,8 @@ fn train_and_score(run: &ResolvedRun, a: &AblateArgs, stop: &StopSignals) -> any
     let name = &run.name;
     let out = a.out.join(folder_name(name));
     let benchmarks = &run.config.benchmarks;
-    let parts = parts_of(run.config.clone(), a.steps);
+    let parts =
+        crate::fetching::parts(parts_of(run.config.clone(), a.steps)).with_context(|| format!("run '{name}'"))?;
     if is_finished(&out) {
         let stored = std::fs::read_to_string(out.join("config.toml")).unwrap_or_default();
         let differences = dgstereo_train::run_identity::training_differences(&stored, &parts.resolved_toml)?;
