@@ -3,8 +3,8 @@
 //! (`models--owner--name/{blobs,snapshots,refs}`): in the Hugging Face cache itself
 //! (`$HF_HOME/hub`, else `~/.cache/huggingface/hub`) unless `DGSTEREO_CACHE` is set, and a file
 //! Python's `huggingface_hub` already downloaded there is used as it is. Beside the files, the
-//! cache records the SHA-256 of each one it fetched (`sha256/NAME`), so a later load notices a
-//! file that changed.
+//! cache records the SHA-256 of each one it fetched or checked, with its size and modification
+//! time (`sha256/NAME`), so a later load notices a file that changed.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -95,28 +95,33 @@ impl Cache {
         self.root.join("sha256").join(w.name)
     }
 
-    /// The SHA-256 recorded for `w`, if any.
-    pub fn recorded(&self, w: &NamedWeights) -> Result<Option<String>> {
+    /// What is recorded for `w`, if anything.
+    pub fn recorded(&self, w: &NamedWeights) -> Result<Option<Record>> {
         let path = self.record_path(w);
-        match std::fs::read_to_string(&path) {
-            Ok(text) => match text.split_whitespace().next() {
-                Some(sha) if is_sha256(sha) => Ok(Some(sha.to_ascii_lowercase())),
-                _ => {
-                    Err(Error::format(&path, "not a SHA-256 record: delete it, and the file it names, and fetch again"))
-                }
-            },
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-            Err(e) => Err(Error::io(&path, e)),
+        let text = match std::fs::read_to_string(&path) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(Error::io(&path, e)),
+        };
+        let mut lines = text.lines();
+        match lines.next().and_then(|l| l.split_whitespace().next()) {
+            Some(sha) if is_sha256(sha) => Ok(Some(Record {
+                sha256: sha.to_ascii_lowercase(),
+                stamp: lines.next().map(str::trim).filter(|l| !l.is_empty()).map(str::to_string),
+            })),
+            _ => Err(Error::format(&path, "not a SHA-256 record: delete it, and the file it names, and fetch again")),
         }
     }
 
-    /// Records `sha256` for `w`, whose file is `file` (`sha256sum`'s line format).
+    /// Records `sha256` for `w`, whose file is `file`: `sha256sum`'s line, then the file's size
+    /// and modification time ([`stamp`]).
     pub fn record(&self, w: &NamedWeights, sha256: &str, file: &Path) -> Result<()> {
         let path = self.record_path(w);
         let dir = self.root.join("sha256");
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
         let tmp = dir.join(format!(".{}.tmp", w.name));
-        std::fs::write(&tmp, format!("{sha256}  {}\n", file.display())).map_err(|e| Error::io(&tmp, e))?;
+        let stamp = stamp(file).unwrap_or_default();
+        std::fs::write(&tmp, format!("{sha256}  {}\n{stamp}\n", file.display())).map_err(|e| Error::io(&tmp, e))?;
         commit_file(&tmp, &path)
     }
 
@@ -130,6 +135,23 @@ impl Cache {
         file.lock().map_err(|e| Error::io(&path, e))?;
         Ok(FetchLock { _file: file })
     }
+}
+
+/// What the cache recorded of a file it fetched or checked.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Record {
+    /// Its SHA-256.
+    pub sha256: String,
+    /// Its size and modification time when that SHA-256 was computed ([`stamp`]).
+    pub stamp: Option<String>,
+}
+
+/// The size and modification time of `path` (links followed), as a record keeps them: a file
+/// whose stamp is unchanged has not been written since.
+pub fn stamp(path: &Path) -> Option<String> {
+    let meta = std::fs::metadata(path).ok()?;
+    let modified = meta.modified().ok()?.duration_since(std::time::UNIX_EPOCH).ok()?;
+    Some(format!("{} bytes, modified {}.{:09}", meta.len(), modified.as_secs(), modified.subsec_nanos()))
 }
 
 /// An exclusive lock on one fetch, released when dropped (or when the process ends).

@@ -68,9 +68,8 @@ impl Http {
 
     /// Why a request got no answer, and what is kept.
     fn transport_cause(&self, t: &ureq::Transport, have: u64) -> String {
-        let timed_out = std::error::Error::source(t)
-            .and_then(|s| s.downcast_ref::<std::io::Error>())
-            .is_some_and(is_timeout);
+        let timed_out =
+            std::error::Error::source(t).and_then(|s| s.downcast_ref::<std::io::Error>()).is_some_and(is_timeout);
         if timed_out {
             format!("no answer within {} ({TIMEOUT_VARIABLE} sets the wait); {}", seconds(self.timeout), kept(have))
         } else {

@@ -32,7 +32,7 @@ pub use cache::Cache;
 pub use catalog::{Architecture, CATALOG, NamedWeights, Role, Source, Sources, find};
 pub use fetch::Fetched;
 pub use options::{FetchOptions, Progress, ProgressFn};
-pub use verify::Verified;
+pub use verify::{Thoroughness, Verified};
 
 /// Resolves weights options to files: looks names up in a cache and fetches what is missing.
 #[derive(Debug, Clone)]
@@ -84,16 +84,22 @@ impl Fetcher {
         &self.options
     }
 
-    /// The file of `w`: from the cache (its SHA-256 checked against the published or recorded
-    /// one), else downloaded (an error when offline, naming the command that fetches it).
+    /// The file of `w`: from the cache (unchanged since its SHA-256 was checked against the
+    /// published or recorded one: [`Thoroughness::Stamp`]), else downloaded (an error when
+    /// offline, naming the command that fetches it).
     pub fn get(&self, w: &NamedWeights) -> Result<PathBuf> {
-        self.fetch(w).map(|f| f.path)
+        self.obtain(w, Thoroughness::Stamp).map(|f| f.path)
     }
 
-    /// As [`Fetcher::get`], saying how the file was checked.
+    /// As [`Fetcher::get`], hashing a cached file whole, and saying how the file was checked
+    /// (`dgstereo weights fetch`).
     pub fn fetch(&self, w: &NamedWeights) -> Result<Fetched> {
+        self.obtain(w, Thoroughness::Hash)
+    }
+
+    fn obtain(&self, w: &NamedWeights, thoroughness: Thoroughness) -> Result<Fetched> {
         if let Some(path) = self.cache.find(w) {
-            verify::check_cached(&self.cache, w, &path)?;
+            verify::check_cached(&self.cache, w, &path, thoroughness)?;
             let verified = if w.sha256.is_some() { Verified::PinnedSha256 } else { Verified::StructureOnly };
             return Ok(Fetched { path, verified });
         }

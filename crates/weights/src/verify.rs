@@ -11,7 +11,7 @@ use dgstereo_model::checkpoint_config;
 use dgstereo_prior::depth_anything::checkpoint::detect_encoder;
 use sha2::{Digest, Sha256};
 
-use crate::cache::Cache;
+use crate::cache::{Cache, stamp};
 use crate::catalog::{Architecture, NamedWeights};
 use crate::structure::{check_igev, defom_encoder, state_dict_keys};
 
@@ -96,32 +96,50 @@ pub fn check_download(path: &Path, w: &NamedWeights, stated: Option<&str>) -> Re
     Ok((actual, verified))
 }
 
+/// How thoroughly [`check_cached`] checks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Thoroughness {
+    /// Every byte is hashed.
+    Hash,
+    /// A file whose size and modification time are those recorded with its SHA-256 is taken as
+    /// unchanged; any other is hashed (a load: hashing a 1.3 GB ViT-L file each time costs
+    /// seconds).
+    Stamp,
+}
+
 /// Checks a cached file of `w` before it is used: its SHA-256 against the pinned one, else
 /// against the one recorded when it was fetched; a file with neither (placed by hand, or
-/// fetched by Python's `huggingface_hub`) has its structure checked and its SHA-256 recorded.
-/// The error names the file and both sums.
-pub fn check_cached(cache: &Cache, w: &NamedWeights, path: &Path) -> Result<()> {
-    let actual = sha256_file(path)?;
-    if let Some(pinned) = w.sha256 {
-        return check_sha256(path, &actual, pinned, "the published SHA-256").map_err(|e| {
-            e.context(format!("{} changed since it was fetched (delete it and fetch {} again)", path.display(), w.name))
-        });
+/// fetched by Python's `huggingface_hub`) has its structure checked. What was checked is
+/// recorded. The error names the file and both sums.
+pub fn check_cached(cache: &Cache, w: &NamedWeights, path: &Path, thoroughness: Thoroughness) -> Result<()> {
+    let record = cache.recorded(w)?;
+    if let Some(record) = &record
+        && thoroughness == Thoroughness::Stamp
+        && w.sha256.is_none_or(|pinned| pinned.eq_ignore_ascii_case(&record.sha256))
+        && record.stamp.is_some()
+        && record.stamp == stamp(path)
+    {
+        return Ok(());
     }
-    match cache.recorded(w)? {
-        Some(recorded) => check_sha256(
+    let actual = sha256_file(path)?;
+    let changed = |e: Error| {
+        e.context(format!("{} changed since it was fetched (delete it and fetch {} again)", path.display(), w.name))
+    };
+    match (w.sha256, &record) {
+        (Some(pinned), _) => check_sha256(path, &actual, pinned, "the published SHA-256").map_err(changed)?,
+        (None, Some(record)) => check_sha256(
             path,
             &actual,
-            &recorded,
+            &record.sha256,
             &format!("the SHA-256 recorded when it was fetched ({})", cache.record_path(w).display()),
         )
-        .map_err(|e| {
-            e.context(format!("{} changed since it was fetched (delete it and fetch {} again)", path.display(), w.name))
-        }),
-        None => {
-            check_structure(path, w)?;
-            cache.record(w, &actual, path)
-        }
+        .map_err(changed)?,
+        (None, None) => check_structure(path, w)?,
     }
+    if record.is_none_or(|r| r.stamp != stamp(path)) {
+        cache.record(w, &actual, path)?;
+    }
+    Ok(())
 }
 
 /// Checks that the checkpoint at `path` loads and shows the architecture of `w`.

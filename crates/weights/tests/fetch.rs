@@ -59,7 +59,7 @@ fn models_zip_is_fetched_through_a_redirect_and_each_checkpoint_kept_and_recorde
         f.clone().offline(true).resolve(Path::new("raftstereo-sceneflow"), Role::Stereo, "weights").unwrap();
     assert_eq!(std::fs::read(sceneflow).unwrap(), std::fs::read(&default).unwrap());
     assert_eq!(files_under(&cache.path().join("raft-stereo")), ["raftstereo-realtime.pth", "raftstereo-sceneflow.pth"]);
-    let recorded = f.cache().recorded(find("raftstereo-realtime").unwrap()).unwrap();
+    let recorded = f.cache().recorded(find("raftstereo-realtime").unwrap()).unwrap().map(|r| r.sha256);
     assert_eq!(recorded, Some(sha256(&std::fs::read(&realtime).unwrap())));
     // A name the archive lacked is an error after the download, not a file.
     let e = f.resolve(Path::new("raftstereo-eth3d"), Role::Stereo, "weights").unwrap_err();
@@ -102,7 +102,7 @@ fn a_google_drive_file_is_found_by_name_through_the_confirmation_page_and_resume
     let fetched = f.fetch(w).unwrap();
     assert_eq!(fetched.path, cache.path().join("google-drive/raft_test.pth"));
     assert_eq!((std::fs::read(&fetched.path).unwrap(), fetched.verified), (body.clone(), Verified::StructureOnly));
-    assert_eq!(f.cache().recorded(w).unwrap(), Some(sha256(&body)));
+    assert_eq!(f.cache().recorded(w).unwrap().map(|r| r.sha256), Some(sha256(&body)));
     let requests = server.requests();
     // The other file's body was never asked for; the second attempt resumed.
     assert!(!requests.iter().any(|r| r.path.contains("confirm=t&uuid=u-A1")), "{requests:?}");

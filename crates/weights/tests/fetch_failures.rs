@@ -125,7 +125,7 @@ fn a_weak_etag_checks_nothing_and_the_fetch_says_structure_only_while_a_pin_stil
     let unpinned = vits_entry("vits-weak", None);
     let fetched = f.fetch(unpinned).unwrap();
     assert_eq!(fetched.verified, Verified::StructureOnly, "a weak tag is no SHA-256");
-    assert_eq!(f.cache().recorded(unpinned).unwrap(), Some(sha256(&changed)));
+    assert_eq!(f.cache().recorded(unpinned).unwrap().map(|r| r.sha256), Some(sha256(&changed)));
     std::fs::remove_dir_all(cache.path().join("huggingface")).unwrap();
     let e = f.fetch(vits_entry("vits-weak-pinned", Some(&sha256(&good)))).unwrap_err().to_string();
     assert!(e.contains("the published SHA-256") && e.contains("nothing was kept"), "{e}");
@@ -172,14 +172,29 @@ fn a_cached_file_that_changed_is_an_error_naming_it_and_both_hashes() {
     let pinned = vits_entry("vits-changed", Some(&sha256(&body)));
     for w in [find("raftstereo-middlebury").unwrap(), pinned] {
         let path = f.get(w).unwrap();
-        let before = sha256(&std::fs::read(&path).unwrap());
-        let mut bytes = std::fs::read(&path).unwrap();
+        let blob = std::fs::canonicalize(&path).unwrap();
+        let original = std::fs::read(&blob).unwrap();
+        let modified = std::fs::metadata(&blob).unwrap().modified().unwrap();
+        // Touched, not changed: loads and `weights fetch` accept it.
+        let file = std::fs::File::options().write(true).open(&blob).unwrap();
+        file.set_modified(modified + Duration::from_secs(5)).unwrap();
+        drop(file);
+        f.get(w).unwrap();
+        f.fetch(w).unwrap();
+        // Rewritten: the next load hashes it, as its modification time moved.
+        let mut bytes = original.clone();
         let last = bytes.len() - 1;
         bytes[last] ^= 0xff;
-        let blob = std::fs::canonicalize(&path).unwrap();
         std::fs::write(&blob, &bytes).unwrap();
         let e = f.get(w).unwrap_err().to_string();
-        assert!(e.contains(&before) && e.contains(&sha256(&bytes)), "{e}");
+        assert!(e.contains(&sha256(&original)) && e.contains(&sha256(&bytes)), "{e}");
         assert!(e.contains("changed since it was fetched") && e.contains(&path.display().to_string()), "{e}");
+        // Its modification time put back (same size): a load trusts the stamp, `weights fetch`
+        // hashes every byte and refuses it.
+        let file = std::fs::File::options().write(true).open(&blob).unwrap();
+        file.set_modified(modified + Duration::from_secs(5)).unwrap();
+        drop(file);
+        assert!(f.get(w).is_ok(), "{}: the stamp is what a load compares", w.name);
+        assert!(f.fetch(w).unwrap_err().to_string().contains(&sha256(&bytes)));
     }
 }
