@@ -73,7 +73,10 @@ impl Http {
         if timed_out {
             format!("no answer within {} ({TIMEOUT_VARIABLE} sets the wait); {}", seconds(self.timeout), kept(have))
         } else {
-            format!("{t}; {}", kept(have))
+            // The transport's own text starts with the address, which the error names already.
+            let message = t.message().map(|m| format!(": {m}")).unwrap_or_default();
+            let source = std::error::Error::source(t).map(|s| format!(" ({s})")).unwrap_or_default();
+            format!("{}{message}{source}; {}", t.kind(), kept(have))
         }
     }
 
