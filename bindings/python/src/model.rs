@@ -33,6 +33,21 @@ fn parse_corr(s: &str) -> PyResult<CorrChoice> {
     }
 }
 
+/// `weights` and the prior's weights as files: names of official checkpoints fetched by the
+/// fetcher the environment describes (made only when a name needs it).
+fn resolve_names(
+    weights: Option<PathBuf>,
+    prior: PriorConfig,
+) -> dgstereo_core::Result<(Option<PathBuf>, PriorConfig)> {
+    let weights_missing = weights.as_ref().is_some_and(|w| !w.exists());
+    if !weights_missing && dgstereo_weights::check_resolved_prior(&prior, "prior").is_ok() {
+        return Ok((weights, prior));
+    }
+    let fetcher = dgstereo_weights::Fetcher::from_env()?;
+    let weights = weights.map(|w| fetcher.resolve_stereo(&w, "weights")).transpose()?;
+    Ok((weights, fetcher.resolve_prior(prior, "prior")?))
+}
+
 #[pymethods]
 impl Engine {
     #[new]
@@ -61,15 +76,11 @@ impl Engine {
             None if run.is_some() => return Err(input("`run` names a run of an experiment: give `experiment` too")),
             None => (None, PriorConfig::None),
         };
-        let config = EngineConfig {
-            weights,
-            model,
-            prior: explicit_prior.unwrap_or(experiment_prior),
-            device,
-            precision,
-            slow_fast_gru,
-            bundled_assets,
-        };
+        // Names of official checkpoints become files (fetched on first use, without progress
+        // bars); the environment sets the cache, the servers, offline mode and the timeout.
+        let prior = explicit_prior.unwrap_or(experiment_prior);
+        let (weights, prior) = from_library(py.detach(|| guarded(|| resolve_names(weights, prior))), Kind::Error)?;
+        let config = EngineConfig { weights, model, prior, device, precision, slow_fast_gru, bundled_assets };
         let inner = py.detach(|| guarded(|| LibEngine::load_with_given_priors(&config)));
         Ok(Self { inner: Box::new(from_library(inner, Kind::Error)?) })
     }

@@ -171,11 +171,13 @@ impl Engine {
                 format!("{}: the depth prior runs in f32 only; leave out `precision` or the prior", config.precision),
             ));
         }
-        // Names of official checkpoints become files (fetched on first use).
-        let prior_config = &dgstereo_weights::resolve_prior(config.prior.clone(), "prior")?;
+        // Names of official checkpoints are files by now: the front end resolved them
+        // (`dgstereo_weights::Fetcher`); one left over is refused, saying so.
+        dgstereo_weights::check_resolved_prior(&config.prior, "prior")?;
+        let prior_config = &config.prior;
         let mut notes = Vec::new();
         let weights = match &config.weights {
-            Some(w) => dgstereo_weights::resolve_stereo(w, "weights")?,
+            Some(w) => dgstereo_weights::check_resolved(w, "weights").map(|()| w.clone())?,
             None => {
                 let with_prior = prior_config.gives_prior() && config.model.is_none();
                 let (path, note) = default_weights_at(config.bundled_assets.as_deref(), with_prior)?;

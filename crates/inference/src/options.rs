@@ -24,7 +24,8 @@ pub const MIN_WORKING_SIZE: usize = 32;
 #[derive(Clone, Debug, PartialEq)]
 pub struct EngineConfig {
     /// Weights: a dgstereo `.safetensors` or an official RAFT-Stereo `.pth`; `None` for the
-    /// bundled default ([`crate::weights::default_weights`]).
+    /// bundled default ([`crate::weights::default_weights`]). A name of an official checkpoint
+    /// is resolved to its file first (`dgstereo_weights::Fetcher::resolve_stereo`).
     pub weights: Option<PathBuf>,
     /// The model configuration the weights were trained with; `None` for the one a
     /// `.safetensors` file carries, else RAFT-Stereo's default.

@@ -38,8 +38,8 @@ fn absolute(path: &std::path::Path) -> std::path::PathBuf {
 /// it, and the left view where sizes differ) within the context of the benchmark's key.
 pub fn preflight(parts: &TrainParts, benchmarks: &[BenchmarkConfig]) -> Result<Preflight> {
     TrainingData::new(&parts.data, &parts.train)?;
-    // A weights name is fetched here, before the first step, or fails offline.
-    let parts = parts.clone().with_named_weights()?;
+    // Weights names were resolved by the front end (`TrainParts::with_named_weights`).
+    parts.check_named_weights_resolved()?;
     if let Some(init) = &parts.train.init
         && !init.is_file()
     {

@@ -109,15 +109,14 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
     // Everything every run reads, and every run's folder, checked before the first one trains
     // (or is submitted) and before anything is written.
     for run in &runs {
-        let parts = parts_of(run.config.clone(), a.steps);
-        preflight(&parts, &run.config.benchmarks)
-            .with_context(|| format!("{}: run '{}'", run.source.display(), run.name))?;
+        let context = || format!("{}: run '{}'", run.source.display(), run.name);
+        let parts = crate::fetching::parts(parts_of(run.config.clone(), a.steps)).with_context(context)?;
+        preflight(&parts, &run.config.benchmarks).with_context(context)?;
         // A folder holding training (checkpoints, a finished run) of another configuration is
         // refused; one whose run never reached a checkpoint is started again.
         let folder = a.out.join(folder_name(&run.name));
         if is_finished(&folder) || has_checkpoints(&folder)? {
-            dgstereo_train::run_identity::check_folder(&folder, &parts.resolved_toml)
-                .with_context(|| format!("{}: run '{}'", run.source.display(), run.name))?;
+            dgstereo_train::run_identity::check_folder(&folder, &parts.resolved_toml).with_context(context)?;
         }
     }
     if let Some(task) = a.task {
@@ -169,7 +168,8 @@ fn train_and_score(run: &ResolvedRun, a: &AblateArgs, stop: &StopSignals) -> any
     let name = &run.name;
     let out = a.out.join(folder_name(name));
     let benchmarks = &run.config.benchmarks;
-    let parts = parts_of(run.config.clone(), a.steps);
+    let parts =
+        crate::fetching::parts(parts_of(run.config.clone(), a.steps)).with_context(|| format!("run '{name}'"))?;
     if is_finished(&out) {
         dgstereo_train::run_identity::check_folder(&out, &parts.resolved_toml)
             .with_context(|| format!("run '{name}'"))?;

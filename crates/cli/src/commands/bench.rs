@@ -190,7 +190,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
             )
         }
         Some(weights) => Some(
-            dgstereo_weights::resolve_prior(
+            crate::fetching::prior(
                 PriorConfig::DepthAnythingV2 {
                     weights: weights.clone(),
                     encoder: None,

@@ -57,7 +57,7 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     parts.train.iters = a.iters;
     parts.train.batch_size = a.batch;
     parts.train.crop = [h, w];
-    let mut trainer = Trainer::new(parts, device)?;
+    let mut trainer = Trainer::new(crate::fetching::parts(parts)?, device)?;
     let batch = random_batch(a.batch / world.size(), [h, w], (w / 4) as f32, trainer.autodiff_device());
     let kernels = match path(trainer.autodiff_device(), Op::Conv) {
         Path::Host => "host convolution backward",

@@ -88,7 +88,8 @@ fn validate(file: &Path, weights: Option<&Path>) -> anyhow::Result<ExitCode> {
         Some(w) => w,
         None => anyhow::bail!("{}: no --weights given and the experiment has no train.init", file.display()),
     };
-    let parts = crate::commands::train::parts_of(run.config, None);
+    let parts = crate::fetching::parts(crate::commands::train::parts_of(run.config, None))?;
+    let weights = crate::fetching::stereo(&weights, "weights")?;
     let device = dgstereo_core::default_device();
     let model = dgstereo_train::ablation::FinishedRun::with_weights(&parts, &weights, &device)
         .with_context(|| format!("{}: loading {}", file.display(), weights.display()))?;
@@ -147,7 +148,9 @@ fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool, config_o
             let on_disk = if config_only {
                 Ok(())
             } else {
-                dgstereo_train::preflight::preflight(&parts, &run.config.benchmarks).map(drop)
+                crate::fetching::parts(parts)
+                    .and_then(|parts| dgstereo_train::preflight::preflight(&parts, &run.config.benchmarks))
+                    .map(drop)
             };
             let checked = on_disk.and_then(|()| dgstereo_experiment::smoke_test(&run.config, size, iters, &device));
             match checked {

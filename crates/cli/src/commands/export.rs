@@ -64,8 +64,9 @@ pub fn run(cmd: ExportCommand) -> anyhow::Result<ExitCode> {
         Some(p) => Some(experiment_configs(p, a.run.as_deref()).map_err(with_flags)?.0),
         None => None,
     };
-    let config =
-        EngineConfig { weights: a.weights.clone(), model, slow_fast_gru: a.slow_fast_gru, ..EngineConfig::default() };
+    let weights =
+        a.weights.as_deref().map(|w| crate::fetching::stereo(w, "weights")).transpose().map_err(with_flags)?;
+    let config = EngineConfig { weights, model, slow_fast_gru: a.slow_fast_gru, ..EngineConfig::default() };
     // The prior maps are inputs of the file: the model loads without its provider.
     let engine = Engine::load_with_given_priors(&config).map_err(with_flags)?;
     let iters = a.iters.or(engine.preset_iters()).unwrap_or(DEFAULT_ITERS);

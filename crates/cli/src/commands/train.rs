@@ -124,6 +124,8 @@ fn train_one_among(
 ) -> anyhow::Result<dgstereo_train::RunSummary> {
     let name = parts.name.clone();
     let stop = session.stop;
+    // Weights names become files (fetched on first use) before the trainer sees them.
+    let parts = crate::fetching::parts(parts).with_context(|| format!("run '{name}'"))?;
     let options = RunOptions {
         out: out.to_path_buf(),
         resume,
