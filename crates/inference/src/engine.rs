@@ -357,8 +357,8 @@ impl Engine {
         let mirrored_prior = given.map(PriorMaps::mirrored);
         let (mirrored, mirrored_info) =
             self.network_disparity(&mirror_rgb(right), &mirror_rgb(left), name, mirrored_prior.as_ref(), options)?;
-        let rejected = rejected_pixels(&disparity, &mirror_disparity(&mirrored), threshold);
-        let filled = fill_rejected(&disparity, &rejected);
+        let rejected = rejected_pixels(&disparity, &mirror_disparity(&mirrored), threshold)?;
+        let filled = fill_rejected(&disparity, &rejected)?;
         let prior_seconds = info.prior_seconds.zip(mirrored_info.prior_seconds).map(|(a, b)| a + b);
         Ok(Prediction { disparity: filled, info: RunInfo { rejected: Some(rejected), prior_seconds, ..info } })
     }
