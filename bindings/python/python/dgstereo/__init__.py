@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import warnings
 from typing import Any, Optional, Tuple, Union
 
 import numpy as np
@@ -273,13 +274,45 @@ def depth(
     *,
     doffs: float = 0.0,
     calib: Optional[Union[str, os.PathLike]] = None,
+    crop: Optional[Tuple[float, float]] = None,
+    scale: Union[float, Tuple[float, float], None] = None,
 ) -> np.ndarray:
     """Depth in metres, ``fx * baseline / (d + doffs)`` (``fx`` in pixels, ``baseline`` in
-    metres), ``inf`` where the disparity is unknown; or from a calibration file ``calib``
-    (Middlebury ``calib.txt``, JSON or ``K.txt``, rescaled to the map's size)."""
-    return _dgstereo.depth(
-        _array(disparity, "disparity"), fx, baseline, float(doffs), None if calib is None else os.fspath(calib)
+    metres), or from a calibration file ``calib`` (Middlebury ``calib.txt``, JSON or ``K.txt``).
+
+    ``inf`` where there is no point in front of the cameras: the disparity is unknown (NaN,
+    ``inf``) or ``d + doffs <= 0`` (a negative disparity); ``inf`` is also the invalid value of a
+    PFM map.
+
+    A calibration applies to the image size it was made for. A map of another size at the same
+    aspect ratio (a resized pair) gets the calibration scaled to it, with a ``UserWarning``
+    saying so; any other size is an :class:`InputError` naming both sizes, unless ``crop`` and
+    ``scale`` say how the pair was made from the calibrated images:
+
+    Args:
+        crop: ``(x, y)``, the top-left corner of the crop in pixels of the calibrated image: the
+            principal point moves by ``(-x, -y)``.
+        scale: the (cropped) images were then resized by this factor, or by ``(sx, sy)``:
+            ``fx``, ``cx`` and ``doffs`` scale by ``sx``, ``fy`` and ``cy`` by ``sy``.
+    """
+    if crop is not None:
+        if not (isinstance(crop, (tuple, list)) and len(crop) == 2):
+            raise InputError(f"`crop` {crop!r}: expected the corner (x, y) in pixels of the calibrated image")
+        crop = (float(crop[0]), float(crop[1]))
+    if scale is not None:
+        if isinstance(scale, (tuple, list)):
+            if len(scale) != 2:
+                raise InputError(f"`scale` {scale!r}: expected a factor or (sx, sy)")
+            scale = (float(scale[0]), float(scale[1]))
+        else:
+            scale = (float(scale), float(scale))
+    result, notice = _dgstereo.depth(
+        _array(disparity, "disparity"), fx, baseline, float(doffs), None if calib is None else os.fspath(calib),
+        crop, scale,
     )
+    if notice is not None:
+        warnings.warn(notice, UserWarning, stacklevel=2)
+    return result
 
 
 def read_pfm(path: Union[str, os.PathLike]) -> np.ndarray:
