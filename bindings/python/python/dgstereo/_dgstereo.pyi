@@ -48,7 +48,12 @@ class Engine:
         lr_check: Optional[float] = None,
         prior: Optional[Tuple[npt.NDArray, npt.NDArray]] = None,
         name: str = "pair",
-    ) -> Tuple[npt.NDArray[np.float32], dict]: ...
+        channels: str = "rgb",
+    ) -> Tuple[npt.NDArray[np.float32], dict]:
+        """``left``, ``right``: uint8 or float in 0..255, or uint16 in 0..65535 (scaled by
+        255/65535 as a 16-bit PNG is read), channels in ``channels`` order (``"rgb"`` or
+        ``"bgr"``); the dict's ``network_size`` is ``(height, width)``."""
+        ...
     def export_onnx(
         self, path: str, height: int, width: int, iters: int
     ) -> Tuple[int, int, list[Tuple[str, list[int]]], list[Tuple[str, list[int]]]]: ...
