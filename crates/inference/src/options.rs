@@ -15,10 +15,7 @@ use dgstereo_model::ModelConfig;
 use dgstereo_prior::PriorConfig;
 
 use crate::cost_volume::{CorrChoice, DEFAULT_MEMORY_BUDGET};
-use crate::working_size::MinSize;
-
-/// The smallest side, in pixels, that `max_size` and `min_size` may ask for.
-pub const MIN_WORKING_SIZE: usize = 32;
+use crate::working_size::{MIN_WORKING_SIZE, MinSize};
 
 /// What to load: the weights, the model and prior configurations, the device.
 #[derive(Clone, Debug, PartialEq)]

@@ -313,7 +313,7 @@ impl Trainer {
         let step = self.step;
         let started = Instant::now();
         let predictions = self.predictions(batch)?;
-        let loss = self.parts.loss.loss(&predictions, &batch.target);
+        let loss = self.parts.loss.loss(&predictions, &batch.target)?;
         let loss_value = f64::from(dgstereo_core::tensor::to_vec(loss.clone().detach())[0]);
         if !loss_value.is_finite() {
             return Err(Error::Other(format!(

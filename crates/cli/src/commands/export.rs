@@ -88,7 +88,12 @@ pub fn run(cmd: ExportCommand) -> anyhow::Result<ExitCode> {
     };
     println!("wrote {} in {:.1} s", a.output.display(), start.elapsed().as_secs_f64());
     println!("opset {}, {} nodes, {:.1} MB", dgstereo_export::OPSET, exported.nodes, exported.bytes.len() as f64 / 1e6);
-    println!("inputs: {} (float32, RGB 0..255; prior maps: relative inverse depth)", shapes(&exported.inputs));
+    let inputs = if engine.model_config().needs_prior() {
+        "float32, RGB 0..255; prior maps: relative inverse depth"
+    } else {
+        "float32, RGB 0..255"
+    };
+    println!("inputs: {} ({inputs})", shapes(&exported.inputs));
     println!("outputs: {} (float32, positive disparity in pixels)", shapes(&exported.outputs));
     Ok(ExitCode::SUCCESS)
 }
