@@ -25,7 +25,7 @@ fn edge_aware_loss(c: &mut Criterion) {
     let mut group = c.benchmark_group("loss");
     group.sample_size(10);
     group.bench_function("edge-aware 320x736 12 predictions", |b| {
-        b.iter(|| black_box(loss.loss(&predictions, &target).into_data()))
+        b.iter(|| black_box(loss.loss(&predictions, &target).expect("matching shapes").into_data()))
     });
     group.finish();
 }

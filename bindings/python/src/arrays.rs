@@ -2,10 +2,11 @@
 //!
 //! Inputs are read through `ndarray` views, so any strides work (C or Fortran order, slices,
 //! negative steps) and nothing is copied on the Python side. Images are `HxW` (grey, repeated
-//! into the three channels), `HxWx3` or `HxWx4` (alpha dropped), `uint8`, `float32` or `float64`
-//! in 0..255; the
-//! pure-Python layer converts other dtypes first. Every check happens here, before the library
-//! sees the data, and fails with a `dgstereo.InputError` naming the argument.
+//! into the three channels), `HxWx3` or `HxWx4` (alpha dropped), in the channel order the caller
+//! names ([`Channels`]), `uint8`, `float32` or `float64` in 0..255, or `uint16` in 0..65535
+//! (read as the command line reads a 16-bit file, [`dgstereo_data::image::sample_from_16_bits`]);
+//! the pure-Python layer converts other dtypes first. Every check happens here, before the
+//! library sees the data, and fails with a `dgstereo.InputError` naming the argument.
 
 use dgstereo_data::{DisparityMap, Mask, RgbImage};
 use numpy::ndarray::{Array2, Array3, ArrayView3, ArrayViewD, Axis, Ix3};
@@ -14,21 +15,56 @@ use pyo3::prelude::*;
 
 use crate::errors::input;
 
-/// The dtypes arrays are read in.
+/// The dtypes maps are read in.
 const DTYPES: &str = "uint8, float32 or float64";
 
-/// An `HxWx3` (or `HxW`) array as an image; `what` names the argument in errors.
-pub fn image(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<RgbImage> {
+/// The dtypes images are read in.
+const IMAGE_DTYPES: &str = "uint8, uint16, float32 or float64";
+
+/// The order of an image's three colour channels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Channels {
+    /// Red, green, blue (what the model takes, and what `dgstereo.read_image` gives).
+    Rgb,
+    /// Blue, green, red (OpenCV's order).
+    Bgr,
+}
+
+impl Channels {
+    /// Parses `channels="rgb"|"bgr"`.
+    pub fn parse(s: &str) -> PyResult<Self> {
+        match s.to_ascii_lowercase().as_str() {
+            "rgb" => Ok(Self::Rgb),
+            "bgr" => Ok(Self::Bgr),
+            _ => Err(input(format!("`channels` '{s}': expected \"rgb\" or \"bgr\" (OpenCV's order)"))),
+        }
+    }
+
+    /// The input channel that holds RGB channel `ch` (of 3 or 4 channels).
+    fn source(self, ch: usize) -> usize {
+        match self {
+            Self::Rgb => ch,
+            Self::Bgr => 2 - ch,
+        }
+    }
+}
+
+/// An `HxWx3` (or `HxWx4`, or `HxW`) array whose channels are in `order` as an RGB image; `what`
+/// names the argument in errors.
+pub fn image(obj: &Bound<'_, PyAny>, what: &str, order: Channels) -> PyResult<RgbImage> {
     if let Ok(a) = obj.extract::<PyReadonlyArrayDyn<'_, u8>>() {
-        return image_from_view(a.as_array(), f32::from, what);
+        return image_from_view(a.as_array(), f32::from, what, order);
+    }
+    if let Ok(a) = obj.extract::<PyReadonlyArrayDyn<'_, u16>>() {
+        return image_from_view(a.as_array(), dgstereo_data::image::sample_from_16_bits, what, order);
     }
     if let Ok(a) = obj.extract::<PyReadonlyArrayDyn<'_, f32>>() {
-        return image_from_view(a.as_array(), |v| v, what);
+        return image_from_view(a.as_array(), |v| v, what, order);
     }
     if let Ok(a) = obj.extract::<PyReadonlyArrayDyn<'_, f64>>() {
-        return image_from_view(a.as_array(), |v| v as f32, what);
+        return image_from_view(a.as_array(), |v| v as f32, what, order);
     }
-    Err(input(format!("`{what}`: expected a NumPy array of {DTYPES}, got {}", describe(obj))))
+    Err(input(format!("`{what}`: expected a NumPy array of {IMAGE_DTYPES}, got {}", describe(obj))))
 }
 
 /// A 2-D float array as a map (non-finite values allowed: "unknown").
@@ -107,7 +143,12 @@ fn map_from_view<T: Copy>(v: ArrayViewD<'_, T>, f: impl Fn(T) -> f32, what: &str
     Ok(DisparityMap { width: w, height: h, data: v.iter().map(|x| f(*x)).collect() })
 }
 
-fn image_from_view<T: Copy>(v: ArrayViewD<'_, T>, f: impl Fn(T) -> f32, what: &str) -> PyResult<RgbImage> {
+fn image_from_view<T: Copy>(
+    v: ArrayViewD<'_, T>,
+    f: impl Fn(T) -> f32,
+    what: &str,
+    order: Channels,
+) -> PyResult<RgbImage> {
     let v3: ArrayView3<'_, T> = match v.ndim() {
         2 => v.insert_axis(Axis(2)).into_dimensionality::<Ix3>(),
         3 => v.into_dimensionality::<Ix3>(),
@@ -126,7 +167,7 @@ fn image_from_view<T: Copy>(v: ArrayViewD<'_, T>, f: impl Fn(T) -> f32, what: &s
     }
     let mut img = RgbImage::new(w, h);
     for ch in 0..3 {
-        let src = v3.index_axis(Axis(2), if c == 1 { 0 } else { ch });
+        let src = v3.index_axis(Axis(2), if c == 1 { 0 } else { order.source(ch) });
         let plane = img.plane_mut(ch);
         for (dst, s) in plane.iter_mut().zip(src.iter()) {
             *dst = f(*s);

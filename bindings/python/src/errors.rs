@@ -6,7 +6,9 @@
 //! becomes follows the library's [`Error`]: a file's error (`Io`, `Format`, `Checkpoint`) makes
 //! a `FileError`; the caller names the kind of the rest.
 
+use std::cell::Cell;
 use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Once;
 
 use dgstereo_core::Error;
 use pyo3::prelude::*;
@@ -69,10 +71,34 @@ pub fn from_library<T>(result: Result<T, Error>, kind: Kind) -> PyResult<T> {
     result.map_err(|e| convert(e, kind))
 }
 
+thread_local! {
+    /// Whether this thread is inside [`guarded`], whose caller reports a panic as an exception.
+    static GUARDED: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Installs, once, a panic hook that stays silent for panics inside [`guarded`] on the calling
+/// thread (their message becomes the exception; Rust's report and backtrace on stderr would only
+/// repeat it to a Python user) and hands every other panic to the hook it replaces.
+fn quiet_inside_guarded() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !GUARDED.with(Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+}
+
 /// Runs `f`, turning a panic into a `dgstereo.Error` ("internal error: ...") instead of letting
-/// it cross into the interpreter.
+/// it cross into the interpreter, and without Rust's panic report on stderr.
 pub fn guarded<T>(f: impl FnOnce() -> Result<T, Error>) -> Result<T, Error> {
-    match catch_unwind(AssertUnwindSafe(f)) {
+    quiet_inside_guarded();
+    let outer = GUARDED.with(|g| g.replace(true));
+    let outcome = catch_unwind(AssertUnwindSafe(f));
+    GUARDED.with(|g| g.set(outer));
+    match outcome {
         Ok(result) => result,
         Err(panic) => {
             let message = panic

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use dgstereo_data::pfm::{Endian, Pfm, read_pfm as read_pfm_file, write_pfm as write_pfm_file};
 use dgstereo_eval::metrics::{METRIC_NAMES, ValidOptions, evaluate};
 use dgstereo_inference::Calibration;
+use dgstereo_inference::calibration::Adjustment;
 use dgstereo_inference::pointcloud::depth_map;
 use nalgebra::Matrix3;
 use numpy::PyReadonlyArrayDyn;
@@ -12,7 +13,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::arrays;
-use crate::errors::{Kind, from_library, input};
+use crate::errors::{Kind, convert, from_library, input};
 
 /// The metrics of `pred` against `gt` (see `dgstereo.metrics`).
 #[pyfunction]
@@ -36,9 +37,12 @@ pub fn metrics<'py>(
     Ok(out)
 }
 
-/// Depth in metres (see `dgstereo.depth`).
+/// Depth in metres and the notice of a calibration rescaled to the map's size, if any (see
+/// `dgstereo.depth`).
 #[pyfunction]
-#[pyo3(signature = (disparity, fx=None, baseline=None, doffs=0.0, calib=None))]
+#[pyo3(signature = (disparity, fx=None, baseline=None, doffs=0.0, calib=None, crop=None, scale=None))]
+// One argument per keyword of the Python function.
+#[allow(clippy::too_many_arguments)]
 pub fn depth<'py>(
     py: Python<'py>,
     disparity: &Bound<'py, PyAny>,
@@ -46,11 +50,26 @@ pub fn depth<'py>(
     baseline: Option<f64>,
     doffs: f64,
     calib: Option<PathBuf>,
-) -> PyResult<Bound<'py, PyAny>> {
+    crop: Option<(f64, f64)>,
+    scale: Option<(f64, f64)>,
+) -> PyResult<(Bound<'py, PyAny>, Option<String>)> {
     let d = arrays::map(disparity, "disparity")?;
-    let calibration = match (calib, fx, baseline) {
-        (Some(path), None, None) => from_library(Calibration::load(&path), Kind::Input)?.for_size(d.width, d.height),
+    let adjustment = Adjustment { crop, scale };
+    let (calibration, notice) = match (calib, fx, baseline) {
+        (Some(path), None, None) => {
+            let loaded = from_library(Calibration::load(&path), Kind::Input)?;
+            let fitted = loaded.adjusted(&adjustment, d.width, d.height).map_err(|e| match e {
+                dgstereo_core::Error::Shape(m) if adjustment.is_none() => {
+                    input(format!("{m}: `crop=(x, y)` and/or `scale=`"))
+                }
+                e => convert(e, Kind::Input),
+            })?;
+            (fitted.0, fitted.1.map(|n| n.to_string()))
+        }
         (None, Some(fx), Some(baseline)) => {
+            if !adjustment.is_none() {
+                return Err(input("`crop` and `scale` adjust a calibration file: give `calib`"));
+            }
             if !(fx.is_finite() && fx > 0.0) {
                 return Err(input(format!("`fx` {fx}: the focal length must be a positive number of pixels")));
             }
@@ -60,18 +79,19 @@ pub fn depth<'py>(
             if !doffs.is_finite() {
                 return Err(input("`doffs` must be finite"));
             }
-            Calibration {
+            let given = Calibration {
                 source: PathBuf::from("<arguments>"),
                 intrinsics: Matrix3::new(fx, 0.0, 0.0, 0.0, fx, 0.0, 0.0, 0.0, 1.0),
                 baseline_m: baseline,
                 doffs,
                 size: None,
                 depth_range: None,
-            }
+            };
+            (given, None)
         }
         _ => return Err(input("give either `fx` and `baseline` (metres), or `calib` (a calibration file)")),
     };
-    Ok(arrays::map_to_array(py, depth_map(&d, &calibration))?.into_any())
+    Ok((arrays::map_to_array(py, depth_map(&d, &calibration))?.into_any(), notice))
 }
 
 /// Reads a PFM file (see `dgstereo.read_pfm`).

@@ -7,6 +7,7 @@
 
 use std::path::PathBuf;
 
+use dgstereo_inference::working_size::network_size;
 use dgstereo_inference::{
     CorrChoice, Engine as LibEngine, EngineConfig, MinSize, PredictOptions, PriorMaps, experiment_configs, parse_prior,
 };
@@ -31,6 +32,21 @@ fn parse_corr(s: &str) -> PyResult<CorrChoice> {
         "alt" => Ok(CorrChoice::Alt),
         _ => Err(input(format!("`corr` '{s}': expected auto, reg or alt"))),
     }
+}
+
+/// `weights` and the prior's weights as files: names of official checkpoints fetched by the
+/// fetcher the environment describes (made only when a name needs it).
+fn resolve_names(
+    weights: Option<PathBuf>,
+    prior: PriorConfig,
+) -> dgstereo_core::Result<(Option<PathBuf>, PriorConfig)> {
+    let weights_missing = weights.as_ref().is_some_and(|w| !w.exists());
+    if !weights_missing && dgstereo_weights::check_resolved_prior(&prior, "prior").is_ok() {
+        return Ok((weights, prior));
+    }
+    let fetcher = dgstereo_weights::Fetcher::from_env()?;
+    let weights = weights.map(|w| fetcher.resolve_stereo(&w, "weights")).transpose()?;
+    Ok((weights, fetcher.resolve_prior(prior, "prior")?))
 }
 
 #[pymethods]
@@ -61,15 +77,11 @@ impl Engine {
             None if run.is_some() => return Err(input("`run` names a run of an experiment: give `experiment` too")),
             None => (None, PriorConfig::None),
         };
-        let config = EngineConfig {
-            weights,
-            model,
-            prior: explicit_prior.unwrap_or(experiment_prior),
-            device,
-            precision,
-            slow_fast_gru,
-            bundled_assets,
-        };
+        // Names of official checkpoints become files (fetched on first use, without progress
+        // bars); the environment sets the cache, the servers, offline mode and the timeout.
+        let prior = explicit_prior.unwrap_or(experiment_prior);
+        let (weights, prior) = from_library(py.detach(|| guarded(|| resolve_names(weights, prior))), Kind::Error)?;
+        let config = EngineConfig { weights, model, prior, device, precision, slow_fast_gru, bundled_assets };
         let inner = py.detach(|| guarded(|| LibEngine::load_with_given_priors(&config)));
         Ok(Self { inner: Box::new(from_library(inner, Kind::Error)?) })
     }
@@ -142,7 +154,7 @@ impl Engine {
     }
 
     /// The disparity of a pair and what happened (a dict).
-    #[pyo3(signature = (left, right, iters, max_size=None, min_size="auto", memory_budget=dgstereo_inference::DEFAULT_MEMORY_BUDGET, corr="auto", lr_check=None, prior=None, name="pair"))]
+    #[pyo3(signature = (left, right, iters, max_size=None, min_size="auto", memory_budget=dgstereo_inference::DEFAULT_MEMORY_BUDGET, corr="auto", lr_check=None, prior=None, name="pair", channels="rgb"))]
     #[allow(clippy::too_many_arguments)]
     fn predict<'py>(
         &self,
@@ -157,12 +169,16 @@ impl Engine {
         lr_check: Option<f32>,
         prior: Option<(Bound<'py, PyAny>, Bound<'py, PyAny>)>,
         name: &str,
+        channels: &str,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
         let min_size: MinSize = min_size.parse().map_err(|e: String| input(format!("`min_size` {e}")))?;
         let options = PredictOptions { iters, max_size, min_size, memory_budget, corr: parse_corr(corr)?, lr_check };
         from_library(self.inner.check(&options), Kind::Input)?;
-        let (l, r) = (arrays::image(left, "left")?, arrays::image(right, "right")?);
+        let order = arrays::Channels::parse(channels)?;
+        let (l, r) = (arrays::image(left, "left", order)?, arrays::image(right, "right", order)?);
         from_library(dgstereo_inference::check_same_size(&l, &r), Kind::Input)?;
+        let min_size = self.inner.min_size(&options);
+        from_library(network_size(l.width, l.height, min_size, options.max_size), Kind::Input)?;
         let maps = match &prior {
             Some((pl, pr)) => {
                 Some(PriorMaps { left: arrays::map(pl, "prior[0]")?, right: arrays::map(pr, "prior[1]")? })
@@ -194,7 +210,9 @@ impl Engine {
         });
         let prediction = from_library(result, Kind::Error)?;
         let info = PyDict::new(py);
-        info.set_item("network_size", prediction.info.network_size)?;
+        // (height, width), as NumPy writes every shape.
+        let (width, height) = prediction.info.network_size;
+        info.set_item("network_size", (height, width))?;
         info.set_item("corr", format!("{:?}", prediction.info.corr).to_ascii_lowercase())?;
         info.set_item("prior_seconds", prediction.info.prior_seconds)?;
         match prediction.info.rejected {

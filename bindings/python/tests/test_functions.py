@@ -1,5 +1,7 @@
 """metrics against NumPy, depth, PFM round trips."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -57,6 +59,44 @@ def test_depth():
         dgstereo.depth(disp, fx=-1.0, baseline=0.1)
     with pytest.raises(dgstereo.InputError):
         dgstereo.depth(disp)
+    # A negative disparity (beyond -doffs) is no point in front of the cameras: inf, as unknown.
+    behind = np.array([[-5.0, -10.0, -12.0]], np.float32)
+    z = dgstereo.depth(behind, 500.0, 0.1, doffs=10.0)
+    assert np.isfinite(z[0, 0]) and np.isinf(z[0, 1:]).all() and (z[0, 1:] > 0).all()
+
+
+def oakd_calibration(tmp_path):
+    """A 640x480 calibration: fx 400, principal point (320, 240), 7.5 cm baseline."""
+    path = tmp_path / "calib.json"
+    path.write_text('{"fx": 400, "cx": 320, "cy": 240, "baseline_m": 0.075, "width": 640, "height": 480}')
+    return path
+
+
+def test_depth_from_a_calibration_of_another_size(tmp_path):
+    calib = oakd_calibration(tmp_path)
+    full = dgstereo.depth(np.full((480, 640), 20.0, np.float32), calib=calib)
+    np.testing.assert_allclose(full, 400 * 0.075 / 20, rtol=1e-6)
+    # A crop of another aspect ratio: an error naming both sizes, not depth x0.156.
+    crop = np.full((40, 100), 20.0, np.float32)
+    with pytest.raises(dgstereo.InputError, match=r"640x480.*100x40.*crop"):
+        dgstereo.depth(crop, calib=calib)
+    # Stated, the crop keeps the focal length.
+    np.testing.assert_allclose(dgstereo.depth(crop, calib=calib, crop=(300, 200)), 400 * 0.075 / 20, rtol=1e-6)
+    # A resize at the same aspect ratio is applied, with a warning.
+    half = np.full((240, 320), 10.0, np.float32)
+    with pytest.warns(UserWarning, match="640x480.*320x240"):
+        z = dgstereo.depth(half, calib=calib)
+    np.testing.assert_allclose(z, 200 * 0.075 / 10, rtol=1e-6)
+    # Stated, the same resize says nothing; another aspect ratio needs (sx, sy).
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_allclose(dgstereo.depth(half, calib=calib, scale=0.5), z, rtol=1e-6)
+        squeezed = np.full((480, 320), 10.0, np.float32)
+        np.testing.assert_allclose(dgstereo.depth(squeezed, calib=calib, scale=(0.5, 1.0)), 200 * 0.075 / 10, rtol=1e-6)
+    with pytest.raises(dgstereo.InputError, match="320x240.*300x240"):
+        dgstereo.depth(np.ones((240, 300), np.float32), calib=calib, scale=0.5)
+    with pytest.raises(dgstereo.InputError, match="calib"):
+        dgstereo.depth(half, fx=400.0, baseline=0.1, crop=(1, 1))
 
 
 def test_pfm_round_trip(tmp_path):

@@ -135,3 +135,22 @@ def test_what_cannot_be_exported_is_an_error_and_no_file(tmp_path):
     with pytest.raises(dgstereo.Error, match="size"):
         dgstereo.Model().export_onnx(target, (0, 64), iters=1)
     assert not target.exists()
+
+
+def test_the_bundled_default_exports_at_its_narrowest_sizes(tmp_path, capfd):
+    # The 1/8-resolution default pools its correlation pyramid below one column at these widths.
+    need("onnxruntime")
+    model = dgstereo.Model()
+    rng = np.random.default_rng(5)
+    for size in [(64, 64), (32, 48)]:
+        info = model.export_onnx(tmp_path / "small.onnx", size, iters=1)
+        assert info["outputs"] == [("disparity", [1, 1, *size])]
+        left = rng.integers(0, 256, (*size, 3), dtype=np.uint8)
+        right = np.roll(left, -2, axis=1)
+        got = run_onnx(tmp_path / "small.onnx", {"left": nchw(left), "right": nchw(right)})[0, 0]
+        want = model.predict(left, right, iters=1, min_size=None, corr="reg")
+        assert np.abs(got - want).max() <= 1e-3, (size, np.abs(got - want).max())
+    with pytest.raises(dgstereo.Error, match="16x64"):
+        model.export_onnx(tmp_path / "tiny.onnx", (16, 64), iters=1)
+    err = capfd.readouterr().err
+    assert "panicked" not in err and "backtrace" not in err, err

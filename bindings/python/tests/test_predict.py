@@ -1,7 +1,9 @@
 """Model.predict against the command line, over every input kind, from several threads."""
 
+import struct
 import subprocess
 import threading
+import zlib
 
 import numpy as np
 import pytest
@@ -61,9 +63,10 @@ def test_every_input_kind_gives_the_same_disparity(small, model):
 
 def test_options_and_info(small, model):
     left, right = small
-    disp, info = model.predict(left, right, iters=1, max_size=32, lr_check=True, return_info=True)
+    disp, info = model.predict(left, right, iters=1, max_size=48, lr_check=True, return_info=True)
     assert disp.shape == (48, 64)
-    assert info["network_size"] == (32, 24)
+    # (height, width), as every array's shape.
+    assert info["network_size"] == (36, 48)
     assert info["rejected"].shape == (48, 64) and info["rejected"].dtype == bool
     _, info = model.predict(left, right, iters=1, min_size=None, memory_budget=1, return_info=True)
     assert info["corr"] == "alt"
@@ -115,3 +118,75 @@ def test_given_prior_maps(root, small):
         paper.predict(left, right, iters=1)
     with pytest.raises(dgstereo.InputError, match="non-finite"):
         paper.predict(left, right, prior=(np.full((48, 64), np.nan), prior[1]), iters=1)
+
+
+def write_png16(path, rgb):
+    """A 16-bit RGB PNG (big-endian samples, as the format stores them)."""
+    h, w, _ = rgb.shape
+    rows = rgb.astype(">u2")
+    raw = b"".join(b"\x00" + rows[y].tobytes() for y in range(h))
+
+    def chunk(kind, data):
+        body = kind + data
+        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF)
+
+    header = struct.pack(">IIBBBBB", w, h, 16, 2, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+def test_uint16_images_are_read_as_the_command_line_reads_16_bit_files(cones, model, tmp_path):
+    # Cones at 16 bits with every bit used (not only multiples of 257), as a 16-bit camera gives.
+    rng = np.random.default_rng(16)
+    pair = []
+    for view, name in zip(cones, ("left", "right")):
+        wide = np.minimum(view.astype(np.uint32) * 257 + rng.integers(0, 257, view.shape), 65535).astype(np.uint16)
+        write_png16(tmp_path / f"{name}.png", wide)
+        pair.append(wide)
+    disp = model.predict(*pair, **QUICK)
+    # The file read as `dgstereo infer` reads it (the same reader) gives the same disparity.
+    from_files = [dgstereo.read_image(tmp_path / f"{n}.png") for n in ("left", "right")]
+    assert from_files[0].max() > 200, "the 16-bit file is read in 0..255"
+    np.testing.assert_array_equal(disp, model.predict(*from_files, **QUICK))
+    # A big-endian array holds the same pixels.
+    np.testing.assert_array_equal(disp, model.predict(*(p.astype(">u2") for p in pair), **QUICK))
+    exe = cli_binary()
+    if exe is None:
+        pytest.skip("no dgstereo binary for the command line's side (build it with cargo, or set DGSTEREO_CLI)")
+    subprocess.run(
+        [exe, "infer", "-l", str(tmp_path / "left.png"), "-r", str(tmp_path / "right.png"),
+         "--iters", "4", "--min-size", "off", "--save", "pfm", "-o", str(tmp_path / "out")],
+        check=True, capture_output=True,
+    )
+    (pfm,) = (tmp_path / "out").glob("*_disparity.pfm")
+    np.testing.assert_array_equal(disp, dgstereo.read_pfm(pfm))
+
+
+def test_channel_order_is_an_argument(small, model):
+    left, right = small
+    ref = model.predict(left, right, **QUICK)
+    bgr = (left[..., ::-1], right[..., ::-1])
+    np.testing.assert_array_equal(model.predict(*bgr, channels="bgr", **QUICK), ref)
+    np.testing.assert_array_equal(model.predict(*bgr, channels="BGR", **QUICK), ref)
+    # BGRA (OpenCV's IMREAD_UNCHANGED of a PNG with alpha) drops its alpha too.
+    alpha = np.full(left.shape[:2] + (1,), 9, dtype=left.dtype)
+    bgra = (np.concatenate([bgr[0], alpha], -1), np.concatenate([bgr[1], alpha], -1))
+    np.testing.assert_array_equal(model.predict(*bgra, channels="bgr", **QUICK), ref)
+    # Read as RGB, the same arrays are other images: the order matters to the model.
+    assert not np.array_equal(model.predict(*bgr, **QUICK), ref)
+    # Grey images have no order.
+    grey = (left[..., 1], right[..., 1])
+    np.testing.assert_array_equal(model.predict(*grey, channels="bgr", **QUICK), model.predict(*grey, **QUICK))
+    with pytest.raises(dgstereo.InputError, match="channels"):
+        model.predict(left, right, channels="yuv", **QUICK)
+
+
+def test_pairs_under_the_networks_minimum_are_refused(model):
+    tiny = np.zeros((1, 1, 3), np.uint8)
+    with pytest.raises(dgstereo.InputError, match="1x1"):
+        model.predict(tiny, tiny, iters=1)
+    strip = np.zeros((20, 200, 3), np.uint8)
+    with pytest.raises(dgstereo.InputError, match="200x20"):
+        model.predict(strip, strip, iters=1)
+    wide = np.zeros((40, 1000, 3), np.uint8)
+    with pytest.raises(dgstereo.InputError, match="max_size"):
+        model.predict(wide, wide, iters=1, max_size=100)

@@ -223,8 +223,12 @@ pub fn load_engine(a: &ModelArgs) -> anyhow::Result<(Engine, PredictOptions)> {
         (None, Some(w)) => with_prior_weights(experiment_prior, w),
         (None, None) => experiment_prior,
     };
+    // Names of official checkpoints become files (fetched on first use).
+    let weights =
+        a.weights.as_deref().map(|w| crate::fetching::stereo(w, "weights")).transpose().map_err(with_flags)?;
+    let prior = crate::fetching::prior(prior, "prior").map_err(with_flags)?;
     let config = EngineConfig {
-        weights: a.weights.clone(),
+        weights,
         model,
         prior,
         device,

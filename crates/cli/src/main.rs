@@ -6,10 +6,12 @@
 
 mod commands;
 mod engine;
+mod fetching;
 mod inputs;
 mod outputs;
 mod sigpipe;
 mod stop_signals;
+mod train_progress;
 mod visualize;
 
 use std::process::ExitCode;
@@ -62,8 +64,7 @@ fn main() -> ExitCode {
     sigpipe::restore_default_sigpipe();
     let cli = Cli::parse();
     dgstereo_kernels::allocator::retain_freed_memory();
-    dgstereo_weights::set_offline(cli.offline);
-    dgstereo_weights::set_progress(true);
+    fetching::set_offline(cli.offline);
     // `bench --kernels` configures the kernels itself; every other command takes
     // `DGSTEREO_KERNELS`, and a malformed value is an error naming the variable and the value,
     // before any work.

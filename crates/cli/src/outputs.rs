@@ -6,7 +6,7 @@
 //! | `npy` | `NAME_disparity.npy` | the same as a `(H, W)` float32 NumPy array |
 //! | `png16` | `NAME_disparity_png16.png` | KITTI-style 16-bit PNG, disparity × 256, 0 = invalid |
 //! | `color` | `NAME_disparity_color.png` | turbo colour map with a legend of its range (px) |
-//! | `depth` | `NAME_depth.pfm` | float32 depth in metres, `inf` where unknown (needs calibration) |
+//! | `depth` | `NAME_depth.pfm` | float32 depth in metres, `inf` where the disparity is unknown or `d + doffs <= 0` (negative: no point in front of the cameras) (needs calibration) |
 //! | `ply` | `NAME_points.ply` | coloured point cloud, see [`dgstereo_inference::pointcloud`] (needs calibration) |
 //! | `rejected` | `NAME_rejected.png` | 255 where `--lr-check` replaced the disparity, else 0 (needs `--lr-check`) |
 //!
@@ -37,7 +37,8 @@ pub enum SaveKind {
     Color,
     /// The left image and the colour picture side by side (a quick look, for reports).
     Preview,
-    /// Depth in metres as PFM (needs calibration).
+    /// Depth in metres as PFM (needs calibration); `inf` where the disparity is unknown or
+    /// negative beyond `doffs`.
     Depth,
     /// Coloured point cloud as PLY (needs calibration).
     Ply,
@@ -88,7 +89,7 @@ impl OutputOptions {
 }
 
 /// Writes the requested outputs of one pair; returns the files written. `calib` must be given
-/// (already sized to the image, see [`Calibration::for_size`]) when a kind needs it, and
+/// (already fitted to the image, see [`Calibration::adjusted`]) when a kind needs it, and
 /// `rejected` (the left-right check's mask) for `rejected`.
 pub fn write_outputs(
     opts: &OutputOptions,

@@ -30,7 +30,9 @@ pub fn display_range(d: &DisparityMap) -> (f32, f32) {
 ///
 /// With `legend`, a band below the map shows the colour bar spanning `range` from left (low) to
 /// right (high), with ticks at 0, 25, 50, 75 and 100 % and the low, middle and high values
-/// written under it (in the map's unit, pixels of disparity).
+/// written under it (in the map's unit, pixels of disparity). The bar and its labels keep a
+/// margin from the image's sides ([`legend_bar`], [`legend_labels`]), so the end labels are
+/// whole however the picture is framed.
 pub fn colorize(d: &DisparityMap, range: (f32, f32), legend: bool) -> RgbImage {
     let (lo, hi) = range;
     let bar = if legend { (d.height / 16).clamp(6, 24) } else { 0 };
@@ -44,32 +46,60 @@ pub fn colorize(d: &DisparityMap, range: (f32, f32), legend: bool) -> RgbImage {
             img.set(x, y, rgb);
         }
     }
-    if !legend {
+    if !legend || d.width == 0 {
         return img;
     }
-    let tick_x = |k: usize| k * (d.width.max(1) - 1) / 4;
+    let (x0, x1) = legend_bar(d.width, scale);
+    let span = (x1 - x0).max(1);
+    let tick_x = |k: usize| x0 + k * (x1 - x0) / 4;
     for y in d.height..d.height + bar {
-        for x in 0..d.width {
-            let t = x as f32 / (d.width.max(2) - 1) as f32;
+        for x in x0..=x1 {
+            let t = (x - x0) as f32 / span as f32;
             let tick = (0..=4).any(|k| x == tick_x(k));
             let rgb = if tick && y >= d.height + 2 * bar / 3 { [255.0; 3] } else { turbo(t) };
             img.set(x, y, rgb);
         }
     }
     let y0 = d.height + bar + scale;
-    let labels = [(lo, 0usize), ((lo + hi) / 2.0, 1), (hi, 2)];
-    for (value, align) in labels {
-        let label = format_value(f64::from(value));
-        let w = text_width(&label, scale);
-        let anchor = tick_x(2 * align);
-        let x0 = match align {
-            0 => 0,
-            1 => anchor.saturating_sub(w / 2),
-            _ => d.width.saturating_sub(w),
-        };
-        draw_text(&mut img, &label, x0, y0, scale);
+    for (label, x) in legend_labels(d.width, scale, range) {
+        draw_text(&mut img, &label, x, y0, scale);
     }
     img
+}
+
+/// The first and last column (inclusive) of the legend's colour bar for a map `width` pixels
+/// wide, with glyphs `scale` pixels per font pixel: a margin of two font pixels from each side,
+/// less on maps too narrow to spare it.
+pub fn legend_bar(width: usize, scale: usize) -> (usize, usize) {
+    let margin = (2 * scale).min(width.saturating_sub(1) / 8);
+    (margin, width.saturating_sub(1 + margin))
+}
+
+/// The legend's labels and the column of their left edge: the low value starting under the
+/// bar's left end, the high value ending under its right end, the middle one centred under the
+/// middle tick. A label that would overlap another (a font pixel apart at least) or reach past
+/// the bar is left out, the middle one first.
+pub fn legend_labels(width: usize, scale: usize, (lo, hi): (f32, f32)) -> Vec<(String, usize)> {
+    let (x0, x1) = legend_bar(width, scale);
+    let text = |v: f32| format_value(f64::from(v));
+    let (low, middle, high) = (text(lo), text((lo + hi) / 2.0), text(hi));
+    let (wl, wm, wh) = (text_width(&low, scale), text_width(&middle, scale), text_width(&high, scale));
+    let bar = x1 + 1 - x0;
+    let mut labels = Vec::new();
+    if wl <= bar {
+        labels.push((low, x0, wl));
+    }
+    if wh <= bar && (labels.is_empty() || wl + scale + wh <= bar) {
+        labels.push((high, x1 + 1 - wh, wh));
+    }
+    let centre = x0 + (x1 - x0) / 2;
+    let xm = centre.saturating_sub(wm / 2).max(x0);
+    let clear = labels.iter().all(|(_, x, w)| xm + wm + scale <= *x || x + w + scale <= xm);
+    if xm + wm <= x1 + 1 && clear {
+        labels.push((middle, xm, wm));
+    }
+    labels.sort_by_key(|(_, x, _)| *x);
+    labels.into_iter().map(|(label, x, _)| (label, x)).collect()
 }
 
 /// Draws `s` in white with its top-left corner at `(x0, y0)` (see [`dgstereo_data::text`]);
@@ -128,8 +158,9 @@ mod tests {
         let with = colorize(&d, (0.0, 63.0), true);
         assert_eq!(plain.height, 48);
         assert!(with.height > 48 + 6);
-        // The colour of the map's left column equals the bar's left end (same range).
-        assert_eq!(with.get(1, 0), with.get(1, 48));
+        // The colour of the map's left column (its low end) equals the bar's left end.
+        let (x0, _) = legend_bar(64, 1);
+        assert_eq!(with.get(0, 0), with.get(x0, 48));
         // The text band holds white glyph pixels and black background.
         let text_rows = 48 + 6..with.height;
         let white = text_rows
@@ -138,5 +169,37 @@ mod tests {
             .filter(|&(x, y)| with.get(x, y) == [255.0; 3])
             .count();
         assert!(white > 10 && white < 64 * text_rows.len() / 2, "{white}");
+    }
+
+    #[test]
+    fn legend_labels_stay_whole_inside_the_picture() {
+        for width in [20, 40, 64, 450, 1242] {
+            for range in [(0.0, 63.0), (18.1, 57.9), (-12.5, 1234.0), (-123456.0, 9.0)] {
+                for scale in [1, 2, 4] {
+                    let (x0, x1) = legend_bar(width, scale);
+                    assert!(x0 >= 1 && x1 <= width - 2, "{width}: bar {x0}..={x1}");
+                    let labels = legend_labels(width, scale, range);
+                    let spans: Vec<(usize, usize)> =
+                        labels.iter().map(|(l, x)| (*x, x + text_width(l, scale))).collect();
+                    for (a, b) in spans.iter().zip(spans.iter().skip(1)) {
+                        assert!(a.1 + scale <= b.0, "{width} {range:?} x{scale}: {labels:?} overlap");
+                    }
+                    for (start, end) in &spans {
+                        assert!(*start >= x0 && *end <= x1 + 1, "{width} {range:?} x{scale}: {labels:?}");
+                    }
+                    if width >= 450 {
+                        assert_eq!(labels.len(), 3, "{width} {range:?} x{scale}: {labels:?}");
+                    }
+                }
+            }
+        }
+        // Drawn: no white glyph pixel in the two outer columns of the text band.
+        let d = DisparityMap { width: 450, height: 375, data: (0..450 * 375).map(|i| (i % 450) as f32).collect() };
+        let img = colorize(&d, (18.1, 57.9), true);
+        let band = 375 + 23..img.height;
+        for x in [0, 1, 448, 449] {
+            assert!(band.clone().all(|y| img.get(x, y) != [255.0; 3]), "column {x} holds text");
+        }
+        assert!(band.clone().any(|y| img.get(6, y) == [255.0; 3]), "the low label starts after the margin");
     }
 }

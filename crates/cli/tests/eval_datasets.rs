@@ -14,9 +14,9 @@ fn weights(test: &str) -> Option<PathBuf> {
 }
 
 /// A fake MiddEval3 folder: `trainingH` with two scenes of 64x48 and `trainingQ` with one of
-/// 32x24; the right view is the left shifted by 2 px, the ground truth 2 px with one unknown pixel.
+/// 48x32 (the network takes at least 32 pixels a side); the right view is the left shifted by 2 px, the ground truth 2 px with one unknown pixel.
 fn fake_middeval3(root: &Path) {
-    for (split, scenes, width, height) in [("H", &["Adirondack", "Piano"][..], 64, 48), ("Q", &["Piano"][..], 32, 24)] {
+    for (split, scenes, width, height) in [("H", &["Adirondack", "Piano"][..], 64, 48), ("Q", &["Piano"][..], 48, 32)] {
         for scene in scenes {
             let dir = root.join(format!("training{split}/{scene}"));
             std::fs::create_dir_all(&dir).unwrap();

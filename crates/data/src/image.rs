@@ -247,10 +247,17 @@ pub(crate) fn open_dynamic(path: &Path) -> Result<image::DynamicImage> {
     reader.decode().map_err(|e| image_error(path, e))
 }
 
+/// A 16-bit sample in 0..255, as [`load_rgb`] reads 16-bit files (and the Python package reads
+/// `uint16` arrays): `v · 255 / 65535`.
+pub fn sample_from_16_bits(v: u16) -> f32 {
+    f32::from(v) * (255.0 / 65535.0)
+}
+
 /// Loads any PNG/JPEG/BMP/TIFF picture as RGB `f32` in 0..255.
 ///
 /// Grayscale is replicated to three channels, alpha is dropped; 8-bit samples keep their value
-/// exactly, 16-bit samples are scaled by `255 / 65535`, float samples by 255.
+/// exactly, 16-bit samples are scaled by `255 / 65535` ([`sample_from_16_bits`]), float samples
+/// by 255.
 pub fn load_rgb(path: impl AsRef<Path>) -> Result<RgbImage> {
     let path = path.as_ref();
     let img = open_dynamic(path)?;
@@ -261,7 +268,7 @@ pub fn load_rgb(path: impl AsRef<Path>) -> Result<RgbImage> {
             img.to_rgb8().into_raw().into_iter().map(f32::from).collect()
         }
         D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => {
-            img.to_rgb16().into_raw().into_iter().map(|v| f32::from(v) * (255.0 / 65535.0)).collect()
+            img.to_rgb16().into_raw().into_iter().map(sample_from_16_bits).collect()
         }
         _ => img.to_rgb32f().into_raw().into_iter().map(|v| v * 255.0).collect(),
     };

@@ -6,15 +6,19 @@
 //! validity is a boolean [`Mask`]. Each file format has its own module with a reader and a writer
 //! that name the file in every error ([`dgstereo_core::Error`]). Dataset layouts
 //! ([`datasets`]) only list files ([`SampleFiles`]); a [`FileDataset`] reads them on demand and a
-//! [`PrefetchLoader`] reads ahead on rayon's pool. The [`synthetic`] generator renders exact
-//! stereo scenes by ray casting disparity-linear surfaces, and [`mod@augment`] reproduces the dense
-//! FlowAugmentor, resizing disparity both bilinearly and by nearest neighbour, and the sparse
-//! one ([`augment_sparse`]) that moves the valid points of real ground truth instead.
+//! [`PrefetchLoader`] reads ahead on rayon's pool; [`headers`] reads a sample's sizes from its
+//! files' headers, for checks before hours of training (reading a sample checks the same sizes).
+//! The [`synthetic`] generator renders exact stereo scenes by ray casting disparity-linear
+//! surfaces, and [`mod@augment`] reproduces the dense FlowAugmentor, resizing disparity both
+//! bilinearly and by nearest neighbour, and the sparse one ([`augment_sparse`]) that moves the
+//! valid points of real ground truth instead.
 #![deny(missing_docs)]
 
 pub mod augment;
 pub mod datasets;
 pub mod disparity_io;
+mod file_start;
+pub mod headers;
 pub mod image;
 pub mod kitti_png;
 pub mod loader;

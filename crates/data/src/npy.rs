@@ -32,27 +32,51 @@ pub enum NpyDtype {
 
 const MAGIC: &[u8] = b"\x93NUMPY";
 
-/// Parses `.npy` bytes; `path` only names the file in errors.
-pub fn decode_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
-    let err = |m: String| Error::format(path, format!("npy: {m}"));
-    if bytes.len() < 10 || &bytes[..6] != MAGIC {
-        return Err(err("not a .npy file (bad magic)".into()));
+/// What a `.npy` header says: the shape, the sample type and where the samples start.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NpyHeader {
+    /// Dimensions, outermost first.
+    pub shape: Vec<usize>,
+    /// Bytes per sample (4 or 8).
+    pub sample_bytes: usize,
+    /// Whether the samples are little-endian.
+    pub little_endian: bool,
+    /// The offset of the first sample.
+    pub data_start: usize,
+}
+
+impl NpyHeader {
+    /// The number of sample bytes the header promises.
+    pub fn data_bytes(&self) -> usize {
+        self.shape.iter().product::<usize>() * self.sample_bytes
     }
-    let major = bytes[6];
-    let (hlen, start) = match major {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        2 | 3 => {
-            if bytes.len() < 12 {
-                return Err(err("truncated header".into()));
-            }
-            (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12)
-        }
-        v => return Err(err(format!("unsupported version {v}"))),
-    };
-    if bytes.len() < start + hlen {
+}
+
+/// The offset just past the header of the `.npy` bytes starting `bytes` (the magic, the version
+/// and the header's length are read; 10 or 12 bytes suffice).
+fn header_end(bytes: &[u8], path: &Path) -> Result<usize> {
+    let err = |m: &str| Error::format(path, format!("npy: {m}"));
+    if bytes.len() < 10 || &bytes[..6] != MAGIC {
+        return Err(err("not a .npy file (bad magic)"));
+    }
+    match bytes[6] {
+        1 => Ok(10 + u16::from_le_bytes([bytes[8], bytes[9]]) as usize),
+        2 | 3 if bytes.len() < 12 => Err(err("truncated header")),
+        2 | 3 => Ok(12 + u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize),
+        v => Err(Error::format(path, format!("npy: unsupported version {v}"))),
+    }
+}
+
+/// Parses the header at the start of `bytes` (the samples need not follow); `path` only names
+/// the file in errors.
+pub fn decode_npy_header(bytes: &[u8], path: &Path) -> Result<NpyHeader> {
+    let err = |m: String| Error::format(path, format!("npy: {m}"));
+    let end = header_end(bytes, path)?;
+    let start = if bytes[6] == 1 { 10 } else { 12 };
+    if bytes.len() < end {
         return Err(err("truncated header".into()));
     }
-    let header = std::str::from_utf8(&bytes[start..start + hlen]).map_err(|_| err("header is not text".into()))?;
+    let header = std::str::from_utf8(&bytes[start..end]).map_err(|_| err("header is not text".into()))?;
     let descr = dict_value(header, "descr").ok_or_else(|| err("header lacks 'descr'".into()))?;
     let descr = descr.trim().trim_matches(|c| c == '\'' || c == '"');
     let fortran = dict_value(header, "fortran_order").ok_or_else(|| err("header lacks 'fortran_order'".into()))?;
@@ -72,19 +96,55 @@ pub fn decode_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
         .map(|s| s.trim_end_matches('L').parse::<usize>())
         .collect::<std::result::Result<Vec<_>, _>>()
         .map_err(|_| err(format!("bad shape {shape_s:?}")))?;
-    let n: usize = shape.iter().product();
-    let body = &bytes[start + hlen..];
-    let (size, little, is64) = match descr {
-        "<f4" => (4, true, false),
-        ">f4" => (4, false, false),
-        "<f8" => (8, true, true),
-        ">f8" => (8, false, true),
+    let (sample_bytes, little_endian) = match descr {
+        "<f4" => (4, true),
+        ">f4" => (4, false),
+        "<f8" => (8, true),
+        ">f8" => (8, false),
         d => {
             return Err(err(format!("unsupported dtype {d:?} (need float32 or float64)")));
         }
     };
+    shape
+        .iter()
+        .try_fold(sample_bytes, |n: usize, d| n.checked_mul(*d))
+        .ok_or_else(|| err(format!("shape {shape:?} overflows")))?;
+    Ok(NpyHeader { shape, sample_bytes, little_endian, data_start: end })
+}
+
+/// The error of a `.npy` whose samples are fewer than its header promises.
+fn truncated(header: &NpyHeader, found: usize, path: &Path) -> Error {
+    Error::format(
+        path,
+        format!("npy: truncated: shape {:?} needs {} data bytes, found {found}", header.shape, header.data_bytes()),
+    )
+}
+
+/// Reads a `.npy` file's header and checks, by the file's length, that every sample is there,
+/// without reading the samples.
+pub fn read_npy_header(path: impl AsRef<Path>) -> Result<NpyHeader> {
+    let path = path.as_ref();
+    let (mut prefix, length) = crate::file_start::read_prefix(path, 4096)?;
+    let end = header_end(&prefix, path)?;
+    if end > prefix.len() && (end as u64) <= length {
+        prefix = crate::file_start::read_prefix(path, end)?.0;
+    }
+    let header = decode_npy_header(&prefix, path)?;
+    let found = length.saturating_sub(header.data_start as u64);
+    if found < header.data_bytes() as u64 {
+        return Err(truncated(&header, found as usize, path));
+    }
+    Ok(header)
+}
+
+/// Parses `.npy` bytes; `path` only names the file in errors.
+pub fn decode_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
+    let header = decode_npy_header(bytes, path)?;
+    let (size, little, is64) = (header.sample_bytes, header.little_endian, header.sample_bytes == 8);
+    let n: usize = header.shape.iter().product();
+    let body = &bytes[header.data_start..];
     if body.len() < n * size {
-        return Err(err(format!("truncated: shape {shape:?} needs {} data bytes, found {}", n * size, body.len())));
+        return Err(truncated(&header, body.len(), path));
     }
     let data = body[..n * size]
         .chunks_exact(size)
@@ -97,7 +157,7 @@ pub fn decode_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
             }
         })
         .collect();
-    Ok(NpyArray { shape, data })
+    Ok(NpyArray { shape: header.shape, data })
 }
 
 /// The text after `'key':` in a header dict, up to the next top-level comma.
@@ -167,16 +227,16 @@ pub fn write_npy(path: impl AsRef<Path>, arr: &NpyArray, dtype: NpyDtype) -> Res
 pub fn read_npy_disparity(path: impl AsRef<Path>) -> Result<DisparityMap> {
     let path = path.as_ref();
     let arr = read_npy(path)?;
-    let (h, w) = match arr.shape.as_slice() {
-        [h, w] | [1, h, w] | [h, w, 1] => (*h, *w),
-        s => {
-            return Err(Error::format(
-                path,
-                format!("npy disparity must be (H, W), (1, H, W) or (H, W, 1), found {s:?}"),
-            ));
-        }
-    };
+    let (w, h) = disparity_size(&arr.shape, path)?;
     Ok(DisparityMap { width: w, height: h, data: arr.data })
+}
+
+/// The `(width, height)` of a `.npy` disparity of `shape`: `(H, W)`, `(1, H, W)` or `(H, W, 1)`.
+pub fn disparity_size(shape: &[usize], path: &Path) -> Result<(usize, usize)> {
+    match shape {
+        [h, w] | [1, h, w] | [h, w, 1] => Ok((*w, *h)),
+        s => Err(Error::format(path, format!("npy disparity must be (H, W), (1, H, W) or (H, W, 1), found {s:?}"))),
+    }
 }
 
 /// Writes a disparity map as a `(H, W)` `float32` `.npy`.

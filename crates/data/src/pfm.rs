@@ -34,8 +34,31 @@ pub enum Endian {
     Big,
 }
 
-/// Parses PFM bytes; `path` only names the file in errors.
-pub fn decode_pfm(bytes: &[u8], path: &Path) -> Result<Pfm> {
+/// What a PFM's header says: the size, the channels, the byte order and where the samples start.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PfmHeader {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// 1 (`Pf`) or 3 (`PF`).
+    pub channels: usize,
+    /// Whether the samples are little-endian (a negative scale).
+    pub little_endian: bool,
+    /// The offset of the first sample.
+    pub data_start: usize,
+}
+
+impl PfmHeader {
+    /// The number of sample bytes the header promises.
+    pub fn data_bytes(&self) -> usize {
+        self.width * self.height * self.channels * 4
+    }
+}
+
+/// Parses the header at the start of `bytes` (the samples need not follow); `path` only names
+/// the file in errors.
+pub fn decode_pfm_header(bytes: &[u8], path: &Path) -> Result<PfmHeader> {
     let err = |m: String| Error::format(path, format!("PFM: {m}"));
     let mut pos = 0usize;
     let mut token = |what: &str| -> Result<String> {
@@ -70,19 +93,43 @@ pub fn decode_pfm(bytes: &[u8], path: &Path) -> Result<Pfm> {
     if pos >= bytes.len() || !bytes[pos].is_ascii_whitespace() {
         return Err(err("missing whitespace after the header".into()));
     }
-    pos += 1;
-    let little = scale < 0.0;
-    let n = width
+    width
         .checked_mul(height)
-        .and_then(|v| v.checked_mul(channels))
+        .and_then(|v| v.checked_mul(channels * 4))
         .ok_or_else(|| err(format!("size {width}x{height} overflows")))?;
-    let body = &bytes[pos..];
+    Ok(PfmHeader { width, height, channels, little_endian: scale < 0.0, data_start: pos + 1 })
+}
+
+/// The error of a PFM whose samples are fewer than its header promises.
+fn truncated(header: &PfmHeader, found: usize, path: &Path) -> Error {
+    let PfmHeader { width, height, channels, .. } = *header;
+    Error::format(
+        path,
+        format!("PFM: truncated: {width}x{height}x{channels} needs {} data bytes, found {found}", header.data_bytes()),
+    )
+}
+
+/// Reads a PFM file's header and checks, by the file's length, that every sample is there,
+/// without reading the samples.
+pub fn read_pfm_header(path: impl AsRef<Path>) -> Result<PfmHeader> {
+    let path = path.as_ref();
+    let (prefix, length) = crate::file_start::read_prefix(path, 4096)?;
+    let header = decode_pfm_header(&prefix, path)?;
+    let found = length.saturating_sub(header.data_start as u64);
+    if found < header.data_bytes() as u64 {
+        return Err(truncated(&header, found as usize, path));
+    }
+    Ok(header)
+}
+
+/// Parses PFM bytes; `path` only names the file in errors.
+pub fn decode_pfm(bytes: &[u8], path: &Path) -> Result<Pfm> {
+    let header = decode_pfm_header(bytes, path)?;
+    let PfmHeader { width, height, channels, little_endian: little, data_start } = header;
+    let n = width * height * channels;
+    let body = &bytes[data_start..];
     if body.len() < n * 4 {
-        return Err(err(format!(
-            "truncated: {width}x{height}x{channels} needs {} data bytes, found {}",
-            n * 4,
-            body.len()
-        )));
+        return Err(truncated(&header, body.len(), path));
     }
     let row = width * channels;
     let mut data = vec![0f32; n];

@@ -156,6 +156,20 @@ impl BenchmarkConfig {
         self.name.as_deref().unwrap_or(self.dataset.name())
     }
 
+    /// The benchmark's settings in words, for tables and messages: its data set and folder, its
+    /// split, weather or subset, iterations, how many samples and the size limit
+    /// (`folder at /data/cones, 2 iterations, first 5 samples, longer side at most 96 px`).
+    pub fn settings(&self) -> String {
+        let mut parts = vec![format!("{} at {}", self.dataset, self.root.display())];
+        parts.extend(self.split.map(|s| format!("split {s}")));
+        parts.extend(self.weather.map(|w| format!("weather {w}")));
+        parts.extend(self.subset.map(|s| format!("subset {s}")));
+        parts.push(format!("{} iteration{}", self.iters, if self.iters == 1 { "" } else { "s" }));
+        parts.extend(self.limit.map(|n| format!("first {n} samples")));
+        parts.extend(self.max_size.map(|m| format!("longer side at most {m} px")));
+        parts.join(", ")
+    }
+
     /// The metrics the ablation table shows for it: EPE and the protocol's headline (bad-2 and
     /// bad-3 for a plain folder, whose protocol has no headline rate).
     pub fn table_metrics(&self) -> Vec<&'static str> {
@@ -308,5 +322,19 @@ mod tests {
         assert_eq!(b(DatasetKind::Kitti2015).table_metrics()[0], "epe");
         assert_eq!(b(DatasetKind::Folder).table_metrics(), vec!["epe", "bad-2", "bad-3"]);
         assert_eq!(b(DatasetKind::Folder).label(), "folder");
+    }
+
+    #[test]
+    fn settings_say_what_is_scored_and_how() {
+        let mut b = BenchmarkConfig::new(DatasetKind::Drivingstereo, "/data/ds");
+        assert_eq!(b.settings(), "drivingstereo at /data/ds, 32 iterations");
+        b.weather = Some(DrivingStereoWeather::Foggy);
+        b.iters = 1;
+        b.limit = Some(5);
+        b.max_size = Some(96);
+        assert_eq!(
+            b.settings(),
+            "drivingstereo at /data/ds, weather foggy, 1 iteration, first 5 samples, longer side at most 96 px"
+        );
     }
 }

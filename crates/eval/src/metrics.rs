@@ -129,6 +129,25 @@ impl Metrics {
         serde_json::Value::Object(map)
     }
 
+    /// The metrics of a [`to_json`](Self::to_json) object (`null` reads as NaN); `None` when a
+    /// metric or `valid_pixels` is missing.
+    pub fn from_json(value: &serde_json::Value) -> Option<Metrics> {
+        let get = |name: &str| match &value[name] {
+            serde_json::Value::Null if value.get(name).is_some() => Some(f64::NAN),
+            v => v.as_f64(),
+        };
+        Some(Metrics {
+            epe: get("epe")?,
+            bad_0_5: get("bad-0.5")?,
+            bad_1: get("bad-1")?,
+            bad_2: get("bad-2")?,
+            bad_3: get("bad-3")?,
+            bad_4: get("bad-4")?,
+            d1_all: get("d1-all")?,
+            valid_pixels: value["valid_pixels"].as_u64()?,
+        })
+    }
+
     /// The mean of several metrics, each image weighing the same; `valid_pixels` is the total.
     /// Images without valid pixels are skipped.
     pub fn mean_of(items: &[Metrics]) -> Metrics {

@@ -218,3 +218,21 @@ fn file_errors_name_the_file() {
     let e = metrics_json(&gt, &gt, Some(Path::new(&m)), None).unwrap_err().to_string();
     assert!(e.contains("m.png"), "{e}");
 }
+
+#[test]
+fn metrics_read_back_from_their_json() {
+    let (pred, gt) = tiny();
+    let m = evaluate(&pred, &gt, None, ValidOptions::default()).unwrap();
+    let back = Metrics::from_json(&m.to_json()).unwrap();
+    for (a, b) in m.values().iter().zip(back.values()) {
+        assert!(close(*a, b), "{a} vs {b}");
+    }
+    assert_eq!(back.valid_pixels, m.valid_pixels);
+    // No valid pixel: nulls read back as NaN; a missing metric is no metrics at all.
+    let none = evaluate(&pred, &gt, Some(&Mask::filled(4, 2, false)), ValidOptions::default()).unwrap();
+    let back = Metrics::from_json(&none.to_json()).unwrap();
+    assert!(back.epe.is_nan() && back.valid_pixels == 0);
+    let mut partial = m.to_json();
+    partial.as_object_mut().unwrap().remove("bad-2");
+    assert!(Metrics::from_json(&partial).is_none());
+}

@@ -255,7 +255,7 @@ proptest! {
         for disparity in &prediction.disparities {
             prop_assert_eq!(disparity.dims(), [1, 1, c.size[0], c.size[1]]);
         }
-        let loss = config.loss.loss(&prediction.disparities, &target(c.size, &ad));
+        let loss = config.loss.loss(&prediction.disparities, &target(c.size, &ad)).unwrap();
         let value = to_vec(loss.clone())[0];
         prop_assert!(value.is_finite() && value > 0.0, "loss {}", value);
         let grads = loss.backward();

@@ -17,6 +17,10 @@ use dgstereo_model::StereoModel;
 
 pub use lower::OPSET;
 
+/// The smallest side of a pair the file may take: the smallest `infer` accepts
+/// (`dgstereo_inference::working_size::MIN_WORKING_SIZE`, which a test compares with this).
+pub const MIN_SIDE: usize = 32;
+
 /// An exported model: the file's bytes and what a user needs to run it.
 #[derive(Debug, Clone)]
 pub struct OnnxExport {
@@ -35,8 +39,11 @@ pub struct OnnxExport {
 /// `1x1xHxW` for a model with a depth prior), output `disparity` (`1x1xHxW`, positive; the
 /// padding to the network's multiple and the crop back are inside the graph).
 pub fn export_onnx(model: &StereoModel, height: usize, width: usize, iters: usize) -> Result<OnnxExport> {
-    if height == 0 || width == 0 {
-        return Err(Error::config("size", format!("{height}x{width}: both sides must be positive")));
+    if height < MIN_SIDE || width < MIN_SIDE {
+        return Err(Error::config(
+            "size",
+            format!("{height}x{width}: the network needs at least {MIN_SIDE} pixels on each side, as `infer` does"),
+        ));
     }
     if iters == 0 {
         return Err(Error::config("iters", "must be at least 1"));

@@ -10,6 +10,7 @@
 //! matchers (the left-right check and background fill of Hirschmüller's semi-global matching),
 //! applied to the network's two outputs.
 
+use dgstereo_core::{Error, Result};
 use dgstereo_data::{DisparityMap, Mask, RgbImage};
 
 /// The usual threshold of the check, in pixels: the two views' disparities may differ by this
@@ -20,6 +21,9 @@ pub const DEFAULT_THRESHOLD: f32 = 2.0;
 pub fn mirror_rgb(image: &RgbImage) -> RgbImage {
     let (w, h) = (image.width, image.height);
     let mut out = RgbImage::new(w, h);
+    if w == 0 {
+        return out;
+    }
     for (src, dst) in image.data.chunks_exact(w).zip(out.data.chunks_exact_mut(w)) {
         for (d, s) in dst.iter_mut().zip(src.iter().rev()) {
             *d = *s;
@@ -31,6 +35,9 @@ pub fn mirror_rgb(image: &RgbImage) -> RgbImage {
 /// The disparity map mirrored left to right.
 pub fn mirror_disparity(map: &DisparityMap) -> DisparityMap {
     let mut out = map.clone();
+    if map.width == 0 {
+        return out;
+    }
     for row in out.data.chunks_exact_mut(map.width) {
         row.reverse();
     }
@@ -44,9 +51,22 @@ pub fn mirror_disparity(map: &DisparityMap) -> DisparityMap {
 ///
 /// # Shapes
 /// Both maps and the mask `width x height`.
-pub fn rejected_pixels(left: &DisparityMap, right: &DisparityMap, threshold: f32) -> Mask {
-    assert_eq!((left.width, left.height), (right.width, right.height), "the two views' maps differ in size");
+///
+/// # Errors
+/// [`Error::Shape`] when a map's values do not fill its size or the two maps differ in size.
+pub fn rejected_pixels(left: &DisparityMap, right: &DisparityMap, threshold: f32) -> Result<Mask> {
+    check_filled("the left view's disparity", left.width, left.height, left.data.len())?;
+    check_filled("the right view's disparity", right.width, right.height, right.data.len())?;
+    if (left.width, left.height) != (right.width, right.height) {
+        return Err(Error::Shape(format!(
+            "left-right check: the left view's disparity is {}x{} and the right view's {}x{}",
+            left.width, left.height, right.width, right.height
+        )));
+    }
     let w = left.width;
+    if w == 0 {
+        return Ok(Mask { width: 0, height: left.height, data: Vec::new() });
+    }
     let mut rejected = vec![true; left.data.len()];
     for ((l_row, r_row), out) in
         left.data.chunks_exact(w).zip(right.data.chunks_exact(w)).zip(rejected.chunks_exact_mut(w))
@@ -62,7 +82,7 @@ pub fn rejected_pixels(left: &DisparityMap, right: &DisparityMap, threshold: f32
             *flag = !(dr.is_finite() && (d - dr).abs() <= threshold);
         }
     }
-    Mask { width: w, height: left.height, data: rejected }
+    Ok(Mask { width: w, height: left.height, data: rejected })
 }
 
 /// `disparity` with each rejected pixel replaced by the smaller of the nearest accepted values to
@@ -71,10 +91,24 @@ pub fn rejected_pixels(left: &DisparityMap, right: &DisparityMap, threshold: f32
 ///
 /// # Shapes
 /// `disparity` and `rejected` are `width x height`.
-pub fn fill_rejected(disparity: &DisparityMap, rejected: &Mask) -> DisparityMap {
-    assert_eq!((disparity.width, disparity.height), (rejected.width, rejected.height), "one flag per pixel");
+///
+/// # Errors
+/// [`Error::Shape`] when the map's or the mask's values do not fill their size or the two
+/// differ in size.
+pub fn fill_rejected(disparity: &DisparityMap, rejected: &Mask) -> Result<DisparityMap> {
+    check_filled("the disparity", disparity.width, disparity.height, disparity.data.len())?;
+    check_filled("the mask of rejected pixels", rejected.width, rejected.height, rejected.data.len())?;
+    if (disparity.width, disparity.height) != (rejected.width, rejected.height) {
+        return Err(Error::Shape(format!(
+            "left-right check: the disparity is {}x{} and the mask of rejected pixels {}x{}",
+            disparity.width, disparity.height, rejected.width, rejected.height
+        )));
+    }
     let w = disparity.width;
     let mut out = disparity.clone();
+    if w == 0 {
+        return Ok(out);
+    }
     let mut from_left = vec![None; w];
     for (row, flags) in out.data.chunks_exact_mut(w).zip(rejected.data.chunks_exact(w)) {
         let mut last = None;
@@ -99,7 +133,15 @@ pub fn fill_rejected(disparity: &DisparityMap, rejected: &Mask) -> DisparityMap 
             }
         }
     }
-    out
+    Ok(out)
+}
+
+/// Checks that `len` values fill a `width x height` map (`what` names it in the error).
+fn check_filled(what: &str, width: usize, height: usize, len: usize) -> Result<()> {
+    if width.checked_mul(height) != Some(len) {
+        return Err(Error::Shape(format!("left-right check: {what} is {width}x{height} but holds {len} values")));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -125,7 +167,7 @@ mod tests {
     fn occluded_pixels_are_rejected_and_visible_ones_kept() {
         let (w, h, bg, fg) = (64, 3, 4.0, 12.0);
         let (left, right) = box_scene(w, h, bg, fg, 30, 40);
-        let rejected = rejected_pixels(&left, &right, 1.0);
+        let rejected = rejected_pixels(&left, &right, 1.0).unwrap();
         for x in 0..w {
             // Out of the right view: the left band; hidden by the box in the right view: the
             // background just left of the box, columns 30 - (fg - bg) .. 30.
@@ -145,8 +187,8 @@ mod tests {
                 left.data[y * w + x] = 20.0;
             }
         }
-        let rejected = rejected_pixels(&left, &right, 1.0);
-        let filled = fill_rejected(&left, &rejected);
+        let rejected = rejected_pixels(&left, &right, 1.0).unwrap();
+        let filled = fill_rejected(&left, &rejected).unwrap();
         let (exact, _) = box_scene(w, h, bg, fg, 30, 40);
         assert_eq!(filled.data, exact.data);
     }
@@ -156,11 +198,11 @@ mod tests {
         let (w, h) = (32, 1);
         let left = DisparityMap::filled(w, h, 3.0);
         let right = DisparityMap::filled(w, h, 4.5);
-        assert!(rejected_pixels(&left, &right, 2.0).data[3..].iter().all(|&r| !r));
-        assert!(rejected_pixels(&left, &right, 1.0).data.iter().all(|&r| r));
+        assert!(rejected_pixels(&left, &right, 2.0).unwrap().data[3..].iter().all(|&r| !r));
+        assert!(rejected_pixels(&left, &right, 1.0).unwrap().data.iter().all(|&r| r));
         let mut nan = left.clone();
         nan.data[10] = f32::NAN;
-        assert!(rejected_pixels(&nan, &right, 2.0).data[10]);
+        assert!(rejected_pixels(&nan, &right, 2.0).unwrap().data[10]);
     }
 
     #[test]
@@ -172,7 +214,7 @@ mod tests {
         // x' = x - 2 - x/8 = 7x/8 - 2, so x = (x' + 2) * 8 / 7 and d = 2 + x/8.
         let right =
             DisparityMap { width: w, height: h, data: (0..w).map(|xp| 2.0 + (xp as f32 + 2.0) / 7.0).collect() };
-        let rejected = rejected_pixels(&left, &right, 0.01);
+        let rejected = rejected_pixels(&left, &right, 0.01).unwrap();
         for x in 0..w {
             assert_eq!(rejected.data[x], (x as f32) < 2.0 + x as f32 / 8.0, "column {x}");
         }
@@ -181,11 +223,28 @@ mod tests {
     #[test]
     fn rows_without_accepted_pixels_stay_as_they_are_and_mirroring_round_trips() {
         let map = DisparityMap { width: 3, height: 2, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] };
-        assert_eq!(fill_rejected(&map, &Mask { width: 3, height: 2, data: vec![true; 6] }).data, map.data);
+        assert_eq!(fill_rejected(&map, &Mask { width: 3, height: 2, data: vec![true; 6] }).unwrap().data, map.data);
         let m = mirror_disparity(&map);
         assert_eq!(m.data, vec![3.0, 2.0, 1.0, 6.0, 5.0, 4.0]);
         assert_eq!(mirror_disparity(&m).data, map.data);
         let image = RgbImage { width: 2, height: 1, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] };
         assert_eq!(mirror_rgb(&image).data, vec![2.0, 1.0, 4.0, 3.0, 6.0, 5.0]);
+    }
+
+    #[test]
+    fn maps_of_different_sizes_are_errors_naming_both_sizes() {
+        let (a, b) = (DisparityMap::filled(8, 4, 1.0), DisparityMap::filled(8, 5, 1.0));
+        let e = rejected_pixels(&a, &b, 1.0).unwrap_err();
+        assert!(matches!(e, Error::Shape(_)) && e.to_string().contains("8x4") && e.to_string().contains("8x5"), "{e}");
+        let mask = Mask { width: 7, height: 4, data: vec![false; 28] };
+        let e = fill_rejected(&a, &mask).unwrap_err();
+        assert!(matches!(e, Error::Shape(_)) && e.to_string().contains("7x4"), "{e}");
+        // Values that do not fill the stated size, and empty maps, are not panics either.
+        let short = DisparityMap { width: 8, height: 4, data: vec![1.0; 31] };
+        let e = rejected_pixels(&short, &a, 1.0).unwrap_err();
+        assert!(e.to_string().contains("holds 31 values"), "{e}");
+        let empty = DisparityMap { width: 0, height: 3, data: Vec::new() };
+        assert_eq!(rejected_pixels(&empty, &empty, 1.0).unwrap().data.len(), 0);
+        assert_eq!(mirror_disparity(&empty), empty);
     }
 }

@@ -26,20 +26,18 @@ use dgstereo_data::{DisparityMap, Mask, RgbImage};
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
-use burn::tensor::{Tensor, TensorData};
-use dgstereo_core::DepthPrior;
-
 use crate::consistency::{fill_rejected, mirror_disparity, mirror_rgb, rejected_pixels};
 use crate::convert::{disparity_map, image_tensor};
 use crate::cost_volume::corr_for;
 use crate::options::{EngineConfig, PredictOptions};
+pub use crate::prior_maps::PriorMaps;
 use crate::weights::{default_weights_at, load_model};
-use crate::working_size::working_scale;
+use crate::working_size::network_size;
 
 /// What happened on one pair.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunInfo {
-    /// Size the network saw (after `max_size` / `min_size`).
+    /// Size the network saw, `(width, height)` (after `max_size` / `min_size`).
     pub network_size: (usize, usize),
     /// Cost volume used.
     pub corr: CorrelationImplementation,
@@ -65,46 +63,6 @@ pub struct Prediction {
     pub disparity: DisparityMap,
     /// How it was computed.
     pub info: RunInfo,
-}
-
-/// A depth prior computed elsewhere for one pair ([`Engine::predict_with_prior`]): the relative
-/// inverse depth (larger = nearer, any scale) of each view, at any size; the engine resizes it
-/// bilinearly to the network's input, as a file prior is.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PriorMaps {
-    /// Prior of the left view.
-    pub left: DisparityMap,
-    /// Prior of the right view.
-    pub right: DisparityMap,
-}
-
-impl PriorMaps {
-    /// The maps of the mirrored, swapped pair (what the left-right check's second pass sees).
-    fn mirrored(&self) -> Self {
-        Self { left: mirror_disparity(&self.right), right: mirror_disparity(&self.left) }
-    }
-
-    /// The prior tensors at the network's input size `[height, width]`.
-    fn at_size(&self, size: [usize; 2], device: &Device) -> DepthPrior {
-        let tensor = |m: &DisparityMap| {
-            let t = Tensor::<4>::from_data(TensorData::new(m.data.clone(), [1, 1, m.height, m.width]), device);
-            dgstereo_kernels::resize_bilinear(t, size, true)
-        };
-        DepthPrior { left: tensor(&self.left), right: tensor(&self.right) }
-    }
-
-    fn check(&self) -> Result<()> {
-        for (view, m) in [("left", &self.left), ("right", &self.right)] {
-            if m.width == 0 || m.height == 0 || m.data.len() != m.width * m.height {
-                let reason = format!("the {view} map is {}x{} with {} values", m.width, m.height, m.data.len());
-                return Err(Error::config("prior", reason));
-            }
-            if let Some(bad) = m.data.iter().find(|v| !v.is_finite()) {
-                return Err(Error::config("prior", format!("the {view} map holds a non-finite value ({bad})")));
-            }
-        }
-        Ok(())
-    }
 }
 
 /// Checks that the two views of a pair have one size.
@@ -171,11 +129,13 @@ impl Engine {
                 format!("{}: the depth prior runs in f32 only; leave out `precision` or the prior", config.precision),
             ));
         }
-        // Names of official checkpoints become files (fetched on first use).
-        let prior_config = &dgstereo_weights::resolve_prior(config.prior.clone(), "prior")?;
+        // Names of official checkpoints are files by now: the front end resolved them
+        // (`dgstereo_weights::Fetcher`); one left over is refused, saying so.
+        dgstereo_weights::check_resolved_prior(&config.prior, "prior")?;
+        let prior_config = &config.prior;
         let mut notes = Vec::new();
         let weights = match &config.weights {
-            Some(w) => dgstereo_weights::resolve_stereo(w, "weights")?,
+            Some(w) => dgstereo_weights::check_resolved(w, "weights").map(|()| w.clone())?,
             None => {
                 let with_prior = prior_config.gives_prior() && config.model.is_none();
                 let (path, note) = default_weights_at(config.bundled_assets.as_deref(), with_prior)?;
@@ -357,8 +317,8 @@ impl Engine {
         let mirrored_prior = given.map(PriorMaps::mirrored);
         let (mirrored, mirrored_info) =
             self.network_disparity(&mirror_rgb(right), &mirror_rgb(left), name, mirrored_prior.as_ref(), options)?;
-        let rejected = rejected_pixels(&disparity, &mirror_disparity(&mirrored), threshold);
-        let filled = fill_rejected(&disparity, &rejected);
+        let rejected = rejected_pixels(&disparity, &mirror_disparity(&mirrored), threshold)?;
+        let filled = fill_rejected(&disparity, &rejected)?;
         let prior_seconds = info.prior_seconds.zip(mirrored_info.prior_seconds).map(|(a, b)| a + b);
         Ok(Prediction { disparity: filled, info: RunInfo { rejected: Some(rejected), prior_seconds, ..info } })
     }
@@ -373,7 +333,7 @@ impl Engine {
         options: &PredictOptions,
     ) -> Result<(DisparityMap, RunInfo)> {
         let (w, h) = (left.width, left.height);
-        let scale = working_scale(w, h, self.min_size(options), options.max_size);
+        let (scale, _) = network_size(w, h, self.min_size(options), options.max_size)?;
         let (l, r) = if scale != 1.0 {
             (resize_rgb(left, scale, scale), resize_rgb(right, scale, scale))
         } else {
@@ -431,10 +391,15 @@ mod tests {
             (p.info.network_size, p.info.corr, p.info.rejected),
             ((64, 48), CorrelationImplementation::Reg, None)
         );
-        let options = PredictOptions { max_size: Some(32), lr_check: Some(2.0), ..quick.clone() };
+        let options = PredictOptions { max_size: Some(48), lr_check: Some(2.0), ..quick.clone() };
         let p = engine.predict(&left, &right, "ramp", &options).unwrap();
         assert_eq!((p.disparity.width, p.disparity.height), (64, 48));
-        assert_eq!(p.info.network_size, (32, 24));
+        assert_eq!(p.info.network_size, (48, 36));
+        // Pairs under the network's minimum are refused with their size, not enlarged.
+        let (tiny_l, tiny_r) = (RgbImage::new(1, 1), RgbImage::new(1, 1));
+        let auto = PredictOptions { iters: 1, ..PredictOptions::default() };
+        let e = engine.predict(&tiny_l, &tiny_r, "tiny", &auto).unwrap_err();
+        assert!(matches!(e, Error::Shape(_)) && e.to_string().contains("1x1"), "{e}");
         assert_eq!(p.info.rejected.map(|m| (m.width, m.height)), Some((64, 48)));
         // A tiny budget turns the materialised volume down; bad options name their field.
         let tight = PredictOptions { memory_budget: 1, ..quick.clone() };

@@ -35,6 +35,7 @@ pub mod cost_volume;
 mod engine;
 pub mod options;
 pub mod pointcloud;
+mod prior_maps;
 pub mod specs;
 pub mod weights;
 pub mod working_size;

@@ -15,16 +15,14 @@ use dgstereo_model::ModelConfig;
 use dgstereo_prior::PriorConfig;
 
 use crate::cost_volume::{CorrChoice, DEFAULT_MEMORY_BUDGET};
-use crate::working_size::MinSize;
-
-/// The smallest side, in pixels, that `max_size` and `min_size` may ask for.
-pub const MIN_WORKING_SIZE: usize = 32;
+use crate::working_size::{MIN_WORKING_SIZE, MinSize};
 
 /// What to load: the weights, the model and prior configurations, the device.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EngineConfig {
     /// Weights: a dgstereo `.safetensors` or an official RAFT-Stereo `.pth`; `None` for the
-    /// bundled default ([`crate::weights::default_weights`]).
+    /// bundled default ([`crate::weights::default_weights`]). A name of an official checkpoint
+    /// is resolved to its file first (`dgstereo_weights::Fetcher::resolve_stereo`).
     pub weights: Option<PathBuf>,
     /// The model configuration the weights were trained with; `None` for the one a
     /// `.safetensors` file carries, else RAFT-Stereo's default.

@@ -1,7 +1,8 @@
 //! Depth maps and coloured point clouds from disparity and calibration, written as PLY.
 //!
 //! Depth is `fx · baseline / (d + doffs)` in metres ([`Calibration::depth`]); pixels without a
-//! usable disparity get `inf` in the depth map. A point cloud keeps the pixels whose depth is
+//! usable disparity (unknown, or `d + doffs <= 0`: a negative disparity places no point in front
+//! of the cameras) get `inf` in the depth map, the invalid value of a PFM map. A point cloud keeps the pixels whose depth is
 //! finite, positive and at most `max_depth` (far points have a disparity of a pixel or less, so
 //! their position is mostly noise), each coloured by the left image.
 //!
@@ -37,7 +38,8 @@ pub struct PointCloud {
     pub colors: Vec<[u8; 3]>,
 }
 
-/// The depth (metres) of every pixel of a disparity map; `inf` where unknown.
+/// The depth (metres) of every pixel of a disparity map; `inf` where the disparity is unknown or
+/// `d + doffs <= 0` (see [`Calibration::depth`]).
 pub fn depth_map(disp: &DisparityMap, calib: &Calibration) -> DisparityMap {
     DisparityMap { width: disp.width, height: disp.height, data: disp.data.iter().map(|d| calib.depth(*d)).collect() }
 }
@@ -51,7 +53,7 @@ pub fn keeps(z: f32, max_depth: f64) -> bool {
 ///
 /// # Shapes
 /// `depth` and `image` have the same width and height (that of `calib`, see
-/// [`Calibration::for_size`]).
+/// [`Calibration::adjusted`]).
 pub fn point_cloud(depth: &DisparityMap, image: &RgbImage, calib: &Calibration, max_depth: f64) -> Result<PointCloud> {
     if (depth.width, depth.height) != (image.width, image.height) {
         return Err(Error::Shape(format!(
@@ -123,12 +125,12 @@ mod tests {
             size: None,
             depth_range: None,
         };
-        // Disparities 10 (1 m), 1 (10 m), NaN, 0 → depths 1, 10, inf, inf.
-        let disp = DisparityMap::from_vec(4, 1, vec![10.0, 1.0, f32::NAN, 0.0]).unwrap();
+        // Disparities 10 (1 m), 1 (10 m), NaN, 0, -3 → depths 1, 10, inf, inf, inf.
+        let disp = DisparityMap::from_vec(5, 1, vec![10.0, 1.0, f32::NAN, 0.0, -3.0]).unwrap();
         let depth = depth_map(&disp, &calib);
         assert_eq!(depth.data[..2], [1.0, 10.0]);
-        assert!(depth.data[2..].iter().all(|z| z.is_infinite()));
-        let image = RgbImage::from_fn(4, 1, |x, _| [x as f32 * 10.0, 0.0, 255.0]);
+        assert!(depth.data[2..].iter().all(|z| *z == f32::INFINITY), "{:?}", depth.data);
+        let image = RgbImage::from_fn(5, 1, |x, _| [x as f32 * 10.0, 0.0, 255.0]);
         let cloud = point_cloud(&depth, &image, &calib, 5.0).unwrap();
         assert_eq!(cloud.points.len(), 1);
         // Pixel (0, 0) at 1 m with cx = 1: x = (0 - 1) / 100.

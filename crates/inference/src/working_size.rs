@@ -11,10 +11,20 @@
 //! side is under [`AUTO_MIN_SIZE`] pixels for models at 1/8 resolution, and leaves 1/4-resolution
 //! models (the official RAFT-Stereo layout) at the size the reference code uses. An explicit
 //! `max_size` turns the automatic enlargement off: asking for a cap means asking for speed.
+//!
+//! A pair with a side under [`MIN_WORKING_SIZE`] pixels, as given or after `max_size`, is
+//! refused ([`network_size`]): the network pads its input to a multiple of 32 (64 for
+//! 1/8-resolution models), so such a pair would be mostly padding, and enlarging it
+//! (`min_size`) invents the detail the network would match.
 
 use std::str::FromStr;
 
-use dgstereo_data::resize::fit_scale;
+use dgstereo_core::{Error, Result};
+use dgstereo_data::resize::{fit_scale, scaled_size};
+
+/// The smallest side, in pixels, of a pair the network is given, and the smallest that
+/// `max_size` and `min_size` may ask for.
+pub const MIN_WORKING_SIZE: usize = 32;
 
 /// The longer side that `min_size auto` brings small pairs up to for 1/8-resolution models
 /// (Cones: 2x, a 640x480 pair: 1.4x).
@@ -69,6 +79,38 @@ pub fn working_scale(width: usize, height: usize, min_size: Option<usize>, max_s
     }
 }
 
+/// The factor and the size (`width, height`) at which the network sees a `width x height` pair
+/// ([`working_scale`], then rounded as the resize rounds).
+///
+/// # Errors
+/// [`Error::Shape`] when a side of the pair is under [`MIN_WORKING_SIZE`];
+/// [`Error::config`]`("max_size", ..)` when `max_size` brings a side under it.
+pub fn network_size(
+    width: usize,
+    height: usize,
+    min_size: Option<usize>,
+    max_size: Option<usize>,
+) -> Result<(f64, (usize, usize))> {
+    if width < MIN_WORKING_SIZE || height < MIN_WORKING_SIZE {
+        return Err(Error::Shape(format!(
+            "the pair is {width}x{height} pixels: the network needs at least {MIN_WORKING_SIZE} pixels on each side"
+        )));
+    }
+    let scale = working_scale(width, height, min_size, max_size);
+    let size = if scale == 1.0 { (width, height) } else { scaled_size(width, height, scale, scale) };
+    if size.0 < MIN_WORKING_SIZE || size.1 < MIN_WORKING_SIZE {
+        let cap = max_size.map_or_else(|| "the working size".to_string(), |m| m.to_string());
+        return Err(Error::config(
+            "max_size",
+            format!(
+                "{cap} brings the {width}x{height} pair to {}x{}, under the network's {MIN_WORKING_SIZE} pixels a side: raise it or leave it out",
+                size.0, size.1
+            ),
+        ));
+    }
+    Ok((scale, size))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -103,5 +145,20 @@ mod tests {
         // The cap wins over the lower bound.
         assert_eq!(working_scale(1242, 375, Some(900), Some(621)), 0.5);
         assert_eq!(working_scale(450, 375, None, Some(150)), 150.0 / 450.0);
+    }
+
+    #[test]
+    fn pairs_under_the_minimum_are_refused_with_their_size() {
+        assert_eq!(network_size(450, 375, Some(900), None).unwrap(), (2.0, (900, 750)));
+        assert_eq!(network_size(32, 32, None, None).unwrap(), (1.0, (32, 32)));
+        for (w, h) in [(1, 1), (31, 100), (100, 31)] {
+            let e = network_size(w, h, Some(900), None).unwrap_err();
+            assert!(matches!(e, Error::Shape(_)), "{e:?}");
+            assert!(e.to_string().contains(&format!("{w}x{h}")) && e.to_string().contains("32"), "{e}");
+        }
+        // A cap that brings the shorter side under the minimum names the cap and both sizes.
+        let e = network_size(1000, 40, None, Some(100)).unwrap_err();
+        assert!(matches!(&e, Error::Config(p) if p.key == "max_size"), "{e:?}");
+        assert!(e.to_string().contains("1000x40") && e.to_string().contains("100x4,"), "{e}");
     }
 }

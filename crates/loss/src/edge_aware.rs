@@ -1,9 +1,10 @@
 //! EALS, edge-aware loss suppression.
 
 use burn::tensor::Tensor;
+use dgstereo_core::Result;
 
 use crate::mask::{edge_mask, sanitized, supervised_mask};
-use crate::sequence::{sequence_weights, weighted_sum};
+use crate::sequence::{check_inputs, sequence_weights, weighted_sum};
 use crate::{DisparityLoss, LossTarget, LossTerms};
 
 /// Edge-aware loss suppression (the paper's EALS).
@@ -48,10 +49,8 @@ impl DisparityLoss for EdgeAwareLoss {
     /// # Shapes
     /// - `predictions`: each `[N, 1, H, W]`
     /// - output: `[1]`
-    ///
-    /// # Panics
-    /// When `predictions` is empty.
-    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Tensor<1> {
+    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Result<Tensor<1>> {
+        check_inputs(predictions, target)?;
         let mask = self.mask(target);
         let gt = sanitized(target.disparity_bilinear.clone(), mask.clone().greater_elem(0.5));
         let weights = sequence_weights(predictions.len(), self.gamma, false);
@@ -61,14 +60,15 @@ impl DisparityLoss for EdgeAwareLoss {
     }
 
     /// The sum over the supervised pixels and the count of all pixels (`B * H * W`).
-    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> LossTerms {
+    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Result<LossTerms> {
+        check_inputs(predictions, target)?;
         let mask = self.mask(target);
         let gt = sanitized(target.disparity_bilinear.clone(), mask.clone().greater_elem(0.5));
         let weights = sequence_weights(predictions.len(), self.gamma, false);
         let count = mask.dims().iter().product::<usize>() as f64;
         let sum = weighted_sum(predictions, &weights, |prediction| {
             ((prediction.clone() - gt.clone()).abs() * mask.clone()).sum()
-        });
-        LossTerms { sum, count }
+        })?;
+        Ok(LossTerms { sum, count })
     }
 }

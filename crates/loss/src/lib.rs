@@ -29,7 +29,7 @@ pub mod sequence;
 
 pub use edge_aware::EdgeAwareLoss;
 pub use mask::{edge_mask, supervised_mask};
-pub use sequence::{SequenceL1Loss, sequence_weights};
+pub use sequence::{SequenceL1Loss, check_inputs, sequence_weights};
 
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
@@ -65,12 +65,15 @@ pub struct LossTerms {
 }
 
 /// The stage trait.
+///
+/// Both methods fail with [`dgstereo_core::Error::Shape`] when there is no prediction or a
+/// prediction's shape is not the ground truth's ([`check_inputs`]).
 pub trait DisparityLoss {
     /// The scalar loss of `predictions` (one `[N, 1, H, W]` positive disparity per iteration).
-    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Tensor<1>;
+    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> dgstereo_core::Result<Tensor<1>>;
 
     /// The same loss as [`LossTerms`]: `loss` equals `sum / max(count, 1)` up to rounding.
-    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> LossTerms;
+    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> dgstereo_core::Result<LossTerms>;
 }
 
 /// Which loss an experiment uses.
@@ -182,9 +185,7 @@ impl LossConfig {
 }
 
 impl DisparityLoss for LossConfig {
-    /// # Panics
-    /// When `predictions` is empty.
-    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Tensor<1> {
+    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> dgstereo_core::Result<Tensor<1>> {
         match *self {
             Self::SequenceL1 { gamma, max_disparity } => {
                 SequenceL1Loss { gamma, max_disparity }.loss(predictions, target)
@@ -195,7 +196,7 @@ impl DisparityLoss for LossConfig {
         }
     }
 
-    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> LossTerms {
+    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> dgstereo_core::Result<LossTerms> {
         match *self {
             Self::SequenceL1 { gamma, max_disparity } => {
                 SequenceL1Loss { gamma, max_disparity }.terms(predictions, target)

@@ -1,6 +1,7 @@
 //! RAFT-Stereo's sequence L1 loss.
 
 use burn::tensor::Tensor;
+use dgstereo_core::{Error, Result};
 
 use crate::mask::{sanitized, supervised_mask};
 use crate::{DisparityLoss, LossTarget, LossTerms};
@@ -14,22 +15,44 @@ pub fn sequence_weights(count: usize, gamma: f64, adjust: bool) -> Vec<f64> {
     (1..=count).map(|k| gamma.powi((count - k) as i32)).collect()
 }
 
-/// `sum_k weights[k] * loss_k` over the predictions.
+/// Checks what a loss reads: at least one prediction, each of the target's `[N, 1, H, W]`
+/// shape, and the target's three maps of one shape.
 ///
-/// # Panics
-/// When `predictions` is empty.
+/// # Errors
+/// [`Error::Shape`] naming the shapes that differ.
+pub fn check_inputs(predictions: &[Tensor<4>], target: &LossTarget) -> Result<()> {
+    let dims = target.disparity_bilinear.dims();
+    if target.disparity_nearest.dims() != dims || target.valid.dims() != dims {
+        return Err(Error::Shape(format!(
+            "loss target: the bilinear ground truth is {dims:?}, the nearest {:?} and the validity mask {:?}",
+            target.disparity_nearest.dims(),
+            target.valid.dims()
+        )));
+    }
+    if dims[1] != 1 {
+        return Err(Error::Shape(format!("loss target: expected [N, 1, H, W] disparity, got {dims:?}")));
+    }
+    if predictions.is_empty() {
+        return Err(Error::Shape("a disparity loss needs at least one prediction, got none".into()));
+    }
+    if let Some((k, p)) = predictions.iter().enumerate().find(|(_, p)| p.dims() != dims) {
+        return Err(Error::Shape(format!("loss: prediction {k} is {:?} but the ground truth is {dims:?}", p.dims())));
+    }
+    Ok(())
+}
+
+/// `sum_k weights[k] * loss_k` over the predictions (checked by [`check_inputs`] first).
 pub(crate) fn weighted_sum(
     predictions: &[Tensor<4>],
     weights: &[f64],
     per_prediction: impl Fn(&Tensor<4>) -> Tensor<1>,
-) -> Tensor<1> {
-    assert!(!predictions.is_empty(), "a disparity loss needs at least one prediction");
+) -> Result<Tensor<1>> {
     predictions
         .iter()
         .zip(weights)
         .map(|(prediction, &weight)| per_prediction(prediction).mul_scalar(weight))
         .reduce(|total, term| total + term)
-        .expect("at least one prediction")
+        .ok_or_else(|| Error::Shape("a disparity loss needs at least one prediction, got none".into()))
 }
 
 /// RAFT-Stereo's loss: `sum_k gamma'^(N-k) * mean_{supervised} |D_k - D_gt|` with
@@ -48,10 +71,8 @@ impl DisparityLoss for SequenceL1Loss {
     /// # Shapes
     /// - `predictions`: each `[N, 1, H, W]`
     /// - output: `[1]`
-    ///
-    /// # Panics
-    /// When `predictions` is empty.
-    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Tensor<1> {
+    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Result<Tensor<1>> {
+        check_inputs(predictions, target)?;
         let gt = target.disparity_bilinear.clone();
         let supervised = supervised_mask(gt.clone(), target.valid.clone(), self.max_disparity);
         let gt = sanitized(gt, supervised.clone());
@@ -64,7 +85,8 @@ impl DisparityLoss for SequenceL1Loss {
     }
 
     /// The sum over the supervised pixels and their count.
-    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> LossTerms {
+    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Result<LossTerms> {
+        check_inputs(predictions, target)?;
         let gt = target.disparity_bilinear.clone();
         let supervised = supervised_mask(gt.clone(), target.valid.clone(), self.max_disparity);
         let gt = sanitized(gt, supervised.clone());
@@ -73,7 +95,7 @@ impl DisparityLoss for SequenceL1Loss {
         let weights = sequence_weights(predictions.len(), self.gamma, true);
         let sum = weighted_sum(predictions, &weights, |prediction| {
             ((prediction.clone() - gt.clone()).abs() * supervised.clone()).sum()
-        });
-        LossTerms { sum, count }
+        })?;
+        Ok(LossTerms { sum, count })
     }
 }

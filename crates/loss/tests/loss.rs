@@ -48,10 +48,10 @@ fn eals_matches_hand_computation() {
     let device = default_device();
     let loss = EdgeAwareLoss { tau: 0.9, gamma: 0.9, max_disparity: 700.0 };
     // L_1 = (1 + 3 + 5) / 6 = 1.5, L_2 = 3 * 1 / 6 = 0.5, L = 0.9 * 1.5 + 0.5 = 1.85.
-    let value = scalar(loss.loss(&example_predictions(&device), &example(&device)));
+    let value = scalar(loss.loss(&example_predictions(&device), &example(&device)).unwrap());
     assert!((value - 1.85).abs() < 1e-5, "{value}");
     // The single last prediction has weight 1.
-    let value = scalar(loss.loss(&example_predictions(&device)[1..], &example(&device)));
+    let value = scalar(loss.loss(&example_predictions(&device)[1..], &example(&device)).unwrap());
     assert!((value - 0.5).abs() < 1e-6, "{value}");
     assert_eq!(to_vec(loss.mask(&example(&device))), vec![1.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
 }
@@ -67,7 +67,7 @@ fn eals_averages_over_the_batch_images() {
         valid: Tensor::cat(vec![one.valid.clone(), Tensor::zeros([1, 1, 2, 3], &device)], 0),
     };
     let predictions: Vec<_> = example_predictions(&device).into_iter().map(|p| Tensor::cat(vec![p; 2], 0)).collect();
-    let value = scalar(LossConfig::edge_aware().loss(&predictions, &target));
+    let value = scalar(LossConfig::edge_aware().loss(&predictions, &target).unwrap());
     assert!((value - 0.925).abs() < 1e-5, "{value}");
 }
 
@@ -77,11 +77,11 @@ fn sequence_l1_matches_hand_computation() {
     let loss = SequenceL1Loss { gamma: 0.9, max_disparity: 700.0 };
     // Supervised: (0,0), (0,1), (0,2), (1,1) with ground truth 1, 2, 3, 5.
     // L_1 = 11 / 4, L_2 = 1; weights 0.9^15 and 1.
-    let value = scalar(loss.loss(&example_predictions(&device), &example(&device)));
+    let value = scalar(loss.loss(&example_predictions(&device), &example(&device)).unwrap());
     let expected = 0.9f32.powi(15) * 2.75 + 1.0;
     assert!((value - expected).abs() < 1e-5, "{value} vs {expected}");
     // N = 1: weight 1, no division by zero.
-    let value = scalar(loss.loss(&example_predictions(&device)[..1], &example(&device)));
+    let value = scalar(loss.loss(&example_predictions(&device)[..1], &example(&device)).unwrap());
     assert!((value - 2.75).abs() < 1e-5, "{value}");
 }
 
@@ -91,7 +91,7 @@ fn losses_without_supervised_pixels_are_zero() {
     let mut target = example(&device);
     target.valid = Tensor::zeros([1, 1, 2, 3], &device);
     for config in [LossConfig::default(), LossConfig::edge_aware()] {
-        let value = scalar(config.loss(&example_predictions(&device), &target));
+        let value = scalar(config.loss(&example_predictions(&device), &target).unwrap());
         assert_eq!(value, 0.0, "{config:?}");
     }
 }
@@ -106,8 +106,8 @@ fn eals_equals_sequence_l1_without_resize_edges_or_invalid_pixels() {
         valid: Tensor::ones([1, 1, 2, 3], &device),
     };
     let predictions = [Tensor::zeros([1, 1, 2, 3], &device)];
-    let eals = scalar(LossConfig::edge_aware().loss(&predictions, &target));
-    let l1 = scalar(LossConfig::default().loss(&predictions, &target));
+    let eals = scalar(LossConfig::edge_aware().loss(&predictions, &target).unwrap());
+    let l1 = scalar(LossConfig::default().loss(&predictions, &target).unwrap());
     assert!((eals - 3.5).abs() < 1e-6 && (l1 - 3.5).abs() < 1e-6, "{eals} {l1}");
 }
 
@@ -117,7 +117,7 @@ fn gradients_stay_finite_next_to_infinite_ground_truth() {
     let target = example(&device);
     let prediction = map(&[0.5, 0.5, 0.5, 0.5, 0.5, 0.5], [1, 1, 2, 3], &device).require_grad();
     for config in [LossConfig::default(), LossConfig::edge_aware()] {
-        let loss = config.loss(std::slice::from_ref(&prediction), &target);
+        let loss = config.loss(std::slice::from_ref(&prediction), &target).unwrap();
         let grads = loss.backward();
         let grad = to_vec(prediction.grad(&grads).expect("gradient"));
         assert!(grad.iter().all(|g| g.is_finite()), "{config:?}: {grad:?}");
@@ -232,4 +232,21 @@ fn invalid_values_are_keyed_problems() {
     assert_eq!(keys(LossConfig::EdgeAware { tau: -1.0, gamma: 0.9, max_disparity: 700.0 }), ["tau"]);
     assert_eq!(keys(LossConfig::SequenceL1 { gamma: 0.0, max_disparity: f64::NAN }), ["gamma", "max_disparity"]);
     assert!(LossConfig::edge_aware().problems().is_empty());
+}
+
+#[test]
+fn no_prediction_or_a_prediction_of_another_shape_is_a_shape_error() {
+    let device = default_device();
+    for config in LossConfig::variants() {
+        let e = config.loss(&[], &example(&device)).unwrap_err();
+        assert!(
+            matches!(e, dgstereo_core::Error::Shape(_)) && e.to_string().contains("at least one prediction"),
+            "{e}"
+        );
+        let e = config.terms(&[], &example(&device)).unwrap_err();
+        assert!(matches!(e, dgstereo_core::Error::Shape(_)), "{e}");
+        let wrong = [Tensor::zeros([1, 1, 3, 2], &device)];
+        let e = config.loss(&wrong, &example(&device)).unwrap_err();
+        assert!(e.to_string().contains("[1, 1, 3, 2]") && e.to_string().contains("[1, 1, 2, 3]"), "{e}");
+    }
 }

@@ -45,8 +45,8 @@ fn terms_give_the_loss_and_add_over_the_images_of_a_batch() {
     let device = default_device();
     let (predictions, target) = batch(4, &device);
     for config in LossConfig::variants() {
-        let loss = value(config.loss(&predictions, &target));
-        let whole = config.terms(&predictions, &target);
+        let loss = value(config.loss(&predictions, &target).unwrap());
+        let whole = config.terms(&predictions, &target).unwrap();
         let from_terms = value(whole.sum.clone()) / whole.count.max(1.0);
         assert!((from_terms - loss).abs() <= 1e-5 * loss.abs(), "{}: {from_terms} vs {loss}", config.kind());
         // Images 0 and 2 on one shard, 1 and 3 on the other, as two ranks hold them.
@@ -54,7 +54,7 @@ fn terms_give_the_loss_and_add_over_the_images_of_a_batch() {
             .into_iter()
             .map(|r| {
                 let (p, t) = shard(&predictions, &target, r);
-                config.terms(&p, &t)
+                config.terms(&p, &t).unwrap()
             })
             .collect();
         let count: f64 = parts.iter().map(|t| t.count).sum();
@@ -69,7 +69,7 @@ fn a_shard_without_supervised_pixels_adds_nothing() {
     let device = default_device();
     let (predictions, mut target) = batch(1, &device);
     target.valid = target.valid.zeros_like();
-    let terms = LossConfig::default().terms(&predictions, &target);
+    let terms = LossConfig::default().terms(&predictions, &target).unwrap();
     assert_eq!(terms.count, 0.0);
     assert_eq!(value(terms.sum), 0.0);
 }

@@ -302,7 +302,11 @@ impl RaftStereo {
         if let (true, Correlation::Reg(p)) = (probe.tracing(), &corr_fn) {
             for (i, level) in p.levels().iter().enumerate() {
                 let [m, w] = level.dims();
-                probe.record(format_args!("corr.pyramid.{i}"), &level.clone().reshape([m, 1, 1, w]));
+                // A level pooled below one column (narrow inputs) holds nothing to record, and
+                // burn cannot reshape an empty tensor on the capture device.
+                if m * w > 0 {
+                    probe.record(format_args!("corr.pyramid.{i}"), &level.clone().reshape([m, 1, 1, w]));
+                }
             }
         }
         corr_fn

@@ -19,7 +19,7 @@ fn both_views_run_in_one_batch_and_come_back_at_image_size() {
     burn::tensor::Device::seed(&device, 9);
     let model = DepthAnythingV2::new(DepthAnythingV2Encoder::Vits, &device);
     let (h, w, input_size) = (20, 31, 28);
-    assert_eq!(network_input_size(h, w, input_size), [28, 42]);
+    assert_eq!(network_input_size(h, w, input_size).unwrap(), [28, 42]);
     let left = Tensor::<4>::random([2, 3, h, w], Distribution::Uniform(0.0, 255.0), &device);
     let right = Tensor::<4>::random([2, 3, h, w], Distribution::Uniform(0.0, 255.0), &device);
 
@@ -31,14 +31,14 @@ fn both_views_run_in_one_batch_and_come_back_at_image_size() {
     assert!(to_vec(out.left.clone()).iter().all(|v| v.is_finite() && *v >= 0.0));
 
     // Same as running each view alone: batching must not mix the views.
-    let alone = prior.model().infer(right.clone(), input_size);
+    let alone = prior.model().infer(right.clone(), input_size).unwrap();
     assert!(max_abs_diff(alone, out.right.clone()) < 1e-4);
-    let first = prior.model().infer(left.narrow(0, 0, 1), input_size);
+    let first = prior.model().infer(left.narrow(0, 0, 1), input_size).unwrap();
     assert!(max_abs_diff(first, out.left.narrow(0, 0, 1)) < 1e-4);
 
     // The network input has the documented size and ImageNet statistics of a grey image.
     let grey = Tensor::<4>::full([1, 3, h, w], 127.5, &device);
-    let x = preprocess(grey, input_size);
+    let x = preprocess(grey, input_size).unwrap();
     assert_eq!(x.dims(), [1, 3, 28, 42]);
     let v = to_vec(x);
     let expected_red = (0.5 - 0.485) / 0.229;

@@ -8,8 +8,10 @@
 //! beats the next row's by more than the larger of the two standard deviations, and the second
 //! best is <u>underlined</u> by the same rule against the third. Every metric here is an error
 //! (EPE in px, bad-T and D1 in % of the valid pixels), so lower is better; the Markdown ends with
-//! a legend saying so, with the pairs behind each benchmark. CSV (`<metric> std` beside each
-//! metric, `n`, `steps`) and JSON (the per-seed values too) hold the same numbers unformatted.
+//! a legend saying so, with the pairs behind each benchmark, then each row's description and
+//! seeds and each benchmark's settings (its folder, iterations, size limit), so the table says
+//! what was measured and how. CSV (`<metric> std` beside each metric, `n`, `steps`) and JSON (the
+//! per-seed values, descriptions and settings too) hold the same numbers unformatted.
 
 use std::path::Path;
 
@@ -97,14 +99,68 @@ pub struct AblationTable {
     pub pairs: Vec<(String, usize)>,
     /// Remarks printed under the legend (rows trained with different losses).
     pub notes: Vec<String>,
-    /// Runs without scores (failed, or not finished), each with what is known of it.
+    /// Runs without current scores (failed, not finished, or stale), each with what is known
+    /// of it.
     pub missing: Vec<(String, String)>,
+    /// Each row's description, by row name.
+    pub descriptions: Vec<(String, String)>,
+    /// How each benchmark is scored, by benchmark name
+    /// ([`BenchmarkConfig::settings`](dgstereo_eval::BenchmarkConfig::settings)).
+    pub settings: Vec<(String, String)>,
 }
 
 impl AblationTable {
     /// A table with the given columns and no rows.
     pub fn new(columns: Vec<(String, String)>) -> Self {
-        Self { columns, rows: Vec::new(), pairs: Vec::new(), notes: Vec::new(), missing: Vec::new() }
+        Self {
+            columns,
+            rows: Vec::new(),
+            pairs: Vec::new(),
+            notes: Vec::new(),
+            missing: Vec::new(),
+            descriptions: Vec::new(),
+            settings: Vec::new(),
+        }
+    }
+
+    /// Records the description of the row of run `run` (the first given for a row stands).
+    pub fn describe_row(&mut self, run: &str, description: &str) {
+        let row = row_name(run);
+        if !self.descriptions.iter().any(|(r, _)| *r == row) {
+            self.descriptions.push((row, description.to_string()));
+        }
+    }
+
+    /// Records how `benchmark` is scored (shown under the legend).
+    pub fn set_settings(&mut self, benchmark: &str, settings: &str) {
+        match self.settings.iter_mut().find(|(b, _)| b == benchmark) {
+            Some(entry) => entry.1 = settings.to_string(),
+            None => self.settings.push((benchmark.to_string(), settings.to_string())),
+        }
+    }
+
+    /// The lines under the legend: each row's seeds and description, each benchmark's settings.
+    pub fn details(&self) -> String {
+        let mut s = String::new();
+        if !self.rows.is_empty() {
+            s += "\nRows:\n\n";
+            for row in &self.rows {
+                let seeds: Vec<String> = row.seeds.iter().map(|x| x.seed.to_string()).collect();
+                let plural = if seeds.len() == 1 { "" } else { "s" };
+                s += &format!("- `{}` (seed{plural} {}, {} steps)", row.name, seeds.join(", "), row.steps);
+                if let Some((_, d)) = self.descriptions.iter().find(|(r, _)| *r == row.name) {
+                    s += &format!(": {d}");
+                }
+                s.push('\n');
+            }
+        }
+        if !self.settings.is_empty() {
+            s += "\nBenchmarks:\n\n";
+            for (b, text) in &self.settings {
+                s += &format!("- {b}: {text}\n");
+            }
+        }
+        s
     }
 
     /// Records that `benchmark` scores `pairs` pairs (shown in the legend).
@@ -212,6 +268,7 @@ impl AblationTable {
         s.push('\n');
         s += &self.legend();
         s.push('\n');
+        s += &self.details();
         s
     }
 
@@ -253,7 +310,8 @@ impl AblationTable {
             .iter()
             .map(|(b, m)| {
                 let pairs = self.pairs.iter().find(|(name, _)| name == b).map(|(_, n)| *n);
-                json!({"benchmark": b, "metric": m, "unit": unit(m), "pairs": pairs})
+                let settings = self.settings.iter().find(|(name, _)| name == b).map(|(_, s)| s);
+                json!({"benchmark": b, "metric": m, "unit": unit(m), "pairs": pairs, "settings": settings})
             })
             .collect();
         let rows: Vec<_> = self
@@ -265,8 +323,9 @@ impl AblationTable {
                     .iter()
                     .map(|s| json!({"run": s.run, "seed": s.seed, "values": by_column(&|c| s.values[c])}))
                     .collect();
-                json!({"run": r.name, "n": r.n(), "steps": r.steps, "values": by_column(&|c| r.mean(c)),
-                       "std": by_column(&|c| r.std(c)), "seeds": seeds})
+                let description = self.descriptions.iter().find(|(row, _)| *row == r.name).map(|(_, d)| d);
+                json!({"run": r.name, "description": description, "n": r.n(), "steps": r.steps,
+                       "values": by_column(&|c| r.mean(c)), "std": by_column(&|c| r.std(c)), "seeds": seeds})
             })
             .collect();
         let missing: Vec<_> = self.missing.iter().map(|(run, reason)| json!({"run": run, "reason": reason})).collect();

@@ -140,7 +140,7 @@ impl Trainer {
     fn shard(&self, batch: &TensorBatch) -> Result<Shard> {
         let step = self.step;
         let predictions = self.predictions(batch)?;
-        let terms = self.parts.loss.terms(&predictions, &batch.target);
+        let terms = self.parts.loss.terms(&predictions, &batch.target)?;
         let loss_sum = f64::from(dgstereo_core::tensor::to_vec(terms.sum.clone().detach())[0]);
         if !loss_sum.is_finite() {
             return Err(Error::Other(format!(

@@ -11,11 +11,13 @@
 //! Since the data of step `k` depends only on the seed and `k`, and the schedule only on `k`, a
 //! checkpoint ([`checkpoint`]) holding the weights, the optimiser state, the parameter identities
 //! and the step reproduces an uninterrupted run exactly. [`run::train`] is the loop: logging
-//! (JSONL, progress bar), validation, plots and atomic checkpoints that keep the last N.
+//! (JSONL), [`progress`] events for the binary to draw, validation, plots and atomic checkpoints
+//! that keep the last N.
 //! `train.ema_decay` adds a moving average of the weights ([`ema`]) that validation, checkpoints'
 //! model weights and the final model use. [`ablation`] scores finished runs into the ablation
 //! table, and [`paper_report`] lays them out in the paper's tables beside its published figures
-//! ([`paper_tables`]). [`verify_step`] checks two steps against the official training loop.
+//! ([`paper_tables`]), each column filled by the benchmark that scores its data set
+//! ([`paper_match`]). [`verify_step`] checks two steps against the official training loop.
 //!
 //! Data parallelism is one seam: a run is `N` ranks meeting through a [`Collective`] (the
 //! world of one is [`SingleProcess`]; MPI's lives in `dgstereo-distributed`).
@@ -35,13 +37,16 @@ mod config;
 pub mod data_parallel;
 pub mod ema;
 pub mod gradient_exchange;
+pub mod paper_match;
 pub mod paper_report;
 pub mod paper_tables;
 pub mod params;
 pub mod plot;
 pub mod preflight;
+pub mod progress;
 pub mod run;
 pub mod run_identity;
+pub mod run_log;
 pub mod schedule;
 pub mod step_timing;
 pub mod trainer;
@@ -50,6 +55,7 @@ pub mod verify_step;
 
 pub use collective::{Collective, SingleProcess};
 pub use config::{DataSource, PhotoTextures, SyntheticScenes, TrainingConfig, TrainingDataConfig, ValidationConfig};
+pub use progress::{Progress, ProgressObserver};
 pub use run::{RunOptions, RunSummary, train, train_among};
 pub use schedule::OneCycleLr;
 pub use trainer::{StepInternals, StepReport, TrainParts, Trainer};

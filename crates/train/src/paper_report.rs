@@ -2,13 +2,12 @@
 //!
 //! [`PaperComparison::new`] fills one of [`PAPER_TABLES`] from run results: a row takes the
 //! scores of the run named by [`PaperRow::run`](crate::paper_tables::PaperRow::run), a column
-//! the metric of the benchmark named by
-//! [`PaperColumn::benchmark`](crate::paper_tables::PaperColumn::benchmark) (the
-//! `[[benchmarks]]` names of `experiments/paper.toml`); anything
-//! missing stays unknown (NaN, shown as `–`). Design decision: matching by name keeps the tables
-//! a pure function of what `dgstereo ablate` scored, so the same runs always give the same
-//! tables, and a partial ablation (some rows trained, some benchmarks present) still fills what it
-//! can. With the published figures, each row is three lines: ours, the paper's, and ours minus the
+//! the metric of the benchmark that scores its data set
+//! ([`PaperColumn::benchmark`](crate::paper_tables::PaperColumn::benchmark), matched by
+//! [`crate::paper_match`]); anything missing stays unknown (NaN, shown as `–`). Design decision:
+//! the tables are a pure function of what `dgstereo ablate` scored and of the study's benchmarks,
+//! so the same runs always give the same tables, and a partial ablation (some rows trained, some
+//! benchmarks present) still fills what it can. With the published figures, each row is three lines: ours, the paper's, and ours minus the
 //! paper's (every metric is an error, so a positive difference is worse than published). A row of
 //! several seeds shows its mean `± std`, as the ablation table does.
 
@@ -19,6 +18,7 @@ use dgstereo_core::Result;
 use dgstereo_eval::Metrics;
 
 use crate::checkpoint::write_atomic;
+use crate::paper_match::{BenchmarkMatch, label_for};
 use crate::paper_tables::{PAPER_SOURCE, PAPER_TABLES, PaperTable};
 
 /// A run's results: its name and, per benchmark name, the benchmark's aggregate metrics.
@@ -48,8 +48,9 @@ pub struct PaperComparison {
 }
 
 impl PaperComparison {
-    /// Fills `table` from `runs` (see the module doc).
-    pub fn new(table: &'static PaperTable, runs: &[RunScores]) -> Self {
+    /// Fills `table` from `runs`, each column from the benchmark `matches` gives its data set
+    /// (see the module doc).
+    pub fn new(table: &'static PaperTable, runs: &[RunScores], matches: &[BenchmarkMatch]) -> Self {
         let mut ours = Vec::with_capacity(table.rows.len());
         let mut found = Vec::with_capacity(table.rows.len());
         let mut spread = Vec::with_capacity(table.rows.len());
@@ -61,7 +62,8 @@ impl PaperComparison {
                     .columns
                     .iter()
                     .map(|c| {
-                        run.and_then(|r| of(r).iter().find(|(b, _)| b == c.benchmark))
+                        let label = label_for(matches, c.benchmark);
+                        run.and_then(|r| of(r).iter().find(|(b, _)| Some(b.as_str()) == label))
                             .and_then(|(_, m)| m.get(c.metric))
                             .unwrap_or(f64::NAN)
                     })
@@ -181,18 +183,25 @@ fn csv_cell(text: &str) -> String {
     if text.contains([',', '"', '\n']) { format!("\"{}\"", text.replace('"', "\"\"")) } else { text.to_string() }
 }
 
-/// The paper's four ablation tables filled from `runs`, in the paper's order.
-pub fn compare_with_paper(runs: &[RunScores]) -> Vec<PaperComparison> {
-    PAPER_TABLES.iter().map(|t| PaperComparison::new(t, runs)).collect()
+/// The paper's four ablation tables filled from `runs`, in the paper's order, each column from
+/// the benchmark `matches` gives its data set
+/// ([`match_benchmarks`](crate::paper_match::match_benchmarks)).
+pub fn compare_with_paper(runs: &[RunScores], matches: &[BenchmarkMatch]) -> Vec<PaperComparison> {
+    PAPER_TABLES.iter().map(|t| PaperComparison::new(t, runs, matches)).collect()
 }
 
-/// All tables as one Markdown document, with a line on how ours were matched.
-pub fn paper_tables_markdown(tables: &[PaperComparison], with_paper: bool) -> String {
+/// All tables as one Markdown document, with how ours were matched: rows by run name, columns
+/// by data set, each column's benchmark listed.
+pub fn paper_tables_markdown(tables: &[PaperComparison], matches: &[BenchmarkMatch], with_paper: bool) -> String {
     let mut s = String::from(
-        "# The paper's ablation tables\n\nOurs: each row is the run it names, each column a \
-         `[[benchmarks]]` entry of that name scored under its protocol (EPE in px; D1/D2/D3 the % \
-         of pixels with an error over 1/2/3 px); `–` where the run or the benchmark is missing.\n",
+        "# The paper's ablation tables\n\nOurs: each row is the run it names, each column the \
+         `[[benchmarks]]` entry that scores its data set (by data set kind and split or weather, \
+         whatever its name), under its protocol (EPE in px; D1/D2/D3 the % of pixels with an error \
+         over 1/2/3 px); `–` where the run or the benchmark is missing.\n\nColumns matched:\n\n",
     );
+    for m in matches {
+        let _ = writeln!(s, "- {}", m.describe());
+    }
     for t in tables {
         s.push('\n');
         s += &t.to_markdown(with_paper);
@@ -200,10 +209,15 @@ pub fn paper_tables_markdown(tables: &[PaperComparison], with_paper: bool) -> St
     s
 }
 
-/// Writes `paper-tables.md` (every table) and `paper-table<N>.csv` (one per table) into `dir`,
-/// atomically.
-pub fn write_paper_tables(tables: &[PaperComparison], dir: &Path, with_paper: bool) -> Result<()> {
-    write_atomic(&dir.join("paper-tables.md"), paper_tables_markdown(tables, with_paper).as_bytes())?;
+/// Writes `paper-tables.md` (every table, and the columns' matches) and `paper-table<N>.csv`
+/// (one per table) into `dir`, atomically.
+pub fn write_paper_tables(
+    tables: &[PaperComparison],
+    matches: &[BenchmarkMatch],
+    dir: &Path,
+    with_paper: bool,
+) -> Result<()> {
+    write_atomic(&dir.join("paper-tables.md"), paper_tables_markdown(tables, matches, with_paper).as_bytes())?;
     for t in tables {
         let path = dir.join(format!("paper-table{}.csv", t.table.number));
         write_atomic(&path, t.to_csv(with_paper).as_bytes())?;

@@ -4,8 +4,10 @@
 //! read after its row has trained. A benchmark folder that does not exist, or holds no pair with
 //! ground truth, must stop the study before its first step, not after its first row: `ablate`
 //! and `experiment check` run [`preflight`] on every run first. It lists the training sources
-//! (as the trainer does), checks the initial weights, and opens every benchmark; each error names
-//! the key and the absolute path it looked at.
+//! (as the trainer does), checks the initial weights, opens every benchmark and reads the header
+//! of every file of every sample it will score (both views of one size, the ground truth complete
+//! and of the left view's size: `dgstereo_data::headers`); each error names the key and the
+//! absolute path it looked at.
 
 use dgstereo_core::{Error, Result};
 use dgstereo_eval::BenchmarkConfig;
@@ -27,15 +29,17 @@ fn absolute(path: &std::path::Path) -> std::path::PathBuf {
 
 /// Checks that every file and folder a run of `parts` scored on `benchmarks` reads is there:
 /// the training sources (listed, with ground truth), `train.init`, and each benchmark (its
-/// folder holds pairs with ground truth).
+/// folder holds pairs with ground truth, and every sample it scores passes
+/// [`SampleFiles::check_headers`](dgstereo_data::SampleFiles::check_headers)).
 ///
 /// # Errors
 /// [`Error::Config`] naming the key (`data.sources[0].root`, `train.init`,
-/// `benchmarks[1].root`) and the absolute path.
+/// `benchmarks[1].root`) and the absolute path; for a sample's file, the file's error (naming
+/// it, and the left view where sizes differ) within the context of the benchmark's key.
 pub fn preflight(parts: &TrainParts, benchmarks: &[BenchmarkConfig]) -> Result<Preflight> {
     TrainingData::new(&parts.data, &parts.train)?;
-    // A weights name is fetched here, before the first step, or fails offline.
-    let parts = parts.clone().with_named_weights()?;
+    // Weights names were resolved by the front end (`TrainParts::with_named_weights`).
+    parts.check_named_weights_resolved()?;
     if let Some(init) = &parts.train.init
         && !init.is_file()
     {
@@ -43,7 +47,14 @@ pub fn preflight(parts: &TrainParts, benchmarks: &[BenchmarkConfig]) -> Result<P
     }
     let mut benchmark_pairs = Vec::with_capacity(benchmarks.len());
     for (i, b) in benchmarks.iter().enumerate() {
-        let (_, indices) = b.dataset().map_err(|e| e.within(&format!("benchmarks[{i}]")))?;
+        let key = format!("benchmarks[{i}]");
+        let (dataset, indices) = b.dataset().map_err(|e| e.within(&key))?;
+        for &index in &indices {
+            let files = &dataset.files[index];
+            files
+                .check_headers()
+                .map_err(|e| e.context(format!("{key} (benchmark '{}'), sample '{}'", b.label(), files.name)))?;
+        }
         benchmark_pairs.push(indices.len());
     }
     Ok(Preflight { benchmark_pairs })

@@ -1,4 +1,4 @@
-//! The training loop: steps, log, progress bar, validation, plot, checkpoints.
+//! The training loop: steps, log, progress events, validation, plot, checkpoints.
 //!
 //! Output folder layout:
 //! - `config.toml`: the resolved experiment;
@@ -11,6 +11,10 @@
 //! - `model.safetensors` and `summary.json`: the final weights (loadable by `dgstereo infer`; the
 //!   moving average with `train.ema_decay`) and the final metrics, written when the run
 //!   completes; their presence marks a finished run.
+//!
+//! Resuming ([`RunOptions::resume`]) continues from the newest checkpoint, starts a folder that
+//! holds none, and leaves a finished run as it is (after checking that it is the same run). The
+//! loop reports its progress as [`Progress`] events to the options' observer and draws nothing.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -20,14 +24,15 @@ use std::time::Instant;
 
 use burn::tensor::Device;
 use dgstereo_core::{Error, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
 use crate::checkpoint::{list_checkpoints, load_checkpoint, save_checkpoint};
 use crate::collective::{Collective, SingleProcess, agree, writes_files};
 use crate::data_parallel::check_batch_divides;
-use crate::plot::{Curves, write_plot};
-use crate::run_identity::{another_run, training_differences};
+use crate::plot::write_plot;
+use crate::progress::{Progress, ProgressObserver};
+use crate::run_identity::{another_run, folder_differences, training_differences};
+use crate::run_log::{read_log, truncate_log};
 use crate::trainer::{StepReport, TrainParts, Trainer};
 use crate::validate::ValidationSet;
 
@@ -36,12 +41,13 @@ use crate::validate::ValidationSet;
 pub struct RunOptions {
     /// The output folder.
     pub out: PathBuf,
-    /// Continue from the newest checkpoint in `out` (error when there is none).
+    /// Continue from the newest checkpoint in `out`; with none, start the run there; a finished
+    /// run (the same run, else an error) is left as it is.
     pub resume: bool,
     /// Stop (with a checkpoint) after this many completed steps, without changing the schedule.
     pub stop_after: Option<usize>,
-    /// Show a progress bar on the terminal.
-    pub progress: bool,
+    /// Receives the run's [`Progress`] (rank 0's); the library draws nothing itself.
+    pub progress: Option<ProgressObserver>,
     /// Shown what the user should know before the run goes on (where a resumed run resumes,
     /// weights that kept their initialisation): the binary prints them; the library never does.
     pub notice: fn(&str),
@@ -65,6 +71,8 @@ pub struct RunSummary {
     /// Whether the run ended early because [`RunOptions::stop`] was set (its checkpoint holds
     /// the last completed step).
     pub stopped: bool,
+    /// Whether the folder held this run finished, and a resume left it as it was.
+    pub untouched: bool,
 }
 
 /// The checkpoint folder of a run folder.
@@ -80,37 +88,6 @@ pub fn is_finished(out: &Path) -> bool {
 fn append_line(path: &Path, value: &serde_json::Value) -> Result<()> {
     let mut f = std::fs::OpenOptions::new().create(true).append(true).open(path).map_err(|e| Error::io(path, e))?;
     writeln!(f, "{value}").map_err(|e| Error::io(path, e))
-}
-
-/// Keeps the log lines of completed steps `<= step` (a resumed run redoes the later ones) and
-/// returns the curves they hold.
-fn truncate_log(path: &Path, step: usize) -> Result<Curves> {
-    let mut curves = Curves::default();
-    if !path.is_file() {
-        return Ok(curves);
-    }
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    let mut kept = String::new();
-    for line in text.lines() {
-        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else { continue };
-        let s = v["step"].as_u64().unwrap_or(u64::MAX) as usize;
-        if s > step {
-            continue;
-        }
-        kept.push_str(line);
-        kept.push('\n');
-        let f = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
-        match v["kind"].as_str() {
-            Some("train") => {
-                curves.train_loss.push((s as f64, f("loss")));
-                curves.train_epe.push((s as f64, f("epe")));
-            }
-            Some("validation") => curves.valid_epe.push((s as f64, f("epe"))),
-            _ => {}
-        }
-    }
-    crate::checkpoint::write_atomic(path, kept.as_bytes())?;
-    Ok(curves)
 }
 
 fn metrics_json(m: &dgstereo_eval::Metrics) -> serde_json::Value {
@@ -156,16 +133,19 @@ pub fn train_among(
         }
         Ok(trainer)
     };
+    if options.resume && is_finished(out) {
+        return agree(ranks, finished_run(out, &parts));
+    }
     let setup = || -> Result<(Trainer, Option<PathBuf>)> {
         if writes {
             std::fs::create_dir_all(&ckpt_dir).map_err(|e| Error::io(&ckpt_dir, e))?;
         }
         let existing = list_checkpoints(&ckpt_dir)?;
-        if options.resume {
-            let (_, path) = existing.last().ok_or_else(|| {
-                Error::config("resume", format!("{} holds no checkpoint to resume from", ckpt_dir.display()))
-            })?;
+        if let Some((_, path)) = existing.last().filter(|_| options.resume) {
             return Ok((resumed_from(path)?, Some(path.clone())));
+        }
+        if options.resume && writes {
+            (options.notice)(&format!("{} holds no checkpoint: starting the run", ckpt_dir.display()));
         }
         if let Some((_, p)) = existing.last().filter(|_| writes) {
             return Err(Error::config(
@@ -193,34 +173,36 @@ pub fn train_among(
     crate::checkpoint::write_atomic(&config_path, trainer.parts.resolved_toml.as_bytes())?;
     let log_path = out.join("log.jsonl");
     let plot_path = out.join("curves.png");
-    let mut curves = truncate_log(&log_path, trainer.step)?;
+    let log = truncate_log(&log_path, trainer.step)?;
+    let mut curves = log.curves;
     let validation = ValidationSet::new(&trainer.parts.data.validation)?;
 
     let t = trainer.parts.train.clone();
     let end = options.stop_after.map_or(t.steps, |s| s.min(t.steps));
-    let bar = if options.progress { ProgressBar::new(t.steps as u64) } else { ProgressBar::hidden() };
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} {pos}/{len} [{elapsed_precise} < {eta_precise}] {wide_bar} {msg}")
-            .expect("valid template"),
-    );
-    bar.set_position(trainer.step as u64);
-    bar.reset_eta();
+    let report = |event: Progress| {
+        if let Some(observer) = &options.progress {
+            observer.report(&event);
+        }
+    };
+    report(Progress::Started { done: trainer.step, steps: t.steps });
 
+    // What the kept log records stands until the resumed run logs anew.
     let mut summary = RunSummary {
         steps: trainer.step,
-        last: None,
-        validation: None,
+        last: log.last,
+        validation: log.validation,
         checkpoint: resumed_checkpoint,
         finished: false,
         stopped: false,
+        untouched: false,
     };
     let mut interval_start = Instant::now();
     let mut interval_steps = 0usize;
     while trainer.step < end {
-        let report = match trainer.step_among(ranks, None) {
+        let step_report = match trainer.step_among(ranks, None) {
             Ok(r) => r,
             Err(e) => {
-                bar.abandon();
+                report(Progress::Ended { finished: false });
                 let _ =
                     append_line(&log_path, &json!({"kind": "error", "step": trainer.step, "message": e.to_string()}));
                 let kept = summary.checkpoint.as_ref().map_or("none yet".to_string(), |p| p.display().to_string());
@@ -229,26 +211,25 @@ pub fn train_among(
         };
         interval_steps += 1;
         let done = trainer.step;
-        bar.set_position(done as u64);
+        let mut logged = None;
         if done % t.log_every == 0 || done == end {
             let rate = interval_steps as f64 / interval_start.elapsed().as_secs_f64().max(1e-9);
-            let mut line = json!({"kind": "train", "step": done, "loss": report.loss, "epe": report.epe,
-                                  "bad3": report.bad3, "lr": report.lr, "steps_per_s": rate, "grad_norm": report.grad_norm});
+            let r = &step_report;
+            let mut line = json!({"kind": "train", "step": done, "loss": r.loss, "epe": r.epe,
+                                  "bad3": r.bad3, "lr": r.lr, "steps_per_s": rate, "grad_norm": r.grad_norm});
             if ranks.size() > 1 {
                 line["world_size"] = json!(ranks.size());
                 line["all_reduce_s"] = json!(trainer.last_step_seconds().all_reduce);
             }
             append_line(&log_path, &line)?;
-            bar.set_message(format!(
-                "loss {:.3} epe {:.3} bad3 {:.1}% lr {:.2e} {:.2} steps/s",
-                report.loss, report.epe, report.bad3, report.lr, rate
-            ));
-            curves.train_loss.push((done as f64, report.loss));
-            curves.train_epe.push((done as f64, report.epe));
-            summary.last = Some(report);
+            curves.train_loss.push((done as f64, r.loss));
+            curves.train_epe.push((done as f64, r.epe));
+            summary.last = Some(step_report);
+            logged = Some((step_report, rate));
             interval_start = Instant::now();
             interval_steps = 0;
         }
+        report(Progress::Step { done, logged });
         let validate_now =
             !validation.is_empty() && ((t.validate_every > 0 && done % t.validate_every == 0) || done == t.steps);
         if validate_now {
@@ -260,32 +241,31 @@ pub fn train_among(
             )?;
             let mut line =
                 json!({"kind": "validation", "step": done, "epe": m.epe, "bad3": m.bad_3, "metrics": metrics_json(&m)});
-            let weights = if trainer.ema.is_some() {
+            if trainer.ema.is_some() {
                 line["weights"] = json!("ema");
-                " (EMA weights)"
-            } else {
-                ""
-            };
+            }
             append_line(&log_path, &line)?;
-            bar.println(format!("validation{weights} at step {done}: EPE {:.3} px, bad-3 {:.2} %", m.epe, m.bad_3));
+            report(Progress::Validated { done, metrics: m, ema: trainer.ema.is_some() });
             curves.valid_epe.push((done as f64, m.epe));
             write_plot(&curves, &plot_path)?;
             summary.validation = Some(m);
         }
         let stop = stop_requested(options, ranks) && done < end;
         if (t.checkpoint_every > 0 && done % t.checkpoint_every == 0) || done == end || stop {
-            summary.checkpoint = Some(save_checkpoint(&trainer, &ckpt_dir, t.keep_checkpoints)?);
+            let path = save_checkpoint(&trainer, &ckpt_dir, t.keep_checkpoints)?;
+            report(Progress::Checkpoint { done, path: path.clone() });
+            summary.checkpoint = Some(path);
         }
         if stop {
-            bar.abandon();
+            report(Progress::Ended { finished: false });
             summary.steps = trainer.step;
             summary.stopped = true;
             return Ok(summary);
         }
     }
-    bar.finish();
     summary.steps = trainer.step;
     summary.finished = trainer.step >= t.steps;
+    report(Progress::Ended { finished: summary.finished });
     if summary.finished {
         if validation.is_empty() {
             write_plot(&curves, &plot_path)?;
@@ -299,7 +279,7 @@ pub fn train_among(
             &out.join("model.safetensors"),
             &metadata,
         )?;
-        let last = summary.last.map(|r| json!({"loss": r.loss, "epe": r.epe, "bad3": r.bad3}));
+        let last = summary.last.as_ref().map(|r| json!({"loss": r.loss, "epe": r.epe, "bad3": r.bad3}));
         let mut summary_json = json!({
             "name": trainer.parts.name, "steps": trainer.step, "last_train": last,
             "validation": summary.validation.as_ref().map(metrics_json),
@@ -310,6 +290,32 @@ pub fn train_among(
         crate::checkpoint::write_atomic(&out.join("summary.json"), format!("{summary_json:#}\n").as_bytes())?;
     }
     Ok(summary)
+}
+
+/// The summary of the finished run in `out`, which a resume leaves as it is: the same run (its
+/// `config.toml` trains what `parts` trains, else the error says which keys differ), its steps
+/// and what its log records.
+fn finished_run(out: &Path, parts: &TrainParts) -> Result<RunSummary> {
+    let differences = folder_differences(out, &parts.resolved_toml)?;
+    if !differences.is_empty() {
+        return Err(another_run(out, &differences));
+    }
+    let log = read_log(&out.join("log.jsonl"), usize::MAX)?;
+    let summary_path = out.join("summary.json");
+    let text = std::fs::read_to_string(&summary_path).map_err(|e| Error::io(&summary_path, e))?;
+    let recorded: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| Error::format(&summary_path, format!("not JSON: {e}")))?;
+    let steps = recorded["steps"].as_u64().map_or(parts.train.steps, |s| s as usize);
+    let checkpoint = list_checkpoints(&checkpoint_dir(out))?.pop().map(|(_, path)| path);
+    Ok(RunSummary {
+        steps,
+        last: log.last,
+        validation: log.validation,
+        checkpoint,
+        finished: true,
+        stopped: false,
+        untouched: true,
+    })
 }
 
 /// Makes every rank hold rank 0's weights before the first step. A fresh run's rank that
@@ -356,7 +362,15 @@ fn follow(mut trainer: Trainer, ranks: &dyn Collective, options: &RunOptions) ->
         stopped = stop_requested(options, ranks) && trainer.step < end;
     }
     let finished = trainer.step >= t.steps;
-    Ok(RunSummary { steps: trainer.step, last, validation: None, checkpoint: None, finished, stopped })
+    Ok(RunSummary {
+        steps: trainer.step,
+        last,
+        validation: None,
+        checkpoint: None,
+        finished,
+        stopped,
+        untouched: false,
+    })
 }
 
 /// Whether any rank was asked to stop ([`RunOptions::stop`]); every rank calls it after every

@@ -63,6 +63,30 @@ pub fn training_differences(run: &str, here: &str) -> Result<Vec<String>> {
         .collect())
 }
 
+/// The training keys that differ between the run in folder `out` (its `config.toml`) and the
+/// configuration `here` ([`training_differences`]); none when the folder holds no run yet.
+///
+/// # Errors
+/// The folder's `config.toml` cannot be read or is not TOML.
+pub fn folder_differences(out: &std::path::Path, here: &str) -> Result<Vec<String>> {
+    let path = out.join("config.toml");
+    if !path.is_file() {
+        return Ok(Vec::new());
+    }
+    let stored = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+    training_differences(&stored, here).map_err(|e| e.context(path.display().to_string()))
+}
+
+/// Checks that folder `out` holds no run or the run `here` configures: else the error of
+/// [`another_run`], which changes nothing.
+///
+/// # Errors
+/// The folder holds another run, or its `config.toml` cannot be read.
+pub fn check_folder(out: &std::path::Path, here: &str) -> Result<()> {
+    let differences = folder_differences(out, here)?;
+    if differences.is_empty() { Ok(()) } else { Err(another_run(out, &differences)) }
+}
+
 /// The error for a folder whose run was trained with another configuration: the first
 /// differing key is the error's key, every difference is listed.
 pub fn another_run(folder: &std::path::Path, differences: &[String]) -> Error {

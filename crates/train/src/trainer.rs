@@ -45,14 +45,24 @@ pub struct TrainParts {
 impl TrainParts {
     /// These parts with the official checkpoints they name (`train.init =
     /// "raftstereo-sceneflow"`, the prior's `weights = "depth-anything-v2-base"`) resolved to
-    /// files, fetched on first use ([`dgstereo_weights`]); `resolved_toml` keeps the names.
-    pub fn with_named_weights(self) -> Result<Self> {
+    /// files by `fetcher`, fetched on first use ([`dgstereo_weights`]); `resolved_toml` keeps the
+    /// names. The front end does this before it trains; the trainer takes files.
+    pub fn with_named_weights(self, fetcher: &dgstereo_weights::Fetcher) -> Result<Self> {
         let init = match self.train.init {
-            Some(init) => Some(dgstereo_weights::resolve_stereo(&init, "train.init")?),
+            Some(init) => Some(fetcher.resolve_stereo(&init, "train.init")?),
             None => None,
         };
-        let prior = dgstereo_weights::resolve_prior(self.prior, "prior.weights")?;
+        let prior = fetcher.resolve_prior(self.prior, "prior.weights")?;
         Ok(Self { prior, train: TrainingConfig { init, ..self.train }, ..self })
+    }
+
+    /// Checks that no official checkpoint's name is left unresolved
+    /// ([`TrainParts::with_named_weights`]).
+    pub fn check_named_weights_resolved(&self) -> Result<()> {
+        if let Some(init) = &self.train.init {
+            dgstereo_weights::check_resolved(init, "train.init")?;
+        }
+        dgstereo_weights::check_resolved_prior(&self.prior, "prior.weights")
     }
 
     /// Checks every part; the message names the key.
@@ -222,7 +232,7 @@ impl Trainer {
     /// A fresh run: weights initialised from `train.seed` on `device`.
     pub fn new(parts: TrainParts, device: &Device) -> Result<Self> {
         parts.validate()?;
-        let parts = parts.with_named_weights()?;
+        parts.check_named_weights_resolved()?;
         let model = init_model(&parts.model, device, Some(parts.train.seed))?;
         let mut notices = Vec::new();
         let model = match &parts.train.init {
@@ -257,7 +267,7 @@ impl Trainer {
         step: usize,
     ) -> Result<Self> {
         parts.validate()?;
-        let parts = parts.with_named_weights()?;
+        parts.check_named_weights_resolved()?;
         let autodiff = device.clone().autodiff();
         let model = model.fork(&autodiff).train();
         let schedule =
@@ -303,7 +313,7 @@ impl Trainer {
         let step = self.step;
         let started = Instant::now();
         let predictions = self.predictions(batch)?;
-        let loss = self.parts.loss.loss(&predictions, &batch.target);
+        let loss = self.parts.loss.loss(&predictions, &batch.target)?;
         let loss_value = f64::from(dgstereo_core::tensor::to_vec(loss.clone().detach())[0]);
         if !loss_value.is_finite() {
             return Err(Error::Other(format!(

@@ -54,7 +54,7 @@ fn ema_parts(steps: usize, decay: f64) -> TrainParts {
 }
 
 fn opts(out: &Path, resume: bool, stop_after: Option<usize>) -> RunOptions {
-    RunOptions { out: out.to_path_buf(), resume, stop_after, progress: false, notice: |_| {}, stop: None }
+    RunOptions { out: out.to_path_buf(), resume, stop_after, progress: None, notice: |_| {}, stop: None }
 }
 
 fn newest_checkpoint(out: &Path) -> std::path::PathBuf {

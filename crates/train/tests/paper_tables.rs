@@ -1,10 +1,34 @@
 //! The paper's ablation tables: the published figures are there, in the paper's order (checked
-//! against the shared transcription when it is present), and fake run results land in the right
-//! cells of the Markdown and CSV layouts, beside the paper's figures and their differences.
+//! against the shared transcription when it is present), fake run results land in the right
+//! cells of the Markdown and CSV layouts, beside the paper's figures and their differences, and
+//! a column takes the benchmark that scores its data set, whatever the benchmark's name.
 
-use dgstereo_eval::Metrics;
+use dgstereo_data::datasets::{DrivingStereoWeather, MiddleburySplit};
+use dgstereo_eval::{BenchmarkConfig, DatasetKind, Metrics};
+use dgstereo_train::paper_match::{BenchmarkMatch, match_benchmarks};
 use dgstereo_train::paper_report::{RunScores, compare_with_paper, paper_tables_markdown, write_paper_tables};
-use dgstereo_train::paper_tables::{DRIVINGSTEREO_COLUMNS, GENERALISATION_COLUMNS, PAPER_TABLES};
+use dgstereo_train::paper_tables::{DRIVINGSTEREO_COLUMNS, GENERALISATION_COLUMNS, PAPER_TABLES, PaperBenchmark};
+
+/// The benchmarks of `experiments/paper.toml`: its names, data sets, splits and weathers.
+fn paper_benchmarks() -> Vec<BenchmarkConfig> {
+    let named =
+        |name: &str, dataset| BenchmarkConfig { name: Some(name.into()), ..BenchmarkConfig::new(dataset, "/data") };
+    let mut benchmarks =
+        vec![BenchmarkConfig { split: Some(MiddleburySplit::H), ..named("middlebury-h", DatasetKind::Middlebury) }];
+    for weather in DrivingStereoWeather::ALL {
+        benchmarks.push(BenchmarkConfig {
+            weather: Some(weather),
+            ..named(&format!("drivingstereo-{weather}"), DatasetKind::Drivingstereo)
+        });
+    }
+    benchmarks.push(named("kitti2015", DatasetKind::Kitti2015));
+    benchmarks.push(named("eth3d", DatasetKind::Eth3d));
+    benchmarks
+}
+
+fn paper_matches() -> Vec<BenchmarkMatch> {
+    match_benchmarks(&paper_benchmarks())
+}
 
 /// Metrics with the given EPE and every bad-T rate at `rate` (so D1, D2 and D3 read `rate`).
 fn metrics(epe: f64, rate: f64) -> Metrics {
@@ -31,18 +55,11 @@ fn the_published_tables_are_there_in_the_papers_order() {
         }
     }
     // The columns: Middlebury-H, the four weathers, KITTI 2015, ETH3D; EPE then D2/D3/D3/D1.
-    let benchmarks: Vec<&str> = GENERALISATION_COLUMNS.iter().step_by(2).map(|c| c.benchmark).collect();
+    let benchmarks: Vec<PaperBenchmark> = GENERALISATION_COLUMNS.iter().step_by(2).map(|c| c.benchmark).collect();
+    let weathers = DrivingStereoWeather::ALL.map(PaperBenchmark::DrivingStereo);
     assert_eq!(
         benchmarks,
-        [
-            "middlebury-h",
-            "drivingstereo-sunny",
-            "drivingstereo-cloudy",
-            "drivingstereo-foggy",
-            "drivingstereo-rainy",
-            "kitti2015",
-            "eth3d"
-        ]
+        [&[PaperBenchmark::MiddleburyH][..], &weathers, &[PaperBenchmark::Kitti2015, PaperBenchmark::Eth3d]].concat()
     );
     let rates: Vec<&str> = GENERALISATION_COLUMNS.iter().skip(1).step_by(2).map(|c| c.metric).collect();
     assert_eq!(rates, ["bad-2", "bad-3", "bad-3", "bad-3", "bad-3", "bad-3", "bad-1"]);
@@ -105,7 +122,7 @@ fn fake_runs_fill_the_papers_layout() {
             spread: Vec::new(),
         },
     ];
-    let tables = compare_with_paper(&runs);
+    let tables = compare_with_paper(&runs, &paper_matches());
     assert_eq!(tables.len(), 4);
     let table2 = &tables[0];
     assert_eq!(table2.found, [false, false, false, true]);
@@ -173,10 +190,12 @@ fn the_tables_are_written_as_markdown_and_csv() {
         scores: vec![("eth3d".into(), metrics(0.25, 2.0))],
         spread: vec![("eth3d".into(), metrics(0.05, 0.5))],
     }];
-    let tables = compare_with_paper(&runs);
-    write_paper_tables(&tables, dir.path(), true).unwrap();
+    let matches = paper_matches();
+    let tables = compare_with_paper(&runs, &matches);
+    write_paper_tables(&tables, &matches, dir.path(), true).unwrap();
     let md = std::fs::read_to_string(dir.path().join("paper-tables.md")).unwrap();
-    assert_eq!(md, paper_tables_markdown(&tables, true));
+    assert_eq!(md, paper_tables_markdown(&tables, &matches, true));
+    assert!(md.contains("- ETH3D: benchmark 'eth3d' (eth3d at /data, 32 iterations)\n"), "{md}");
     let titles: Vec<&str> = md.lines().filter(|l| l.starts_with("### Table")).collect();
     assert_eq!(
         titles,
@@ -201,4 +220,65 @@ fn the_tables_are_written_as_markdown_and_csv() {
     let std = table3.lines().find(|l| l.starts_with("Depth+DCN+both,+dgia,ours std")).unwrap();
     assert!(std.ends_with(",0.05,0.5"), "{std}");
     assert!(md.contains("0.25 ± 0.05 | 2.00 ± 0.50 |"), "{md}");
+}
+
+#[test]
+fn columns_take_the_benchmark_of_their_data_set_whatever_its_name() {
+    // A folder named like a DrivingStereo weather, DrivingStereo's foggy weather under another
+    // name, a Middlebury benchmark without the half-resolution split, and KITTI 2015 scored
+    // with fewer iterations on a few downscaled samples.
+    let folder = BenchmarkConfig {
+        name: Some("drivingstereo-sunny".into()),
+        ..BenchmarkConfig::new(DatasetKind::Folder, "/cones")
+    };
+    let foggy = BenchmarkConfig {
+        name: Some("fog".into()),
+        weather: Some(DrivingStereoWeather::Foggy),
+        ..BenchmarkConfig::new(DatasetKind::Drivingstereo, "/ds")
+    };
+    let middlebury =
+        BenchmarkConfig { name: Some("middlebury-h".into()), ..BenchmarkConfig::new(DatasetKind::Middlebury, "/mb") };
+    let kitti = BenchmarkConfig {
+        iters: 4,
+        limit: Some(10),
+        max_size: Some(320),
+        ..BenchmarkConfig::new(DatasetKind::Kitti2015, "/kitti")
+    };
+    let matches = match_benchmarks(&[folder, foggy, middlebury, kitti]);
+    let found: Vec<(&str, Option<&str>)> = matches.iter().map(|m| (m.heading, m.label())).collect();
+    assert_eq!(
+        found,
+        [
+            ("DS-Sunny", None),
+            ("DS-Cloudy", None),
+            ("DS-Foggy", Some("fog")),
+            ("DS-Rainy", None),
+            ("Midd-H", None),
+            ("KITTI15", Some("kitti2015")),
+            ("ETH3D", None)
+        ]
+    );
+    assert_eq!(
+        matches[0].describe(),
+        "DS-Sunny: no benchmark of the study (dataset = \"drivingstereo\", weather = \"sunny\")"
+    );
+    assert_eq!(matches[2].describe(), "DS-Foggy: benchmark 'fog' (drivingstereo at /ds, weather foggy, 32 iterations)");
+    assert_eq!(matches[4].describe(), "Midd-H: no benchmark of the study (dataset = \"middlebury\", split = \"H\")");
+    assert!(
+        matches[5].describe().ends_with(
+            "; not the paper's protocol: 4 iterations (the paper: 32), only the first 10 samples, pairs downscaled to at most 320 px"
+        ),
+        "{}",
+        matches[5].describe()
+    );
+
+    // Scores land by the match: the folder's are never DrivingStereo's, the fog's are.
+    let runs = [RunScores {
+        run: "paper".into(),
+        scores: vec![("drivingstereo-sunny".into(), metrics(9.0, 90.0)), ("fog".into(), metrics(1.7, 9.0))],
+        spread: Vec::new(),
+    }];
+    let table2 = &compare_with_paper(&runs, &matches)[0];
+    assert!(table2.ours[3][..2].iter().all(|v| v.is_nan()), "{:?}", table2.ours[3]);
+    assert_eq!(table2.ours[3][4..6], [1.7, 9.0]);
 }

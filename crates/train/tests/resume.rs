@@ -36,7 +36,7 @@ fn max_diff(a: &[(String, Vec<f32>)], b: &[(String, Vec<f32>)]) -> f32 {
 }
 
 fn opts(out: &Path, resume: bool, stop_after: Option<usize>) -> RunOptions {
-    RunOptions { out: out.to_path_buf(), resume, stop_after, progress: false, notice: |_| {}, stop: None }
+    RunOptions { out: out.to_path_buf(), resume, stop_after, progress: None, notice: |_| {}, stop: None }
 }
 
 #[test]

@@ -2,19 +2,22 @@
 //! (`~/.cache/dgstereo` on Linux). Hub files are kept in the Hugging Face cache layout
 //! (`models--owner--name/{blobs,snapshots,refs}`): in the Hugging Face cache itself
 //! (`$HF_HOME/hub`, else `~/.cache/huggingface/hub`) unless `DGSTEREO_CACHE` is set, and a file
-//! Python's `huggingface_hub` already downloaded there is used as it is.
+//! Python's `huggingface_hub` already downloaded there is used as it is. Beside the files, the
+//! cache records the SHA-256 of each one it fetched or checked, with its size and modification
+//! time (`sha256/NAME`), so a later load notices a file that changed.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
+use dgstereo_core::atomic_file::commit_file;
 use dgstereo_core::{Error, Result};
 
-use crate::catalog::{NamedWeights, Source};
+use crate::catalog::{NamedWeights, Source, is_sha256};
 
 /// The folders named weights are kept in and looked up in.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Cache {
-    /// Our own folder: `models.zip`'s checkpoints and the locks.
+    /// Our own folder: the files of every source but the hub, the records and the locks.
     root: PathBuf,
     /// The Hugging Face cache new hub files go to.
     hub: PathBuf,
@@ -64,15 +67,62 @@ impl Cache {
         self.root.join("raft-stereo")
     }
 
+    /// Where a file of `w` from any source but the hub is kept: `models.zip`'s in
+    /// `raft-stereo/`, Google Drive's in `google-drive/`, one downloaded by hand in a folder of
+    /// its name (`igev-stereo-sceneflow/sceneflow.pth`). `None` for hub files.
+    pub fn file_path(&self, w: &NamedWeights) -> Option<PathBuf> {
+        match w.source {
+            Source::ModelsZip { member } => Some(self.raft_stereo_dir().join(member)),
+            Source::GoogleDrive { file, .. } => Some(self.root.join("google-drive").join(file)),
+            Source::Page { file, .. } => Some(self.root.join(w.name).join(file)),
+            Source::Hub { .. } => None,
+        }
+    }
+
     /// Where `w` is, if it is in the cache.
     pub fn find(&self, w: &NamedWeights) -> Option<PathBuf> {
         match w.source {
-            Source::ModelsZip { member } => Some(self.raft_stereo_dir().join(member)).filter(|p| p.is_file()),
             Source::Hub { repo, file } => std::iter::once(&self.hub)
                 .chain(self.shared_hub.as_ref())
                 .find_map(|hub| hf_hub::Cache::new(hub.clone()).model(repo.to_string()).get(file))
                 .filter(|p| p.is_file()),
+            _ => self.file_path(w).filter(|p| p.is_file()),
         }
+    }
+
+    /// The file that records the SHA-256 of `w` as it was fetched.
+    pub fn record_path(&self, w: &NamedWeights) -> PathBuf {
+        self.root.join("sha256").join(w.name)
+    }
+
+    /// What is recorded for `w`, if anything.
+    pub fn recorded(&self, w: &NamedWeights) -> Result<Option<Record>> {
+        let path = self.record_path(w);
+        let text = match std::fs::read_to_string(&path) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(Error::io(&path, e)),
+        };
+        let mut lines = text.lines();
+        match lines.next().and_then(|l| l.split_whitespace().next()) {
+            Some(sha) if is_sha256(sha) => Ok(Some(Record {
+                sha256: sha.to_ascii_lowercase(),
+                stamp: lines.next().map(str::trim).filter(|l| !l.is_empty()).map(str::to_string),
+            })),
+            _ => Err(Error::format(&path, "not a SHA-256 record: delete it, and the file it names, and fetch again")),
+        }
+    }
+
+    /// Records `sha256` for `w`, whose file is `file`: `sha256sum`'s line, then the file's size
+    /// and modification time ([`stamp`]).
+    pub fn record(&self, w: &NamedWeights, sha256: &str, file: &Path) -> Result<()> {
+        let path = self.record_path(w);
+        let dir = self.root.join("sha256");
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        let tmp = dir.join(format!(".{}.tmp", w.name));
+        let stamp = stamp(file).unwrap_or_default();
+        std::fs::write(&tmp, format!("{sha256}  {}\n{stamp}\n", file.display())).map_err(|e| Error::io(&tmp, e))?;
+        commit_file(&tmp, &path)
     }
 
     /// Holds the lock of `key` until the guard is dropped, waiting for another process or
@@ -85,6 +135,23 @@ impl Cache {
         file.lock().map_err(|e| Error::io(&path, e))?;
         Ok(FetchLock { _file: file })
     }
+}
+
+/// What the cache recorded of a file it fetched or checked.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Record {
+    /// Its SHA-256.
+    pub sha256: String,
+    /// Its size and modification time when that SHA-256 was computed ([`stamp`]).
+    pub stamp: Option<String>,
+}
+
+/// The size and modification time of `path` (links followed), as a record keeps them: a file
+/// whose stamp is unchanged has not been written since.
+pub fn stamp(path: &Path) -> Option<String> {
+    let meta = std::fs::metadata(path).ok()?;
+    let modified = meta.modified().ok()?.duration_since(std::time::UNIX_EPOCH).ok()?;
+    Some(format!("{} bytes, modified {}.{:09}", meta.len(), modified.as_secs(), modified.subsec_nanos()))
 }
 
 /// An exclusive lock on one fetch, released when dropped (or when the process ends).

@@ -5,10 +5,12 @@
 >>> disp = model.predict(left, right, iters=32)  # HxW float32, positive disparity (px)
 >>> dgstereo.metrics(disp, gt)["epe"]
 
-Images are ``HxWx3`` (RGB), ``HxWx4`` (alpha dropped) or ``HxW`` (grey) arrays, ``uint8`` or
-float in 0..255 (a float image in 0..1 is refused unless ``scale=`` says how to read it), of any
-strides. Errors are :class:`dgstereo.Error`; bad arguments also are ``ValueError``
-(:class:`InputError`), files also ``OSError`` (:class:`FileError`).
+Images are ``HxWx3``, ``HxWx4`` (alpha dropped) or ``HxW`` (grey) arrays of any strides, RGB
+unless ``channels="bgr"`` (OpenCV's order) says otherwise: ``uint8`` or float in 0..255 (a float
+image in 0..1 is refused unless ``scale=`` says how to read it), ``uint16`` in 0..65535 (read as
+``dgstereo infer`` reads a 16-bit PNG: ``v * 255 / 65535``). Errors are :class:`dgstereo.Error`;
+bad arguments also are ``ValueError`` (:class:`InputError`), files also ``OSError``
+(:class:`FileError`).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import warnings
 from typing import Any, Optional, Tuple, Union
 
 import numpy as np
@@ -50,26 +53,36 @@ DEFAULT_ITERS = 32
 DEFAULT_LR_CHECK = 2.0
 
 _NATIVE = (np.dtype(np.uint8), np.dtype(np.float32), np.dtype(np.float64))
+#: What images are read in besides: 16-bit samples, scaled as the command line scales them.
+_NATIVE_IMAGE = _NATIVE + (np.dtype(np.uint16),)
+_CHANNELS = ("rgb", "bgr")
 _UNITS = {"": 1, "b": 1, "k": 10**3, "kb": 10**3, "kib": 2**10, "m": 10**6, "mb": 10**6,
           "mib": 2**20, "g": 10**9, "gb": 10**9, "gib": 2**30, "t": 10**12, "tb": 10**12, "tib": 2**40}
 
 
-def _array(x: Any, what: str) -> np.ndarray:
-    """``x`` as an array the native module reads: uint8, float32 or float64 in native byte
-    order (other numeric dtypes become float32); views and strides are kept."""
+def _array(x: Any, what: str, native: Tuple[np.dtype, ...] = _NATIVE) -> np.ndarray:
+    """``x`` as an array the native module reads: a dtype of ``native`` in native byte order
+    (swapped where it is not; other numeric dtypes become float32); views and strides are kept."""
     a = np.asarray(x)
-    if a.dtype in _NATIVE and a.dtype.isnative:
-        return a
+    if a.dtype.newbyteorder("=") in native:
+        return a if a.dtype.isnative else a.astype(a.dtype.newbyteorder("="))
     if a.dtype.kind in "uif":
         return a.astype(np.float32)
     raise InputError(f"`{what}`: expected a numeric array, got dtype {a.dtype}")
 
 
+def _channels(channels: str) -> str:
+    if not isinstance(channels, str) or channels.lower() not in _CHANNELS:
+        raise InputError(f'`channels` {channels!r}: expected "rgb" or "bgr" (OpenCV\'s order)')
+    return channels.lower()
+
+
 def _image(x: Any, what: str, scale: Optional[float]) -> np.ndarray:
     """An image for the native module: ``scale`` multiplies the values when given; without it, a
     float image whose values all lie in 0..1 is refused (it would be read as almost black in
-    0..255), naming the fixes."""
-    a = _array(x, what)
+    0..255), naming the fixes. ``uint16`` stays as it is (the native module scales it as the
+    command line scales a 16-bit file)."""
+    a = _array(x, what, _NATIVE_IMAGE)
     if scale is not None:
         return a.astype(np.float32) * np.float32(scale)
     finite = a[np.isfinite(a)] if a.dtype.kind == "f" else a
@@ -201,15 +214,18 @@ class Model:
         name: str = "pair",
         return_info: bool = False,
         scale: Optional[float] = None,
+        channels: str = "rgb",
     ):
         """The disparity of a rectified pair: ``HxW`` float32, in pixels, positive
         (``x_right = x_left - d``), at the left image's size. The same as ``dgstereo infer``
         with the same options.
 
         Args:
-            left, right: ``HxWx3``, ``HxWx4`` (alpha dropped) or ``HxW`` arrays, uint8 or float in
-                0..255, one size; a float image in 0..1 is refused unless ``scale`` says how to
-                read it.
+            left, right: ``HxWx3``, ``HxWx4`` (alpha dropped) or ``HxW`` arrays of one size:
+                ``uint8`` or float in 0..255 (a float image in 0..1 is refused unless ``scale``
+                says how to read it), or ``uint16`` in 0..65535 (``cv2.IMREAD_UNCHANGED`` of a
+                16-bit file), read as ``dgstereo infer`` reads a 16-bit PNG (``v * 255 / 65535``).
+                Other integer dtypes are taken as 0..255.
             iters: update iterations (default :attr:`default_iters`).
             prior: ``(left, right)`` ``HxW`` relative inverse depth maps (larger = nearer) of a
                 model with a depth prior, computed elsewhere (any size; resized bilinearly).
@@ -219,10 +235,16 @@ class Model:
             corr: ``"auto"``, ``"reg"`` (materialised) or ``"alt"`` (on the fly).
             lr_check: left-right check (``True``: 2 px, or a threshold in pixels).
             name: the pair's name, by which a ``file:`` prior finds its maps.
-            return_info: also return a dict (``network_size``, ``corr``, ``rejected`` mask of
-                the pixels the check replaced, ``prior_seconds``).
-            scale: multiply the images' values by this first (``255.0`` for images in 0..1;
-                ``1.0`` to pass them as they are).
+            return_info: also return a dict: ``network_size`` (``(height, width)`` the network
+                saw, as NumPy orders shapes), ``corr``, ``rejected`` (mask of the pixels the
+                check replaced), ``prior_seconds``.
+            scale: multiply the images' values by this first, whatever their dtype (``255.0``
+                for images in 0..1; ``1.0`` to pass them as they are).
+            channels: the order of the images' colour channels: ``"rgb"`` (the default, what
+                :func:`read_image`, PIL and imageio give) or ``"bgr"`` (OpenCV's
+                ``cv2.imread``).
+
+        Pairs with a side under 32 pixels (as given, or after ``max_size``) are refused.
         """
         if iters is None:
             iters = self.default_iters
@@ -238,6 +260,7 @@ class Model:
             threshold = float(lr_check)
         if max_size is not None and (isinstance(max_size, bool) or int(max_size) < 0):
             raise InputError(f"`max_size` {max_size!r}: must be a number of pixels")
+        channels = _channels(channels)
         if prior is not None:
             if not (isinstance(prior, (tuple, list)) and len(prior) == 2):
                 raise InputError("`prior`: expected a pair (left, right) of HxW arrays")
@@ -253,6 +276,7 @@ class Model:
             threshold,
             prior,
             name,
+            channels,
         )
         return (disp, info) if return_info else disp
 
@@ -273,13 +297,45 @@ def depth(
     *,
     doffs: float = 0.0,
     calib: Optional[Union[str, os.PathLike]] = None,
+    crop: Optional[Tuple[float, float]] = None,
+    scale: Union[float, Tuple[float, float], None] = None,
 ) -> np.ndarray:
     """Depth in metres, ``fx * baseline / (d + doffs)`` (``fx`` in pixels, ``baseline`` in
-    metres), ``inf`` where the disparity is unknown; or from a calibration file ``calib``
-    (Middlebury ``calib.txt``, JSON or ``K.txt``, rescaled to the map's size)."""
-    return _dgstereo.depth(
-        _array(disparity, "disparity"), fx, baseline, float(doffs), None if calib is None else os.fspath(calib)
+    metres), or from a calibration file ``calib`` (Middlebury ``calib.txt``, JSON or ``K.txt``).
+
+    ``inf`` where there is no point in front of the cameras: the disparity is unknown (NaN,
+    ``inf``) or ``d + doffs <= 0`` (a negative disparity); ``inf`` is also the invalid value of a
+    PFM map.
+
+    A calibration applies to the image size it was made for. A map of another size at the same
+    aspect ratio (a resized pair) gets the calibration scaled to it, with a ``UserWarning``
+    saying so; any other size is an :class:`InputError` naming both sizes, unless ``crop`` and
+    ``scale`` say how the pair was made from the calibrated images:
+
+    Args:
+        crop: ``(x, y)``, the top-left corner of the crop in pixels of the calibrated image: the
+            principal point moves by ``(-x, -y)``.
+        scale: the (cropped) images were then resized by this factor, or by ``(sx, sy)``:
+            ``fx``, ``cx`` and ``doffs`` scale by ``sx``, ``fy`` and ``cy`` by ``sy``.
+    """
+    if crop is not None:
+        if not (isinstance(crop, (tuple, list)) and len(crop) == 2):
+            raise InputError(f"`crop` {crop!r}: expected the corner (x, y) in pixels of the calibrated image")
+        crop = (float(crop[0]), float(crop[1]))
+    if scale is not None:
+        if isinstance(scale, (tuple, list)):
+            if len(scale) != 2:
+                raise InputError(f"`scale` {scale!r}: expected a factor or (sx, sy)")
+            scale = (float(scale[0]), float(scale[1]))
+        else:
+            scale = (float(scale), float(scale))
+    result, notice = _dgstereo.depth(
+        _array(disparity, "disparity"), fx, baseline, float(doffs), None if calib is None else os.fspath(calib),
+        crop, scale,
     )
+    if notice is not None:
+        warnings.warn(notice, UserWarning, stacklevel=2)
+    return result
 
 
 def read_pfm(path: Union[str, os.PathLike]) -> np.ndarray:

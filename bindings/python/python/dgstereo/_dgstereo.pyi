@@ -48,7 +48,12 @@ class Engine:
         lr_check: Optional[float] = None,
         prior: Optional[Tuple[npt.NDArray, npt.NDArray]] = None,
         name: str = "pair",
-    ) -> Tuple[npt.NDArray[np.float32], dict]: ...
+        channels: str = "rgb",
+    ) -> Tuple[npt.NDArray[np.float32], dict]:
+        """``left``, ``right``: uint8 or float in 0..255, or uint16 in 0..65535 (scaled by
+        255/65535 as a 16-bit PNG is read), channels in ``channels`` order (``"rgb"`` or
+        ``"bgr"``); the dict's ``network_size`` is ``(height, width)``."""
+        ...
     def export_onnx(
         self, path: str, height: int, width: int, iters: int
     ) -> Tuple[int, int, list[Tuple[str, list[int]]], list[Tuple[str, list[int]]]]: ...
@@ -62,7 +67,12 @@ def depth(
     baseline: Optional[float] = None,
     doffs: float = 0.0,
     calib: Optional[_Path] = None,
-) -> npt.NDArray[np.float32]: ...
+    crop: Optional[Tuple[float, float]] = None,
+    scale: Optional[Tuple[float, float]] = None,
+) -> Tuple[npt.NDArray[np.float32], Optional[str]]:
+    """The depth map (``inf`` where ``d + doffs <= 0`` or ``d`` is unknown) and the notice of a
+    calibration rescaled to the map's size (same aspect ratio), else ``None``."""
+    ...
 def read_pfm(path: _Path) -> npt.NDArray[np.float32]: ...
 def write_pfm(path: _Path, array: npt.NDArray[np.float32]) -> None: ...
 def read_image(path: _Path) -> npt.NDArray[np.float32]: ...

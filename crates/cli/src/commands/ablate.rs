@@ -8,11 +8,15 @@
 //! headline rate); the table's columns are the union over the runs, NaN where a run lacks one.
 //! Runs that differ only in `train.seed` form one row (mean ± std over the seeds,
 //! [`dgstereo_train::ablation_table`]). Before any run trains, every run's data, initial weights
-//! and benchmark folders are checked ([`dgstereo_train::preflight`]), so a wrong benchmark path
-//! costs seconds, not a trained row. Where a row is one of the paper's, the rows' means also
-//! fill the paper's four ablation tables (`paper-tables.md`, `paper-table{2,3,4,5}.csv`): rows are
-//! matched by name and columns to benchmarks by name, and `--paper` sets the published figures
-//! and our distance from them beside ours.
+//! and benchmark folders are checked ([`dgstereo_train::preflight`], every benchmark sample's
+//! headers included), and so are the run folders: two runs of one name, or a folder holding
+//! checkpoints or a finished run of another configuration, are refused before anything is written
+//! (`study.json` included), so a wrong benchmark path costs seconds, not a trained row. Where a row is one of
+//! the paper's, the rows' means also fill the paper's four ablation tables (`paper-tables.md`,
+//! `paper-table{2,3,4,5}.csv`): rows are matched by run name and columns to benchmarks by data set
+//! (kind and split or weather, [`dgstereo_train::paper_match`]), and `--paper` sets the published
+//! figures and our distance from them beside ours. A study stopped by a signal continues where it
+//! stopped when the same command runs again.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -26,7 +30,7 @@ use dgstereo_train::run::{checkpoint_dir, is_finished};
 
 use super::ablate_collect::{Study, collect, collect_study};
 use super::ablate_scores::{cached_scores, save_scores, score};
-use super::train::{folder_name, parts_of, train_one};
+use super::train::{Session, check_distinct_folders, folder_name, parts_of, train_one};
 use crate::stop_signals::StopSignals;
 
 /// Where the runs of a study train.
@@ -68,7 +72,8 @@ pub struct AblateArgs {
     /// then a job collecting the tables).
     #[arg(long, value_enum, default_value = "local")]
     pub launcher: Launcher,
-    /// With `--launcher slurm`: return when the tables are written, with the study's status.
+    /// With `--launcher slurm`: return when the tables are written, with the study's status
+    /// (refused with the local launcher).
     #[arg(long)]
     pub wait: bool,
     /// With `--launcher slurm`: options for `sbatch` (`"--partition=gpu --gres=gpu:1
@@ -88,13 +93,31 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
     if a.collect {
         return collect_study(&a.out);
     }
+    if a.launcher != Launcher::Slurm {
+        for (given, flag) in [(a.wait, "--wait"), (a.sbatch.is_some(), "--sbatch")] {
+            if given {
+                anyhow::bail!(
+                    "{flag} applies to a study submitted to Slurm (--launcher slurm); a local study runs here and \
+                     returns when its tables are written: nothing was run"
+                );
+            }
+        }
+    }
     let stop = StopSignals::install()?;
     let runs = dgstereo_experiment::load_all(&a.files)?;
-    // Everything every run reads, checked before the first one trains (or is submitted).
+    check_distinct_folders(&runs)?;
+    // Everything every run reads, and every run's folder, checked before the first one trains
+    // (or is submitted) and before anything is written.
     for run in &runs {
-        let parts = parts_of(run.config.clone(), a.steps);
-        preflight(&parts, &run.config.benchmarks)
-            .with_context(|| format!("{}: run '{}'", run.source.display(), run.name))?;
+        let context = || format!("{}: run '{}'", run.source.display(), run.name);
+        let parts = crate::fetching::parts(parts_of(run.config.clone(), a.steps)).with_context(context)?;
+        preflight(&parts, &run.config.benchmarks).with_context(context)?;
+        // A folder holding training (checkpoints, a finished run) of another configuration is
+        // refused; one whose run never reached a checkpoint is started again.
+        let folder = a.out.join(folder_name(&run.name));
+        if is_finished(&folder) || has_checkpoints(&folder)? {
+            dgstereo_train::run_identity::check_folder(&folder, &parts.resolved_toml).with_context(context)?;
+        }
     }
     if let Some(task) = a.task {
         let run = runs.get(task).with_context(|| format!("--task {task}: the study has {} runs", runs.len()))?;
@@ -120,6 +143,10 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
         return super::ablate_slurm::submit(&runs, &submission);
     }
     for run in &runs {
+        if stop.requested() {
+            eprintln!("{}: stopped before run '{}'; run the same command again to continue", stop.name(), run.name);
+            return Ok(stop.exit_code());
+        }
         let status = train_and_score(run, &a, &stop)?;
         if status != ExitCode::SUCCESS {
             return Ok(status);
@@ -132,22 +159,25 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
 /// stopped by a signal returns the signal's status.
 fn train_and_score(run: &ResolvedRun, a: &AblateArgs, stop: &StopSignals) -> anyhow::Result<ExitCode> {
     let device = a.device.device()?;
+    let session = Session {
+        device: &device,
+        stop,
+        progress: !a.quiet,
+        continue_with: "run the same command again to continue (ablate resumes its unfinished runs)",
+    };
     let name = &run.name;
     let out = a.out.join(folder_name(name));
     let benchmarks = &run.config.benchmarks;
-    let parts = parts_of(run.config.clone(), a.steps);
+    let parts =
+        crate::fetching::parts(parts_of(run.config.clone(), a.steps)).with_context(|| format!("run '{name}'"))?;
     if is_finished(&out) {
-        let stored = std::fs::read_to_string(out.join("config.toml")).unwrap_or_default();
-        let differences = dgstereo_train::run_identity::training_differences(&stored, &parts.resolved_toml)?;
-        if !differences.is_empty() {
-            return Err(dgstereo_train::run_identity::another_run(&out, &differences))
-                .with_context(|| format!("run '{name}'"));
-        }
+        dgstereo_train::run_identity::check_folder(&out, &parts.resolved_toml)
+            .with_context(|| format!("run '{name}'"))?;
         println!("{name}: finished run found in {}, reusing it", out.display());
     } else if a.rescore {
         println!("{name}: not finished in {}, left out (--rescore trains nothing)", out.display());
         return Ok(ExitCode::SUCCESS);
-    } else if train_one(parts.clone(), &out, has_checkpoints(&out)?, !a.quiet, &device, stop)?.stopped {
+    } else if train_one(parts.clone(), &out, has_checkpoints(&out)?, &session)?.stopped {
         return Ok(stop.exit_code());
     }
     if cached_scores(&out, &parts, benchmarks).is_some() && !a.rescore {

@@ -25,10 +25,13 @@ use dgstereo_core::device::Precision;
 use dgstereo_core::timing::process_cpu_seconds;
 use dgstereo_core::{DepthPrior, DeviceChoice, InputPadder};
 use dgstereo_inference::cost_volume::{CorrChoice, DEFAULT_MEMORY_BUDGET, corr_for, corr_name};
+use dgstereo_inference::{Engine, EngineConfig};
 use dgstereo_kernels::{Op, Path, Settings, count_work, path};
 use dgstereo_model::profile::profile_forward;
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig, PriorInput, PriorProvider};
+
+use crate::engine::with_flags;
 
 /// Options of `dgstereo bench`.
 #[derive(Args)]
@@ -51,10 +54,16 @@ pub struct BenchArgs {
     /// Cost volume (`auto`: within the 4 GiB that `infer --corr auto` allows by default).
     #[arg(long, value_enum, default_value_t = CorrChoice::Reg)]
     pub corr: CorrChoice,
-    /// Model configuration: a TOML file of `ModelConfig`, or an experiment file (its first run's
-    /// `[model]`, e.g. `experiments/zoo/defom-vits.toml`); default RAFT-Stereo's.
+    /// Model configuration: a TOML file of `ModelConfig`, or an experiment file or model card
+    /// (`assets/weights/*.toml`) whose `[model]` is used (default: RAFT-Stereo's, or the one
+    /// `--weights` carry).
     #[arg(long)]
     pub config: Option<std::path::PathBuf>,
+    /// Time these weights instead of freshly initialised ones: a dgstereo `.safetensors`, an
+    /// official RAFT-Stereo `.pth` or a checkpoint's name, loaded as `infer --weights` loads it
+    /// (the architecture it carries or shows, unless `--config` gives one).
+    #[arg(long)]
+    pub weights: Option<std::path::PathBuf>,
     /// Also time each stage of one forward pass (with `--train`: each stage's forward and backward, run alone).
     #[arg(long)]
     pub stages: bool,
@@ -151,6 +160,40 @@ pub fn median(v: &mut [f64]) -> f64 {
     if v.len() % 2 == 1 { v[m] } else { 0.5 * (v[m - 1] + v[m]) }
 }
 
+/// `--config`: a `ModelConfig` TOML, or the `[model]` of an experiment file or model card.
+pub fn model_config(path: &std::path::Path) -> anyhow::Result<ModelConfig> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let table: toml::Table = toml::from_str(&text).with_context(|| format!("{}: not TOML", path.display()))?;
+    if table.contains_key("model") || table.contains_key("base") {
+        let (model, _) = dgstereo_inference::experiment_configs(path, None).map_err(with_flags)?;
+        return Ok(model);
+    }
+    toml::from_str::<ModelConfig>(&text).with_context(|| {
+        format!("{}: neither a model configuration nor an experiment file with a [model] table", path.display())
+    })
+}
+
+/// The model `bench` times: `--weights` loaded as `infer` loads them, else a fresh network of
+/// `--config` (the cost does not depend on the weights' values).
+fn bench_model(a: &BenchArgs, device: &burn::tensor::Device) -> anyhow::Result<(StereoModel, ModelConfig)> {
+    let config = a.config.as_deref().map(model_config).transpose()?;
+    let Some(weights) = &a.weights else {
+        let config = config.unwrap_or_default();
+        return Ok((StereoModel::new(config.init(device)?, config.clone(), device.clone()), config));
+    };
+    let engine = Engine::load_with_given_priors(&EngineConfig {
+        weights: Some(weights.clone()),
+        model: config,
+        device: a.device.parse()?,
+        precision: a.precision,
+        ..EngineConfig::default()
+    })
+    .map_err(with_flags)?;
+    eprintln!("weights {} ({})", engine.weights().display(), engine.configuration_summary());
+    let (network, config) = (engine.stereo_model().network.clone(), engine.model_config().clone());
+    Ok((StereoModel::new(network, config.clone(), engine.device().clone()), config))
+}
+
 pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let [h, w] = parse_size(&a.size)?;
     if a.iters == 0 {
@@ -164,13 +207,8 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     dgstereo_kernels::configure(settings)?;
     // The precision is set before the device's first tensor: burn fixes it there.
     let device = a.device.parse::<DeviceChoice>()?.device_with_precision(precision)?;
-    let config = match &a.config {
-        Some(p) => model_config(p)?,
-        None => ModelConfig::default(),
-    };
+    let (model, config) = bench_model(&a, &device)?;
     let implementation = corr_for(&config, a.corr, DEFAULT_MEMORY_BUDGET, w, h);
-    let network = config.init(&device)?;
-    let model = StereoModel::new(network, config.clone(), device.clone());
     let image = || Tensor::<4>::random([1, 3, h, w], Distribution::Uniform(0.0, 255.0), &device);
     let (left, right) = (image(), image());
     let prior = config.needs_prior().then(|| DepthPrior {
@@ -187,7 +225,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
             )
         }
         Some(weights) => Some(
-            dgstereo_weights::resolve_prior(
+            crate::fetching::prior(
                 PriorConfig::DepthAnythingV2 {
                     weights: weights.clone(),
                     encoder: None,
@@ -374,19 +412,4 @@ mod tests {
             assert!(process_cpu_seconds().unwrap() >= before);
         }
     }
-}
-
-/// The model configuration of `path`: an experiment file (it has a `[model]` table or a `name`;
-/// its first run's model, `base` files and sweeps resolved) or a bare `ModelConfig`.
-fn model_config(path: &std::path::Path) -> anyhow::Result<ModelConfig> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let table: toml::Table = toml::from_str(&text).with_context(|| format!("{}: not TOML", path.display()))?;
-    if table.contains_key("model") || table.contains_key("name") {
-        let run = dgstereo_experiment::load(path)?
-            .into_iter()
-            .next()
-            .ok_or_else(|| anyhow::anyhow!("{}: the file defines no run", path.display()))?;
-        return Ok(run.config.model);
-    }
-    toml::from_str::<ModelConfig>(&text).with_context(|| format!("{}: not a model configuration", path.display()))
 }

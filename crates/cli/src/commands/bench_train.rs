@@ -22,7 +22,7 @@ use dgstereo_train::batch::TensorBatch;
 use dgstereo_train::step_timing::{StageBackward, StepSeconds, random_batch};
 use dgstereo_train::{Collective, TrainParts, Trainer};
 
-use super::bench::{BenchArgs, machine_line, median, parse_size, peak_memory_bytes};
+use super::bench::{BenchArgs, machine_line, median, model_config, parse_size, peak_memory_bytes};
 use super::train::parts_of;
 
 /// Times `a.runs` training steps after `a.warmup` (`dgstereo bench --train`).
@@ -39,6 +39,9 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     if a.batch == 0 {
         bail!("--batch must be at least 1");
     }
+    if a.weights.is_some() {
+        bail!("--weights: a training step costs the same whatever the weights; `bench --train` times fresh ones");
+    }
     dgstereo_train::data_parallel::check_batch_divides(a.batch, world.size()).context("--batch")?;
     let config = match &a.experiment {
         Some(p) => {
@@ -51,13 +54,12 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     };
     let mut parts: TrainParts = parts_of(config, None);
     if let Some(p) = &a.config {
-        let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
-        parts.model = toml::from_str(&text).with_context(|| format!("{}: not a model configuration", p.display()))?;
+        parts.model = model_config(p)?;
     }
     parts.train.iters = a.iters;
     parts.train.batch_size = a.batch;
     parts.train.crop = [h, w];
-    let mut trainer = Trainer::new(parts, device)?;
+    let mut trainer = Trainer::new(crate::fetching::parts(parts)?, device)?;
     let batch = random_batch(a.batch / world.size(), [h, w], (w / 4) as f32, trainer.autodiff_device());
     let kernels = match path(trainer.autodiff_device(), Op::Conv) {
         Path::Host => "host convolution backward",

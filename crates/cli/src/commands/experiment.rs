@@ -2,8 +2,11 @@
 //!
 //! `check` resolves and validates each file (bases, sweeps, defaults), then builds every run's
 //! model, counts its trainable parameters and runs one forward pass on a small synthetic pair.
-//! It prints one line per run and exits with status 1 when any file or run fails; a failing file
-//! does not stop the others from being checked. `samples` writes the training pairs a run draws
+//! Unless `--config-only`, it also opens everything each run reads, the header of every benchmark
+//! sample included ([`dgstereo_train::preflight`]). Two runs of one name among the files (they
+//! would train into one folder of a study) fail too. It prints one line per run and exits with
+//! status 1 when any file or run fails; a failing file does not stop the others from being
+//! checked. `samples` writes the training pairs a run draws
 //! (after augmentation, exactly as the trainer sees them) as pictures, to look at the data before
 //! spending hours on it. `validate` scores weights on a run's held-out synthetic set, the numbers
 //! its training log would show, so candidates (and the starting point of a run) compare on the set
@@ -85,7 +88,8 @@ fn validate(file: &Path, weights: Option<&Path>) -> anyhow::Result<ExitCode> {
         Some(w) => w,
         None => anyhow::bail!("{}: no --weights given and the experiment has no train.init", file.display()),
     };
-    let parts = crate::commands::train::parts_of(run.config, None);
+    let parts = crate::fetching::parts(crate::commands::train::parts_of(run.config, None))?;
+    let weights = crate::fetching::stereo(&weights, "weights")?;
     let device = dgstereo_core::default_device();
     let model = dgstereo_train::ablation::FinishedRun::with_weights(&parts, &weights, &device)
         .with_context(|| format!("{}: loading {}", file.display(), weights.display()))?;
@@ -129,6 +133,7 @@ fn samples(file: &Path, out: &Path, count: usize) -> anyhow::Result<ExitCode> {
 fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool, config_only: bool) -> anyhow::Result<ExitCode> {
     let device = dgstereo_core::default_device();
     let mut failures = 0usize;
+    let mut all_runs = Vec::new();
     for file in files {
         let runs = match dgstereo_experiment::load(file) {
             Ok(runs) => runs,
@@ -143,7 +148,9 @@ fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool, config_o
             let on_disk = if config_only {
                 Ok(())
             } else {
-                dgstereo_train::preflight::preflight(&parts, &run.config.benchmarks).map(drop)
+                crate::fetching::parts(parts)
+                    .and_then(|parts| dgstereo_train::preflight::preflight(&parts, &run.config.benchmarks))
+                    .map(drop)
             };
             let checked = on_disk.and_then(|()| dgstereo_experiment::smoke_test(&run.config, size, iters, &device));
             match checked {
@@ -156,7 +163,12 @@ fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool, config_o
             if show {
                 println!("{}", run.config.to_toml());
             }
+            all_runs.push(run);
         }
+    }
+    if let Err(e) = super::train::check_distinct_folders(&all_runs) {
+        failures += 1;
+        println!("error: {e}");
     }
     if failures > 0 {
         eprintln!("{failures} failed");

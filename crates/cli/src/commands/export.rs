@@ -64,8 +64,9 @@ pub fn run(cmd: ExportCommand) -> anyhow::Result<ExitCode> {
         Some(p) => Some(experiment_configs(p, a.run.as_deref()).map_err(with_flags)?.0),
         None => None,
     };
-    let config =
-        EngineConfig { weights: a.weights.clone(), model, slow_fast_gru: a.slow_fast_gru, ..EngineConfig::default() };
+    let weights =
+        a.weights.as_deref().map(|w| crate::fetching::stereo(w, "weights")).transpose().map_err(with_flags)?;
+    let config = EngineConfig { weights, model, slow_fast_gru: a.slow_fast_gru, ..EngineConfig::default() };
     // The prior maps are inputs of the file: the model loads without its provider.
     let engine = Engine::load_with_given_priors(&config).map_err(with_flags)?;
     let iters = a.iters.or(engine.preset_iters()).unwrap_or(DEFAULT_ITERS);
@@ -87,7 +88,12 @@ pub fn run(cmd: ExportCommand) -> anyhow::Result<ExitCode> {
     };
     println!("wrote {} in {:.1} s", a.output.display(), start.elapsed().as_secs_f64());
     println!("opset {}, {} nodes, {:.1} MB", dgstereo_export::OPSET, exported.nodes, exported.bytes.len() as f64 / 1e6);
-    println!("inputs: {} (float32, RGB 0..255; prior maps: relative inverse depth)", shapes(&exported.inputs));
+    let inputs = if engine.model_config().needs_prior() {
+        "float32, RGB 0..255; prior maps: relative inverse depth"
+    } else {
+        "float32, RGB 0..255"
+    };
+    println!("inputs: {} ({inputs})", shapes(&exported.inputs));
     println!("outputs: {} (float32, positive disparity in pixels)", shapes(&exported.outputs));
     Ok(ExitCode::SUCCESS)
 }

@@ -14,12 +14,12 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::Args;
 use dgstereo_data::load_rgb;
-use dgstereo_inference::calibration::Calibration;
+use dgstereo_inference::calibration::{Adjustment, Calibration, Rescaled};
 use dgstereo_inference::pointcloud::PlyEncoding;
 use dgstereo_inference::{Engine, PredictOptions, check_same_size};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::engine::{ModelArgs, describe, error_line, load_engine, with_flags};
+use crate::engine::{ModelArgs, describe, error_line, flag_names, load_engine, with_flags};
 use crate::inputs::{PairList, PairPaths, from_folder, from_left_right, from_list};
 use crate::outputs::{OutputOptions, SaveKind, calibration_beside, write_outputs};
 
@@ -46,9 +46,19 @@ pub struct InferArgs {
     #[arg(long, value_enum, value_delimiter = ',', default_value = "pfm,color")]
     save: Vec<SaveKind>,
     /// Calibration for depth and ply: Middlebury calib.txt, JSON (fx, fy, cx, cy, baseline) or
-    /// K.txt (default: a calib.txt or K.txt beside each left image).
+    /// K.txt (default: a calib.txt or K.txt beside each left image). It applies to the image size
+    /// it was made for; a resize at the same aspect ratio is applied with a note, any other size
+    /// is an error unless --calib-crop / --calib-scale say how the images were made.
     #[arg(long)]
     calib: Option<PathBuf>,
+    /// The pairs are crops of the calibrated images whose top-left corner is at X,Y (pixels of
+    /// the calibrated image): the principal point moves by (-X, -Y).
+    #[arg(long, value_name = "X,Y", value_parser = parse_crop)]
+    calib_crop: Option<(f64, f64)>,
+    /// The pairs are the calibrated images (after --calib-crop) resized by S, or by SX
+    /// horizontally and SY vertically: fx, cx and doffs scale by SX, fy and cy by SY.
+    #[arg(long, value_name = "S|SX,SY", value_parser = parse_scale)]
+    calib_scale: Option<(f64, f64)>,
     /// Farthest point kept in point clouds, metres (default: the calibration's depth range, else
     /// the depth of a 1-pixel disparity).
     #[arg(long)]
@@ -58,6 +68,39 @@ pub struct InferArgs {
     ply_encoding: PlyEncoding,
     #[command(flatten)]
     model: ModelArgs,
+}
+
+/// Two numbers `A,B`.
+fn parse_pair(s: &str) -> Result<(f64, f64), String> {
+    let numbers: Vec<f64> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().map_err(|_| format!("'{v}' is not a number")))
+        .collect::<Result<_, _>>()?;
+    match numbers[..] {
+        [a, b] => Ok((a, b)),
+        _ => Err(format!("'{s}': expected two numbers A,B")),
+    }
+}
+
+/// `--calib-crop X,Y`: a corner of non-negative pixels.
+fn parse_crop(s: &str) -> Result<(f64, f64), String> {
+    let (x, y) = parse_pair(s)?;
+    if !(x.is_finite() && y.is_finite() && x >= 0.0 && y >= 0.0) {
+        return Err(format!("'{s}': the corner X,Y must be pixels >= 0"));
+    }
+    Ok((x, y))
+}
+
+/// `--calib-scale S` or `SX,SY`: positive factors.
+fn parse_scale(s: &str) -> Result<(f64, f64), String> {
+    let (sx, sy) = match s.trim().parse::<f64>() {
+        Ok(v) => (v, v),
+        Err(_) => parse_pair(s)?,
+    };
+    if !(sx.is_finite() && sy.is_finite() && sx > 0.0 && sy > 0.0) {
+        return Err(format!("'{s}': the factors must be positive numbers"));
+    }
+    Ok((sx, sy))
 }
 
 fn find_pairs(a: &InferArgs) -> anyhow::Result<PairList> {
@@ -99,6 +142,12 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
         bail!("--max-depth must be a positive number of metres");
     }
     let kinds = dedup(&a.save);
+    let adjustment = Adjustment { crop: a.calib_crop, scale: a.calib_scale };
+    if !adjustment.is_none() && !kinds.iter().any(|k| k.needs_calibration()) {
+        bail!(
+            "--calib-crop and --calib-scale adjust the calibration of depth and ply outputs: add --save depth or ply"
+        );
+    }
     if kinds.contains(&SaveKind::Rejected) && a.model.lr_check.is_none() {
         bail!("--save rejected writes the pixels the left-right check replaced: add --lr-check");
     }
@@ -123,6 +172,8 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
     let (engine, options) = load_engine(&a.model)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the output folder", a.out.display()))?;
     let opts = OutputOptions { dir: a.out.clone(), kinds, max_depth: a.max_depth, ply: a.ply_encoding };
+    let calibration = CalibrationChoice { global: global_calib.as_ref(), adjustment };
+    let mut notes: Vec<String> = Vec::new();
 
     let mut failures: Vec<Failure> =
         list.problems.iter().map(|p| Failure { what: p.path.clone(), message: p.message.clone() }).collect();
@@ -149,11 +200,18 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
     for pair in &list.pairs {
         bar.set_message(pair.name.clone());
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            process_pair(&engine, &options, pair, &opts, global_calib.as_ref())
+            process_pair(&engine, &options, pair, &opts, &calibration)
         }));
         match outcome {
-            Ok(Ok(line)) => {
+            Ok(Ok((line, note))) => {
                 done += 1;
+                // A rescaled calibration is said once for each size it was rescaled to.
+                if let Some(note) = note.map(|n| n.to_string())
+                    && !notes.contains(&note)
+                {
+                    bar.suspend(|| eprintln!("note: {note}"));
+                    notes.push(note);
+                }
                 bar.suspend(|| println!("{line}"));
             }
             Ok(Err(e)) => {
@@ -207,34 +265,59 @@ fn dedup(kinds: &[SaveKind]) -> Vec<SaveKind> {
     out
 }
 
-/// Reads, predicts and writes one pair; returns the line reporting it.
+/// The calibration of the run: `--calib` (else the file beside each left image) and how the
+/// pairs were made from the calibrated images.
+struct CalibrationChoice<'a> {
+    global: Option<&'a Calibration>,
+    adjustment: Adjustment,
+}
+
+/// Reads, predicts and writes one pair; returns the line reporting it and the notice of a
+/// calibration rescaled to the pair's size.
 fn process_pair(
     engine: &Engine,
     options: &PredictOptions,
     pair: &PairPaths,
     opts: &OutputOptions,
-    global_calib: Option<&Calibration>,
-) -> anyhow::Result<String> {
+    calibration: &CalibrationChoice<'_>,
+) -> anyhow::Result<(String, Option<Rescaled>)> {
     let t0 = Instant::now();
     let left = load_rgb(&pair.left)?;
     let right = load_rgb(&pair.right)?;
     let both = || format!("{} + {}", pair.left.display(), pair.right.display());
     check_same_size(&left, &right).map_err(|e| anyhow::Error::from(e).context(both()))?;
-    let calib = if opts.kinds.iter().any(|k| k.needs_calibration()) {
-        Some(calibration_for(&pair.left, global_calib)?.for_size(left.width, left.height))
+    let (calib, note) = if opts.kinds.iter().any(|k| k.needs_calibration()) {
+        let loaded = calibration_for(&pair.left, calibration.global)?;
+        let (calib, note) = loaded.adjusted(&calibration.adjustment, left.width, left.height).map_err(|e| {
+            let hint = match &e {
+                dgstereo_core::Error::Shape(_) if calibration.adjustment.is_none() => {
+                    ": --calib-crop X,Y and/or --calib-scale S"
+                }
+                _ => "",
+            };
+            anyhow::anyhow!("{}{hint}", flag_names(&e.to_string()))
+        })?;
+        (Some(calib), note)
     } else {
-        None
+        (None, None)
     };
     let prediction = engine.predict(&left, &right, &pair.name, options).map_err(|e| with_flags(e).context(both()))?;
     let (disp, info) = (prediction.disparity, prediction.info);
     let written = write_outputs(opts, &pair.name, &left, &disp, calib.as_ref(), info.rejected.as_ref())?;
+    // Depth is `inf` where the disparity gives no point in front of the cameras: say how often.
+    let no_depth = calib.as_ref().map_or(0, |c| disp.data.iter().filter(|d| c.depth(**d).is_infinite()).count());
+    let no_depth = if no_depth > 0 {
+        format!(", {no_depth} px without depth (disparity unknown or <= -doffs: inf)")
+    } else {
+        String::new()
+    };
     let files: Vec<String> =
         written.iter().map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()).collect();
     let checked =
         info.rejected_share().map_or(String::new(), |s| format!(", left-right check replaced {:.1} %", 100.0 * s));
     let prior = info.prior_seconds.map_or(String::new(), |s| format!(" (depth prior {s:.2} s)"));
-    Ok(format!(
-        "{}: {}x{} (network {}x{}, {:?} volume{checked}) {:.2} s{prior} -> {}",
+    let line = format!(
+        "{}: {}x{} (network {}x{}, {:?} volume{checked}{no_depth}) {:.2} s{prior} -> {}",
         pair.name,
         left.width,
         left.height,
@@ -243,7 +326,8 @@ fn process_pair(
         info.corr,
         t0.elapsed().as_secs_f64(),
         files.join(", ")
-    ))
+    );
+    Ok((line, note))
 }
 
 fn calibration_for(left: &Path, global: Option<&Calibration>) -> anyhow::Result<Calibration> {

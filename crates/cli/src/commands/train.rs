@@ -2,8 +2,11 @@
 //!
 //! One run trains into `--out`; a file with a sweep trains each combination into
 //! `--out/<run name>` (characters other than letters, digits, `-`, `_`, `.`, `=`, `,` and `+`
-//! become `_`). `--steps N` replaces `train.steps` (and so the schedule's length) before the
-//! configuration is resolved and stored; `--resume` continues from the newest checkpoint.
+//! become `_`; two runs that would share a folder are refused before anything trains). `--steps
+//! N` replaces `train.steps` (and so the schedule's length) before the configuration is resolved
+//! and stored. `--resume` continues each run from its newest checkpoint, starts a run whose
+//! folder holds none, and leaves a finished run as it is (after checking it is the same run), so
+//! `train SWEEP.toml --resume` completes a sweep however far it got.
 //!
 //! Started by `mpirun` or `srun` as several ranks (a build with the `mpi` feature), the ranks
 //! train one run together ([`dgstereo_train::train_among`]): the cores of a machine are divided
@@ -65,16 +68,50 @@ pub fn parts_of(mut config: dgstereo_experiment::ExperimentConfig, steps: Option
     }
 }
 
-/// Trains one run into `out`, in this process alone, until done or `stop` is set.
+/// How the runs of one command train: where, whether with a progress bar, what stops them and
+/// how the command continues a stopped run.
+pub struct Session<'a> {
+    /// The device.
+    pub device: &'a burn::tensor::Device,
+    /// The stop flag and signals.
+    pub stop: &'a StopSignals,
+    /// Draw a progress bar.
+    pub progress: bool,
+    /// What the user runs to continue a stopped run (`resume with --resume`).
+    pub continue_with: &'static str,
+}
+
+/// Checks that no two runs train into one folder: two runs of one name (from two files, or one
+/// file given twice), or names that differ only in characters a folder name replaces.
+pub fn check_distinct_folders(runs: &[dgstereo_experiment::ResolvedRun]) -> anyhow::Result<()> {
+    for (i, run) in runs.iter().enumerate() {
+        let folder = folder_name(&run.name);
+        let Some(other) = runs[..i].iter().find(|r| folder_name(&r.name) == folder) else { continue };
+        let (a, b) = (other.source.display(), run.source.display());
+        if other.name == run.name {
+            anyhow::bail!(
+                "run name '{}' is given twice ({a}, {b}): each run needs a name of its own, since it names the \
+                 run's folder and its row; set `name` in one of the files",
+                run.name
+            );
+        }
+        anyhow::bail!(
+            "runs '{}' ({a}) and '{}' ({b}) would train into one folder, '{folder}': rename one",
+            other.name,
+            run.name
+        );
+    }
+    Ok(())
+}
+
+/// Trains one run into `out`, in this process alone, until done or a signal stops it.
 pub fn train_one(
     parts: TrainParts,
     out: &Path,
     resume: bool,
-    progress: bool,
-    device: &burn::tensor::Device,
-    stop: &StopSignals,
+    session: &Session<'_>,
 ) -> anyhow::Result<dgstereo_train::RunSummary> {
-    train_one_among(parts, out, resume, progress, device, stop, &dgstereo_train::SingleProcess)
+    train_one_among(parts, out, resume, session, &dgstereo_train::SingleProcess)
 }
 
 /// Trains one run into `out` with every rank of `ranks`; rank 0 prints.
@@ -82,31 +119,37 @@ fn train_one_among(
     parts: TrainParts,
     out: &Path,
     resume: bool,
-    progress: bool,
-    device: &burn::tensor::Device,
-    stop: &StopSignals,
+    session: &Session<'_>,
     ranks: &dyn Collective,
 ) -> anyhow::Result<dgstereo_train::RunSummary> {
     let name = parts.name.clone();
+    let stop = session.stop;
+    // Weights names become files (fetched on first use) before the trainer sees them.
+    let parts = crate::fetching::parts(parts).with_context(|| format!("run '{name}'"))?;
     let options = RunOptions {
         out: out.to_path_buf(),
         resume,
         stop_after: None,
-        progress,
+        progress: Some(crate::train_progress::observer(session.progress, stop.position())),
         notice: |n| eprintln!("{n}"),
         stop: Some(stop.flag()),
     };
     let summary =
-        dgstereo_train::train_among(parts, device, &options, ranks).with_context(|| format!("run '{name}'"))?;
+        dgstereo_train::train_among(parts, session.device, &options, ranks).with_context(|| format!("run '{name}'"))?;
     if ranks.rank() != 0 {
+        return Ok(summary);
+    }
+    if summary.untouched {
+        println!("{name}: finished run in {}, left as it is ({} steps)", out.display(), summary.steps);
         return Ok(summary);
     }
     if summary.stopped {
         let at = summary.checkpoint.as_ref().map_or(String::new(), |p| format!(" ({})", p.display()));
         eprintln!(
-            "{name}: {}: stopped at step {}, checkpoint written{at}; resume with --resume",
+            "{name}: {}: stopped at step {}, checkpoint written{at}; {}",
             stop.name(),
-            summary.steps
+            summary.steps,
+            session.continue_with
         );
         return Ok(summary);
     }
@@ -147,12 +190,22 @@ pub fn run(a: TrainArgs) -> anyhow::Result<ExitCode> {
 fn train_all(a: &TrainArgs, world: &World) -> anyhow::Result<ExitCode> {
     let stop = StopSignals::install()?;
     let runs = dgstereo_experiment::load(&a.experiment)?;
+    check_distinct_folders(&runs)?;
     let device = a.device.device_for_local_rank(world.local_rank(), world.local_size())?;
+    let session = Session {
+        device: &device,
+        stop: &stop,
+        progress: !a.quiet && world.rank() == 0,
+        continue_with: "resume with --resume",
+    };
     let several = runs.len() > 1;
     for run in runs {
+        if world.size() == 1 && stop.requested() {
+            eprintln!("{}: stopped before run '{}'; {}", stop.name(), run.name, session.continue_with);
+            return Ok(stop.exit_code());
+        }
         let out = if several { a.out.join(folder_name(&run.name)) } else { a.out.clone() };
-        let progress = !a.quiet && world.rank() == 0;
-        let summary = train_one_among(parts_of(run.config, a.steps), &out, a.resume, progress, &device, &stop, world)?;
+        let summary = train_one_among(parts_of(run.config, a.steps), &out, a.resume, &session, world)?;
         if summary.stopped {
             return Ok(stop.exit_code());
         }

@@ -1,17 +1,18 @@
 //! `dgstereo weights list` and `dgstereo weights fetch NAME...`: the official checkpoints known
-//! by name ([`dgstereo_weights`]), their sources and licences, and where the cache keeps them.
+//! by name ([`dgstereo_weights`]), their sources, licences and how a fetch is checked, and where
+//! the cache keeps them.
 
 use std::process::ExitCode;
 
 use anyhow::bail;
 use clap::{Args, Subcommand};
-use dgstereo_weights::{CATALOG, Fetcher, Role, find};
+use dgstereo_weights::{CATALOG, Role, Source, find};
 
 /// The `weights` subcommands.
 #[derive(Subcommand)]
 pub enum WeightsCommand {
-    /// Lists the names `--weights` and `--prior-weights` take, with source, licence and whether
-    /// each is in the cache.
+    /// Lists the names `--weights` and `--prior-weights` take, with source, licence, how a fetch
+    /// is checked and whether each is in the cache.
     List,
     /// Downloads official checkpoints into the cache (resumable; checked before they are kept).
     Fetch(FetchArgs),
@@ -34,22 +35,31 @@ fn role(r: Role) -> &'static str {
 }
 
 pub fn run(cmd: WeightsCommand) -> anyhow::Result<ExitCode> {
-    let fetcher = Fetcher::from_env()?;
+    let fetcher = crate::fetching::fetcher()?;
     match cmd {
         WeightsCommand::List => {
-            println!("cache: {} (hub files: {})", fetcher.cache().root().display(), fetcher.cache().hub().display());
+            let cache = fetcher.cache();
+            println!("cache: {} (hub files: {})", cache.root().display(), cache.hub().display());
             for w in &CATALOG {
-                let state = match fetcher.cache().find(w) {
+                let state = match cache.find(w) {
                     Some(path) => format!("cached: {}", path.display()),
-                    None => "not cached".to_string(),
+                    None => match w.source {
+                        Source::Page { file, .. } => format!(
+                            "not cached: download {file} by hand and give its path to {}, or put it at {}",
+                            role(w.role),
+                            cache.file_path(w).unwrap_or_default().display()
+                        ),
+                        _ => "not cached".to_string(),
+                    },
                 };
                 println!(
-                    "\n{}  ({})\n  {}\n  licence: {}\n  source: {}\n  {state}",
+                    "\n{}  ({})\n  {}\n  licence: {}\n  source: {}\n  verified: {}\n  {state}",
                     w.name,
                     role(w.role),
                     w.about,
                     w.licence,
-                    w.origin(fetcher.sources())
+                    w.origin(fetcher.sources()),
+                    w.verification()
                 );
             }
         }
@@ -62,11 +72,11 @@ pub fn run(cmd: WeightsCommand) -> anyhow::Result<ExitCode> {
                     CATALOG.iter().map(|w| w.name).collect::<Vec<_>>().join(", ")
                 );
             }
-            for name in &a.names {
-                let w = find(name).expect("checked above");
+            for w in a.names.iter().filter_map(|n| find(n)) {
                 eprintln!("{}: {} (licence: {})", w.name, w.origin(fetcher.sources()), w.licence);
-                let path = fetcher.get(w)?;
-                println!("{}\t{}", w.name, path.display());
+                let fetched = fetcher.fetch(w)?;
+                eprintln!("{}: verified: {}", w.name, fetched.verified.describe());
+                println!("{}\t{}", w.name, fetched.path.display());
             }
         }
     }

@@ -24,9 +24,11 @@ pub use middeval3::{MiddleburySplit, middeval3, middeval3_splits_in};
 pub use numpy_permutation::numpy_permutation;
 pub use sceneflow::{SceneFlowPass, SceneFlowSubset, sceneflow};
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use dgstereo_core::Result;
+
+use crate::headers::{disparity_size, image_size, size_mismatch};
 
 use crate::image::{DisparityMap, Mask, RgbImage, load_mask, load_rgb};
 use crate::read_disparity;
@@ -117,14 +119,52 @@ pub struct FileDataset {
     pub rule: ValidRule,
 }
 
+impl SampleFiles {
+    /// Checks the sample's files by their headers, without decoding them
+    /// ([`crate::headers`]): both views of one size, the ground truth complete and of the left
+    /// view's size, the non-occlusion mask of that size too. Returns the left view's
+    /// `(width, height)`.
+    ///
+    /// # Errors
+    /// A file that cannot be opened, a header that cannot be read, a disparity file cut short,
+    /// or a file whose size is not the left view's (naming both files).
+    pub fn check_headers(&self) -> Result<(usize, usize)> {
+        let size = image_size(&self.left)?;
+        self.check_size(&self.right, "the right view", image_size(&self.right)?, size)?;
+        if let Some(d) = &self.disparity {
+            self.check_size(d, "the ground truth", disparity_size(d)?, size)?;
+        }
+        if let Some(m) = &self.nonoccluded {
+            self.check_size(m, "the non-occlusion mask", image_size(m)?, size)?;
+        }
+        Ok(size)
+    }
+
+    fn check_size(&self, path: &Path, what: &str, found: (usize, usize), left: (usize, usize)) -> Result<()> {
+        if found == left { Ok(()) } else { Err(size_mismatch(path, what, found, &self.left, left)) }
+    }
+}
+
 impl FileDataset {
     /// Reads one sample's files.
+    ///
+    /// # Errors
+    /// A file that cannot be read, and a file whose size is not the left view's (naming both
+    /// files): the views, the ground truth and the masks of a sample are of one size.
     pub fn load(files: &SampleFiles, rule: ValidRule) -> Result<Sample> {
         let left = load_rgb(&files.left)?;
+        let size = (left.width, left.height);
         let right = load_rgb(&files.right)?;
+        files.check_size(&files.right, "the right view", (right.width, right.height), size)?;
         let disparity = files.disparity.as_ref().map(read_disparity).transpose()?;
+        if let (Some(path), Some(d)) = (&files.disparity, &disparity) {
+            files.check_size(path, "the ground truth", (d.width, d.height), size)?;
+        }
         let valid = disparity.as_ref().map(|d| rule.mask(d));
         let nonoccluded = files.nonoccluded.as_ref().map(load_mask).transpose()?;
+        if let (Some(path), Some(m)) = (&files.nonoccluded, &nonoccluded) {
+            files.check_size(path, "the non-occlusion mask", (m.width, m.height), size)?;
+        }
         Ok(Sample { name: files.name.clone(), group: files.group.clone(), left, right, disparity, valid, nonoccluded })
     }
 }

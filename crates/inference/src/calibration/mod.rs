@@ -9,11 +9,14 @@
 //! - `K.txt`: line 1 the 3x3 intrinsics row-major (9 numbers), line 2 the baseline in **metres**
 //!   (FoundationStereo's layout).
 //!
-//! Design decision: everything is converted to metres and pixels of the calibrated image once, and
-//! [`Calibration::for_size`] rescales the intrinsics when the images are a resized version of the
-//! calibrated ones, so depth is right whatever size the user feeds. Depth is
-//! `Z = fx · baseline / (d + doffs)`; a point is `Z · K⁻¹ · (x, y, 1)` (nalgebra).
+//! Design decision: everything is converted to metres and pixels of the calibrated image once. A
+//! calibration applies to the image size it was made for; [`Calibration::for_size`] rescales it
+//! only for a resize at the same aspect ratio (with a notice) and refuses other sizes, which
+//! [`Calibration::adjusted`] fits when the user states the crop or the scale ([`fit`]). Depth is
+//! `Z = fx · baseline / (d + doffs)`, `inf` where that is no point in front of the cameras
+//! (unknown disparity, or `d + doffs <= 0`); a point is `Z · K⁻¹ · (x, y, 1)` (nalgebra).
 
+pub mod fit;
 pub mod middlebury;
 
 use std::path::{Path, PathBuf};
@@ -22,6 +25,7 @@ use dgstereo_core::{Error, Result};
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
 
+pub use fit::{Adjustment, Rescaled};
 pub use middlebury::{MiddleburyCalib, read_middlebury_calib};
 
 /// Intrinsics of the left camera and the stereo geometry.
@@ -79,24 +83,9 @@ impl Calibration {
         self.intrinsics[(0, 0)]
     }
 
-    /// The calibration of the same cameras for images of `width x height`: intrinsics and `doffs`
-    /// scaled by the size ratio when the calibrated size is known and differs.
-    pub fn for_size(&self, width: usize, height: usize) -> Self {
-        let Some((w0, h0)) = self.size else { return self.clone() };
-        if (w0, h0) == (width, height) || w0 == 0 || h0 == 0 {
-            return self.clone();
-        }
-        let (sx, sy) = (width as f64 / w0 as f64, height as f64 / h0 as f64);
-        let scale = Matrix3::new(sx, 0.0, 0.0, 0.0, sy, 0.0, 0.0, 0.0, 1.0);
-        Self {
-            intrinsics: scale * self.intrinsics,
-            doffs: self.doffs * sx,
-            size: Some((width, height)),
-            ..self.clone()
-        }
-    }
-
-    /// Depth in metres of disparity `d` (pixels); `inf` when `d` is unknown or `d + doffs <= 0`.
+    /// Depth in metres of disparity `d` (pixels); `inf` when `d` is unknown or `d + doffs <= 0`
+    /// (no point in front of the cameras: a negative disparity, or zero at `doffs = 0`), which is
+    /// also the invalid value of a PFM map (Middlebury's convention).
     pub fn depth(&self, d: f32) -> f32 {
         let denom = d as f64 + self.doffs;
         if d.is_finite() && denom > 0.0 { (self.fx() * self.baseline_m / denom) as f32 } else { f32::INFINITY }
@@ -216,9 +205,13 @@ mod tests {
         assert_eq!(c.baseline_m, 0.2);
         // Z = 1000 * 0.2 / (30 + 10) = 5 m.
         assert!((c.depth(30.0) - 5.0).abs() < 1e-6);
-        let half = c.for_size(100, 50);
+        let (half, notice) = c.for_size(100, 50).unwrap();
         assert!((half.depth(15.0) - 5.0).abs() < 1e-6, "the same point at half size");
+        assert!(notice.is_some());
+        // Negative disparity beyond `doffs`, zero at `doffs = 0` and unknown: no depth.
         assert_eq!(c.depth(-20.0), f32::INFINITY);
+        assert_eq!(c.depth(-10.0), f32::INFINITY);
+        assert_eq!(c.depth(f32::NAN), f32::INFINITY);
     }
 
     #[test]

@@ -93,9 +93,13 @@ impl DepthAnythingV2 {
     /// # Shapes
     /// - `images`: `[B, 3, H, W]`, RGB in 0..255
     /// - output: `[B, 1, H, W]`, relative inverse depth, non-negative
-    pub fn infer(&self, images: Tensor<4>, input_size: usize) -> Tensor<4> {
+    ///
+    /// # Errors
+    /// [`dgstereo_core::Error::Shape`] for images that are not RGB or are empty
+    /// ([`preprocess::preprocess`]).
+    pub fn infer(&self, images: Tensor<4>, input_size: usize) -> dgstereo_core::Result<Tensor<4>> {
         let [_, _, h, w] = images.dims();
-        let x = preprocess::preprocess(images, input_size);
-        resize_bilinear(self.forward(x), [h, w], true)
+        let x = preprocess::preprocess(images, input_size)?;
+        Ok(resize_bilinear(self.forward(x), [h, w], true))
     }
 }

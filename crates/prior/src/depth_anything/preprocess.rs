@@ -8,6 +8,7 @@
 //! as `np.round`), rounding up instead when that would fall below `input_size`.
 
 use burn::tensor::{Tensor, TensorData};
+use dgstereo_core::{Error, Result};
 
 use super::cubic::resize_bicubic;
 use super::dinov2::PATCH_SIZE;
@@ -34,13 +35,22 @@ fn constrain_to_multiple_of(x: f64, min_val: usize) -> usize {
 ///
 /// Both sides are scaled by `max(input_size / height, input_size / width)` and constrained to
 /// multiples of 14 no smaller than `input_size`.
-pub fn network_input_size(height: usize, width: usize, input_size: usize) -> [usize; 2] {
-    assert!(height > 0 && width > 0, "empty image {height}x{width}");
+///
+/// # Errors
+/// [`Error::Shape`] for an empty image; [`Error::config`]`("input_size", ..)` for an input size
+/// of 0.
+pub fn network_input_size(height: usize, width: usize, input_size: usize) -> Result<[usize; 2]> {
+    if height == 0 || width == 0 {
+        return Err(Error::Shape(format!("depth-anything-v2 prior: the image is empty ({height}x{width})")));
+    }
+    if input_size == 0 {
+        return Err(Error::config("input_size", "must be at least 1 pixel (the official size is 518)"));
+    }
     let scale = (input_size as f64 / height as f64).max(input_size as f64 / width as f64);
-    [
+    Ok([
         constrain_to_multiple_of(scale * height as f64, input_size),
         constrain_to_multiple_of(scale * width as f64, input_size),
-    ]
+    ])
 }
 
 /// ImageNet normalisation of images in 0..1: `(x - mean) / std` per channel.
@@ -60,11 +70,20 @@ pub fn normalize_imagenet(x: Tensor<4>) -> Tensor<4> {
 /// # Shapes
 /// - `images`: `[B, 3, H, W]`, RGB in 0..255
 /// - output: `[B, 3, H', W']` with `H'`, `W'` multiples of 14
-pub fn preprocess(images: Tensor<4>, input_size: usize) -> Tensor<4> {
+///
+/// # Errors
+/// [`Error::Shape`] when the images do not have 3 channels or are empty (see
+/// [`network_input_size`]).
+pub fn preprocess(images: Tensor<4>, input_size: usize) -> Result<Tensor<4>> {
     let [_, c, h, w] = images.dims();
-    assert_eq!(c, 3, "Depth Anything V2 takes RGB images, got {c} channels");
-    let size = network_input_size(h, w, input_size);
-    normalize_imagenet(resize_bicubic(images.div_scalar(255.0), size))
+    if c != 3 {
+        return Err(Error::Shape(format!(
+            "depth-anything-v2 prior: takes RGB images [B, 3, H, W], got {c} channels ({:?})",
+            images.dims()
+        )));
+    }
+    let size = network_input_size(h, w, input_size)?;
+    Ok(normalize_imagenet(resize_bicubic(images.div_scalar(255.0), size)))
 }
 
 #[cfg(test)]
@@ -95,7 +114,7 @@ mod tests {
         for (h, w) in [(375, 1242), (480, 640), (1080, 1920), (518, 518), (100, 100), (2000, 300), (70, 98), (333, 334)]
         {
             for input_size in [518, 364, 700] {
-                let [nh, nw] = network_input_size(h, w, input_size);
+                let [nh, nw] = network_input_size(h, w, input_size).unwrap();
                 assert_eq!(nh % 14, 0, "{h}x{w}@{input_size} -> {nh}x{nw}");
                 assert_eq!(nw % 14, 0, "{h}x{w}@{input_size} -> {nh}x{nw}");
                 assert!(nh.min(nw) >= input_size, "{h}x{w}@{input_size} -> {nh}x{nw}");
@@ -112,16 +131,31 @@ mod tests {
     #[test]
     fn known_sizes() {
         // 518 is already a multiple of 14 (37 patches): the short side stays 518.
-        assert_eq!(network_input_size(480, 640, 518), [518, 686]); // 690.67 -> 49.33 -> 49 · 14
-        assert_eq!(network_input_size(375, 1242, 518), [518, 1722]); // 1715.6 / 14 = 122.54 -> 123
-        assert_eq!(network_input_size(518, 518, 518), [518, 518]);
+        assert_eq!(network_input_size(480, 640, 518).unwrap(), [518, 686]); // 690.67 -> 49.33 -> 49 · 14
+        assert_eq!(network_input_size(375, 1242, 518).unwrap(), [518, 1722]); // 1715.6 / 14 = 122.54 -> 123
+        assert_eq!(network_input_size(518, 518, 518).unwrap(), [518, 518]);
         // Downscaling (SceneFlow 540x960): 960 · 518/540 = 920.9 -> 65.78 patches -> 66 · 14.
-        assert_eq!(network_input_size(540, 960, 518), [518, 924]);
+        assert_eq!(network_input_size(540, 960, 518).unwrap(), [518, 924]);
         // Portrait: the width is the shorter side. 450 · 518/375 = 621.6 -> 44.4 -> 44 · 14.
-        assert_eq!(network_input_size(450, 375, 518), [616, 518]);
+        assert_eq!(network_input_size(450, 375, 518).unwrap(), [616, 518]);
         // Upscaling a tiny image: the short side to 518.
-        assert_eq!(network_input_size(100, 50, 518), [1036, 518]);
+        assert_eq!(network_input_size(100, 50, 518).unwrap(), [1036, 518]);
         // Rounding down would go below the minimum, so the side rounds up: 520 / 14 = 37.14 -> 38.
-        assert_eq!(network_input_size(520, 1000, 520), [532, 994]);
+        assert_eq!(network_input_size(520, 1000, 520).unwrap(), [532, 994]);
+    }
+
+    #[test]
+    fn empty_images_and_other_channel_counts_are_shape_errors() {
+        for (h, w) in [(0, 10), (10, 0)] {
+            let e = network_input_size(h, w, 518).unwrap_err();
+            assert!(matches!(e, Error::Shape(_)) && e.to_string().contains(&format!("{h}x{w}")), "{e}");
+        }
+        let e = network_input_size(10, 10, 0).unwrap_err();
+        assert!(matches!(&e, Error::Config(p) if p.key == "input_size"), "{e}");
+        let device = dgstereo_core::default_device();
+        let grey = Tensor::<4>::zeros([1, 1, 14, 14], &device);
+        let e = preprocess(grey, 14).unwrap_err();
+        assert!(matches!(e, Error::Shape(_)) && e.to_string().contains("1 channels"), "{e}");
+        assert_eq!(preprocess(Tensor::<4>::zeros([1, 3, 14, 14], &device), 14).unwrap().dims(), [1, 3, 14, 14]);
     }
 }

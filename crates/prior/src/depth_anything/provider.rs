@@ -91,7 +91,7 @@ impl PriorProvider for DepthAnythingV2Prior {
             return Err(Error::Shape(format!("depth-anything-v2 prior: empty images {:?}", input.left.dims())));
         }
         let both = Tensor::cat(vec![as_rgb(input.left.clone())?, as_rgb(input.right.clone())?], 0).detach();
-        let depth = self.model.infer(both, self.input_size).detach();
+        let depth = self.model.infer(both, self.input_size)?.detach();
         Ok(Some(DepthPrior { left: depth.clone().narrow(0, 0, n), right: depth.narrow(0, n, n) }))
     }
 }

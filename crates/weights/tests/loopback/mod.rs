@@ -1,20 +1,23 @@
-//! A loopback HTTP/1.1 server standing in for the hub and for Dropbox in the fetch tests: it
-//! serves files with ranges (206 and `Content-Range`), redirects with extra headers (the hub's
-//! `x-repo-commit`, `x-linked-etag`), can break the connection of the next full download after
-//! some bytes, and records every request. The command line's tests include it too.
+//! A loopback HTTP/1.1 server standing in for the hub, Dropbox, Google Drive and static mirrors
+//! in the fetch tests: it serves files with ranges (206 and `Content-Range`) or without (a
+//! server that ignores `Range`), with extra headers (`ETag`, `Content-Disposition`), pages,
+//! redirects with extra headers (the hub's `x-repo-commit`, `x-linked-etag`); it can break the
+//! connection of the next full download after some bytes, or fall silent there; and it records
+//! every request. [`Server::silent`] accepts connections and never answers. The command line's
+//! tests include it too.
 
 #![allow(dead_code)]
 
 use std::collections::HashMap;
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
 use std::sync::{Arc, Mutex};
 
 /// What a path answers.
 #[derive(Clone)]
 pub enum Route {
-    /// The bytes, with ranges.
-    File(Arc<Vec<u8>>),
+    /// The bytes, with these headers, honouring ranges or not.
+    File { body: Arc<Vec<u8>>, headers: Vec<(String, String)>, ranges: bool },
     /// A 302 to another path of this server, with these headers.
     Redirect { to: String, headers: Vec<(String, String)> },
 }
@@ -34,6 +37,8 @@ struct State {
     requests: Vec<Request>,
     /// Paths whose next body is cut after this many bytes.
     cut: HashMap<String, usize>,
+    /// Paths whose next body stops after this many bytes, the connection left open.
+    stall: HashMap<String, usize>,
 }
 
 /// The server; it runs until the test process ends.
@@ -59,14 +64,43 @@ impl Server {
         Self { base, state }
     }
 
+    /// A server that accepts connections and never answers (a captive portal, a filtering
+    /// proxy): it reads nothing and writes nothing, holding each connection until the client
+    /// gives up.
+    pub fn silent() -> Self {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let base = format!("http://{}", listener.local_addr().unwrap());
+        let state = Arc::new(Mutex::new(State::default()));
+        let shared = state.clone();
+        std::thread::spawn(move || {
+            for stream in listener.incoming().flatten() {
+                shared.lock().unwrap().requests.push(Request { path: String::new(), range: None });
+                std::thread::spawn(move || hold(stream));
+            }
+        });
+        Self { base, state }
+    }
+
     /// `http://127.0.0.1:PORT`.
     pub fn base(&self) -> &str {
         &self.base
     }
 
-    /// Serves `body` at `path`.
+    /// Serves `body` at `path`, with ranges.
     pub fn file(&self, path: &str, body: Vec<u8>) {
-        self.state.lock().unwrap().routes.insert(path.into(), Route::File(Arc::new(body)));
+        self.file_with(path, body, &[], true);
+    }
+
+    /// Serves `body` at `path` with `headers`, honouring ranges with `ranges` (else every
+    /// request gets the whole file with 200, as `python3 -m http.server` answers).
+    pub fn file_with(&self, path: &str, body: Vec<u8>, headers: &[(&str, &str)], ranges: bool) {
+        let headers = headers.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        self.state.lock().unwrap().routes.insert(path.into(), Route::File { body: Arc::new(body), headers, ranges });
+    }
+
+    /// Serves the HTML `page` at `path`.
+    pub fn page(&self, path: &str, page: &str) {
+        self.file_with(path, page.as_bytes().to_vec(), &[("Content-Type", "text/html; charset=utf-8")], false);
     }
 
     /// Redirects `path` to `to` with `headers`.
@@ -79,6 +113,12 @@ impl Server {
     /// bytes, after `bytes` bytes.
     pub fn cut_next(&self, path: &str, bytes: usize) {
         self.state.lock().unwrap().cut.insert(path.into(), bytes);
+    }
+
+    /// Stops the next response at `path` with a body of more than `bytes` bytes after `bytes`
+    /// bytes, the connection left open and silent.
+    pub fn stall_next(&self, path: &str, bytes: usize) {
+        self.state.lock().unwrap().stall.insert(path.into(), bytes);
     }
 
     /// The requests so far.
@@ -109,7 +149,7 @@ fn serve(mut stream: TcpStream, state: &Mutex<State>, base: &str) {
     let route = {
         let mut s = state.lock().unwrap();
         s.requests.push(Request { path: path.clone(), range: range.clone() });
-        s.routes.get(path.split('?').next().unwrap_or_default()).cloned()
+        s.routes.get(&path).or_else(|| s.routes.get(path.split('?').next().unwrap_or_default())).cloned()
     };
     let _ = match route {
         None => write!(stream, "HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"),
@@ -120,9 +160,10 @@ fn serve(mut stream: TcpStream, state: &Mutex<State>, base: &str) {
                 "HTTP/1.1 302 Found\r\nLocation: {base}{to}\r\n{extra}Content-Length: 0\r\nConnection: close\r\n\r\n"
             )
         }
-        Some(Route::File(body)) => {
+        Some(Route::File { body, headers, ranges }) => {
             let total = body.len();
-            let (status, start, end) = match range.as_deref().and_then(|r| r.strip_prefix("bytes=")) {
+            let asked = range.as_deref().and_then(|r| r.strip_prefix("bytes=")).filter(|_| ranges);
+            let (status, start, end) = match asked {
                 Some(r) => {
                     let (a, b) = r.split_once('-').unwrap_or((r, ""));
                     let start: usize = a.parse().unwrap_or(0);
@@ -138,26 +179,42 @@ fn serve(mut stream: TcpStream, state: &Mutex<State>, base: &str) {
                 }
                 None => ("200 OK", 0, total),
             };
-            let content_range = if start > 0 || end < total || range.is_some() {
+            let content_range = if asked.is_some() {
                 format!("Content-Range: bytes {start}-{}/{total}\r\n", end - 1)
             } else {
                 String::new()
             };
+            let accept = if ranges { "Accept-Ranges: bytes\r\n" } else { "" };
+            let extra: String = headers.iter().map(|(k, v)| format!("{k}: {v}\r\n")).collect();
             let head = format!(
-                "HTTP/1.1 {status}\r\nContent-Length: {}\r\n{content_range}Accept-Ranges: bytes\r\nConnection: close\r\n\r\n",
+                "HTTP/1.1 {status}\r\nContent-Length: {}\r\n{content_range}{accept}{extra}Connection: close\r\n\r\n",
                 end - start
             );
-            let cut = {
+            let (cut, stall) = {
                 let mut s = state.lock().unwrap();
-                match s.cut.get(&path).copied() {
-                    Some(after) if end - start > after => s.cut.remove(&path),
+                let take = |map: &mut HashMap<String, usize>| match map.get(&path).copied() {
+                    Some(after) if end - start > after => map.remove(&path),
                     _ => None,
-                }
+                };
+                let cut = take(&mut s.cut);
+                (cut, take(&mut s.stall))
             };
-            let send_end = cut.map(|after| start + after).unwrap_or(end);
-            stream.write_all(head.as_bytes()).and_then(|_| stream.write_all(&body[start..send_end]))
+            let send_end = cut.or(stall).map(|after| start + after).unwrap_or(end);
+            let sent = stream.write_all(head.as_bytes()).and_then(|_| stream.write_all(&body[start..send_end]));
+            if stall.is_some() {
+                let _ = stream.flush();
+                hold(stream);
+                return;
+            }
+            sent
         }
     };
     let _ = stream.flush();
     let _ = stream.shutdown(Shutdown::Both);
+}
+
+/// Keeps `stream` open without a word until the client closes it.
+fn hold(mut stream: TcpStream) {
+    let mut sink = [0u8; 1024];
+    while matches!(stream.read(&mut sink), Ok(n) if n > 0) {}
 }
