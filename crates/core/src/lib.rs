@@ -35,3 +35,23 @@ pub struct DepthPrior {
     /// Prior of the right view.
     pub right: burn::tensor::Tensor<4>,
 }
+
+/// What a monocular depth network inside the stereo network hands on (DEFOM-Stereo's embedded
+/// Depth Anything V2): features for the encoders and the left view's inverse depth, for the
+/// disparity initialiser. `f` is the update grid's stride `2^n_downsample`.
+///
+/// # Shapes
+/// - `context[l]`: `[N, F, H/(f·2^l), W/(f·2^l)]`, `l = 0, 1, 2` (left view)
+/// - `left`, `right`: `[N, F, H/f, W/f]`
+/// - `inverse_depth`: `[N, 1, H/f, W/f]`, relative (larger = nearer), non-negative
+#[derive(Debug, Clone)]
+pub struct MonocularFeatures {
+    /// The left view's features at the context encoder's three levels, finest first.
+    pub context: Vec<burn::tensor::Tensor<4>>,
+    /// The left view's features at the update grid, for the feature encoder.
+    pub left: burn::tensor::Tensor<4>,
+    /// The right view's features at the update grid, for the feature encoder.
+    pub right: burn::tensor::Tensor<4>,
+    /// The left view's relative inverse depth at the update grid.
+    pub inverse_depth: burn::tensor::Tensor<4>,
+}

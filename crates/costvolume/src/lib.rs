@@ -12,6 +12,10 @@
 //! GPU inference, burn's tensor operations (the reference and the differentiable path)
 //! elsewhere. This crate is the stage: its configuration, its trait and the choice between the
 //! two.
+//!
+//! DEFOM-Stereo adds a second lookup of the same volume ([`ScaleLookup`]): its level 0 sampled
+//! around the matches of scaled disparities, `x - s·d` for each scale `s`, for the update block
+//! that rescales the disparity.
 #![deny(missing_docs)]
 
 use burn::tensor::Tensor;
@@ -53,6 +57,54 @@ pub struct CorrelationConfig {
     /// Lookup radius (`corr_radius`, 4).
     #[serde(default = "default_radius")]
     pub radius: usize,
+    /// The scale lookup beside the normal one (DEFOM-Stereo); none in RAFT-Stereo.
+    #[serde(default)]
+    pub scale_lookup: Option<ScaleLookup>,
+}
+
+/// DEFOM-Stereo's scale lookup: the volume's level 0 sampled at `x + s·f + dx` for each scale `s`
+/// of `scales` and `dx = -radius..=radius`, `f` the current x flow (`-disparity`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScaleLookup {
+    /// The scales (`scale_list`: 0.125, 0.25, 0.5, 0.75, 1, 1.25, 1.5, 2).
+    #[serde(default = "default_scales")]
+    pub scales: Vec<f32>,
+    /// The radius around each (`scale_corr_radius`, 2).
+    #[serde(default = "default_scale_radius")]
+    pub radius: usize,
+}
+
+fn default_scales() -> Vec<f32> {
+    vec![0.125, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0]
+}
+fn default_scale_radius() -> usize {
+    2
+}
+
+impl Default for ScaleLookup {
+    fn default() -> Self {
+        Self { scales: default_scales(), radius: default_scale_radius() }
+    }
+}
+
+impl ScaleLookup {
+    /// Channels of a lookup: `scales · (2·radius + 1)`.
+    pub fn channels(&self) -> usize {
+        self.scales.len() * (2 * self.radius + 1)
+    }
+
+    /// Everything wrong with the options, keys relative to its table: no scales, or a scale
+    /// that is not a positive finite number.
+    pub fn problems(&self) -> Vec<Problem> {
+        if self.scales.is_empty() {
+            return vec![Problem::new("scales", "must list at least one scale")];
+        }
+        match self.scales.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
+            Some(s) => vec![Problem::new("scales", format!("{s} is not a positive number"))],
+            None => Vec::new(),
+        }
+    }
 }
 
 fn default_levels() -> usize {
@@ -64,15 +116,22 @@ fn default_radius() -> usize {
 
 impl Default for CorrelationConfig {
     fn default() -> Self {
-        Self { implementation: CorrelationImplementation::Reg, levels: 4, radius: 4 }
+        Self { implementation: CorrelationImplementation::Reg, levels: 4, radius: 4, scale_lookup: None }
     }
 }
 
 impl CorrelationConfig {
     /// Everything wrong with the options, keys relative to the correlation table (`levels`
-    /// must be at least 1).
+    /// must be at least 1; the scale lookup's problems under `scale_lookup`).
     pub fn problems(&self) -> Vec<Problem> {
-        if self.levels == 0 { vec![Problem::new("levels", "must be at least 1")] } else { Vec::new() }
+        let mut problems = Vec::new();
+        if self.levels == 0 {
+            problems.push(Problem::new("levels", "must be at least 1"));
+        }
+        if let Some(scale) = &self.scale_lookup {
+            problems.extend(scale.problems().into_iter().map(|p| p.within("scale_lookup")));
+        }
+        problems
     }
 
     /// Channels of a lookup: `levels · (2·radius + 1)`.
@@ -121,6 +180,29 @@ pub enum Correlation {
     Reg(CorrelationPyramid),
     /// On-the-fly.
     Alt(OnTheFlyCorrelation),
+}
+
+impl Correlation {
+    /// The scale lookup ([`ScaleLookup`]): for each scale `s`, level 0 sampled around
+    /// `coords0 + s·flow_x` with `lookup.radius`, the scales' samples side by side.
+    ///
+    /// # Shapes
+    /// - `coords0`, `flow_x`: `[N, 1, H, W]`; output `[N, scales · (2·radius + 1), H, W]`,
+    ///   scale-major, offsets ascending
+    pub fn scale_lookup(&self, coords0: Tensor<4>, flow_x: Tensor<4>, lookup: &ScaleLookup) -> Tensor<4> {
+        let samples = lookup
+            .scales
+            .iter()
+            .map(|&s| {
+                let at = coords0.clone() + flow_x.clone().mul_scalar(s);
+                match self {
+                    Self::Reg(c) => c.lookup_levels(at, 1, lookup.radius),
+                    Self::Alt(c) => c.lookup_levels(at, 1, lookup.radius),
+                }
+            })
+            .collect();
+        Tensor::cat(samples, 1)
+    }
 }
 
 impl CostVolume for CorrelationPyramid {

@@ -4,6 +4,7 @@ use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
 use crate::context::ContextEncoder;
+use crate::depth_block::DepthFeatureInput;
 use crate::feature::{FeatureEncoder, SharedFeatureHead};
 use crate::layout::{Encoders, SeparateEncoders, SharedBackbone};
 use crate::norm::NormKind;
@@ -25,6 +26,10 @@ pub struct EncoderConfig {
     /// widths make a CPU-trainable model, but official checkpoints need the reference's.
     #[serde(default = "default_trunk_dims")]
     pub trunk_dims: [usize; 3],
+    /// Whether the encoders add a monocular network's features to their trunks, on
+    /// ImageNet-normalised images (`added`: DEFOM-Stereo), or read the image alone (`none`).
+    #[serde(default)]
+    pub depth_features: DepthFeatureInput,
 }
 
 fn default_feature_dim() -> usize {
@@ -42,13 +47,15 @@ impl Default for EncoderConfig {
             shared_backbone: false,
             feature_dim: 256,
             trunk_dims: default_trunk_dims(),
+            depth_features: DepthFeatureInput::None,
         }
     }
 }
 
 impl EncoderConfig {
-    /// Everything wrong with the options, keys relative to the encoder table: zero widths, and
-    /// trunk widths that the group norm (`channels / 8` groups) cannot split.
+    /// Everything wrong with the options, keys relative to the encoder table: zero widths, trunk
+    /// widths that the group norm (`channels / 8` groups) cannot split, and monocular features
+    /// with the shared backbone (DEFOM-Stereo's encoders are separate).
     pub fn problems(&self) -> Vec<dgstereo_core::Problem> {
         let mut problems = Vec::new();
         let mut add = |key: &str, reason: String| problems.push(dgstereo_core::Problem::new(key, reason));
@@ -69,6 +76,12 @@ impl EncoderConfig {
                 ),
             );
         }
+        if self.depth_features == DepthFeatureInput::Added && self.shared_backbone {
+            add(
+                "depth_features",
+                "\"added\" needs separate feature and context encoders (shared_backbone = false)".into(),
+            );
+        }
         problems
     }
 
@@ -83,21 +96,43 @@ impl EncoderConfig {
 
     /// Builds the layout: separate feature and context encoders, or one shared backbone.
     /// `context_dims` are the GRU's hidden widths (coarsest first), `n_downsample` the `log2` of
-    /// the encoders' output stride.
-    pub fn init(&self, context_dims: [usize; 3], n_downsample: usize, device: &Device) -> Encoders {
+    /// the encoders' output stride, `depth_channels` the width of the monocular features the
+    /// encoders add (with `depth_features = "added"`).
+    ///
+    /// # Errors
+    /// [`dgstereo_core::Error::Config`] keyed `depth_features` when they add features and
+    /// `depth_channels` is `None`.
+    pub fn init(
+        &self,
+        context_dims: [usize; 3],
+        n_downsample: usize,
+        depth_channels: Option<usize>,
+        device: &Device,
+    ) -> dgstereo_core::Result<Encoders> {
+        let depth = match (self.depth_features, depth_channels) {
+            (DepthFeatureInput::None, _) => None,
+            (DepthFeatureInput::Added, Some(channels)) => Some(channels),
+            (DepthFeatureInput::Added, None) => {
+                return Err(dgstereo_core::Error::config(
+                    "depth_features",
+                    "\"added\" needs a monocular network's features (model.monocular)",
+                ));
+            }
+        };
         // Built in the order of the reference's constructor (`fnet`, `cnet`, `conv2`), which is
         // the order fresh weights are drawn in.
         let trunk = self.trunk_dims;
-        let cnet = || ContextEncoder::new(context_dims, trunk, self.context_norm, n_downsample, device);
-        match self.shared_backbone {
+        let cnet = |depth| ContextEncoder::new(context_dims, trunk, self.context_norm, n_downsample, depth, device);
+        Ok(match self.shared_backbone {
             false => Encoders::Separate(SeparateEncoders {
-                fnet: FeatureEncoder::new(self.feature_dim, trunk, NormKind::Instance, n_downsample, device),
-                cnet: cnet(),
+                fnet: FeatureEncoder::new(self.feature_dim, trunk, NormKind::Instance, n_downsample, depth, device),
+                cnet: cnet(depth),
+                normalisation: self.depth_features.normalisation(),
             }),
             true => Encoders::Shared(SharedBackbone {
-                cnet: cnet(),
+                cnet: cnet(None),
                 conv2: SharedFeatureHead::new(trunk[2], self.feature_dim, device),
             }),
-        }
+        })
     }
 }

@@ -6,6 +6,7 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_kernels::{Numerics, conv2d_forward};
 
+use crate::depth_block::DepthFeatureBlock;
 use crate::feature::trunk_strides;
 use crate::norm::{Norm, NormKind};
 use crate::residual::{ResidualBlock, forward_layer, make_layer};
@@ -64,13 +65,28 @@ pub struct ContextEncoder {
     pub outputs16: Vec<ContextHead>,
     /// Heads at 1/(4f): a single convolution each.
     pub outputs32: Vec<Conv2d>,
+    /// The monocular features' block added before the 1/f heads (DEFOM-Stereo's `conv08`).
+    pub conv08: Option<DepthFeatureBlock>,
+    /// The same before the 1/(2f) heads (`conv16`).
+    pub conv16: Option<DepthFeatureBlock>,
+    /// The same before the 1/(4f) heads (`conv32`).
+    pub conv32: Option<DepthFeatureBlock>,
 }
 
 impl ContextEncoder {
     /// `dims` are the reference's `hidden_dims` (`[1/16, 1/8, 1/4]` order), used for both the
     /// hidden and the context heads (`context_dims = hidden_dims`); `trunk` the widths of
-    /// layer1..3 (`[64, 96, 128]` in the reference; layer4/5 keep the last).
-    pub fn new(dims: [usize; 3], trunk: [usize; 3], norm: NormKind, n_downsample: usize, device: &Device) -> Self {
+    /// layer1..3 (`[64, 96, 128]` in the reference; layer4/5 keep the last); with
+    /// `depth_channels`, it adds monocular features of that width before each level's heads
+    /// ([`DepthFeatureBlock`]).
+    pub fn new(
+        dims: [usize; 3],
+        trunk: [usize; 3],
+        norm: NormKind,
+        n_downsample: usize,
+        depth_channels: Option<usize>,
+        device: &Device,
+    ) -> Self {
         let [s1, s2, s3] = trunk_strides(n_downsample);
         let [c1, c2, c3] = trunk;
         Self {
@@ -84,6 +100,9 @@ impl ContextEncoder {
             outputs08: (0..2).map(|_| ContextHead::new(c3, dims[2], norm, device)).collect(),
             outputs16: (0..2).map(|_| ContextHead::new(c3, dims[1], norm, device)).collect(),
             outputs32: (0..2).map(|_| conv2d([c3, dims[0]], 3, 1, 1, ConvInit::KaimingFanOut, device)).collect(),
+            conv08: depth_channels.map(|d| DepthFeatureBlock::new(d, c3, norm, device)),
+            conv16: depth_channels.map(|d| DepthFeatureBlock::new(d, c3, norm, device)),
+            conv32: depth_channels.map(|d| DepthFeatureBlock::new(d, c3, norm, device)),
         }
     }
 
@@ -112,22 +131,42 @@ impl ContextEncoder {
     }
 
     /// The heads of `levels` levels from a trunk output, their convolutions with the rounding
-    /// `numerics` allows in training.
-    pub fn heads(&self, trunk: Tensor<4>, levels: usize, numerics: Numerics) -> ContextFeatures {
+    /// `numerics` allows in training. With `depth` (the monocular context features, finest
+    /// first) and this encoder's [`DepthFeatureBlock`]s, each level's heads read the level's
+    /// trunk output plus its block of the level's features; the coarser trunk layers read the
+    /// trunk output alone, as in DEFOM-Stereo.
+    pub fn heads(
+        &self,
+        trunk: Tensor<4>,
+        levels: usize,
+        numerics: Numerics,
+        depth: Option<&[Tensor<4>]>,
+    ) -> ContextFeatures {
+        let with_depth = |block: &Option<DepthFeatureBlock>, x: Tensor<4>, level: usize| match (block, depth) {
+            (Some(block), Some(depth)) => x + block.forward(depth[level].clone(), numerics),
+            _ => x,
+        };
         let pair = |heads: &[ContextHead], x: &Tensor<4>| {
             [heads[0].forward(x.clone(), numerics), heads[1].forward(x.clone(), numerics)]
         };
-        let mut out = vec![pair(&self.outputs08, &trunk)];
+        let mut out = vec![pair(&self.outputs08, &with_depth(&self.conv08, trunk.clone(), 0))];
         if levels >= 2 {
             let y = forward_layer(&self.layer4, trunk, numerics);
-            out.push(pair(&self.outputs16, &y));
+            out.push(pair(&self.outputs16, &with_depth(&self.conv16, y.clone(), 1)));
             if levels >= 3 {
-                let z = forward_layer(&self.layer5, y, numerics);
+                let z = with_depth(&self.conv32, forward_layer(&self.layer5, y, numerics), 2);
                 let [hidden, context] = [&self.outputs32[0], &self.outputs32[1]];
                 out.push([conv2d_forward(hidden, z.clone(), numerics), conv2d_forward(context, z, numerics)]);
             }
         }
         ContextFeatures { levels: out }
+    }
+
+    /// The context of `levels` levels of `image`, with the monocular context features `depth`
+    /// where the encoder adds them ([`Self::heads`]).
+    pub fn context_with_depth(&self, image: Tensor<4>, levels: usize, depth: Option<&[Tensor<4>]>) -> ContextFeatures {
+        let numerics = self.numerics();
+        self.heads(self.trunk(image, numerics), levels, numerics, depth)
     }
 }
 
@@ -137,7 +176,6 @@ impl ContextExtractor for ContextEncoder {
     /// rounding. With instance or group norms it keeps the plain products, as the feature
     /// encoder does.
     fn context(&self, image: Tensor<4>, levels: usize) -> ContextFeatures {
-        let numerics = self.numerics();
-        self.heads(self.trunk(image, numerics), levels, numerics)
+        self.context_with_depth(image, levels, None)
     }
 }

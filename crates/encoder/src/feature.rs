@@ -7,6 +7,7 @@ use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_kernels::{Numerics, conv2d_forward};
 
 use crate::FeatureExtractor;
+use crate::depth_block::DepthFeatureBlock;
 use crate::norm::{Norm, NormKind};
 use crate::residual::{ResidualBlock, forward_layer, make_layer};
 
@@ -32,14 +33,24 @@ pub struct FeatureEncoder {
     pub layer2: Vec<ResidualBlock>,
     /// `trunk[2]` channels (128).
     pub layer3: Vec<ResidualBlock>,
+    /// The monocular features' block added to the trunk's output (DEFOM-Stereo's `convd`).
+    pub convd: Option<DepthFeatureBlock>,
     /// 1x1 projection to `output_dim`.
     pub conv2: Conv2d,
 }
 
 impl FeatureEncoder {
     /// The encoder with `output_dim` channels (256 in RAFT-Stereo), trunk widths `trunk`
-    /// (`[64, 96, 128]` in RAFT-Stereo) and `norm` (instance).
-    pub fn new(output_dim: usize, trunk: [usize; 3], norm: NormKind, n_downsample: usize, device: &Device) -> Self {
+    /// (`[64, 96, 128]` in RAFT-Stereo) and `norm` (instance); with `depth_channels`, it adds
+    /// monocular features of that width to its trunk's output ([`DepthFeatureBlock`]).
+    pub fn new(
+        output_dim: usize,
+        trunk: [usize; 3],
+        norm: NormKind,
+        n_downsample: usize,
+        depth_channels: Option<usize>,
+        device: &Device,
+    ) -> Self {
         let [s1, s2, s3] = trunk_strides(n_downsample);
         let [c1, c2, c3] = trunk;
         let init = ConvInit::KaimingFanOut;
@@ -49,20 +60,31 @@ impl FeatureEncoder {
             layer1: make_layer(c1, c1, norm, 1, device),
             layer2: make_layer(c1, c2, norm, s2, device),
             layer3: make_layer(c2, c3, norm, s3, device),
+            convd: depth_channels.map(|d| DepthFeatureBlock::new(d, c3, norm, device)),
             conv2: conv2d([c3, output_dim], 1, 1, 0, init, device),
         }
     }
-}
 
-impl FeatureExtractor for FeatureEncoder {
-    fn features(&self, images: Tensor<4>) -> Tensor<4> {
+    /// Matching features of `images`, with the monocular features `depth` (`[N, D, H/f, W/f]`)
+    /// added after the trunk where the encoder has a [`DepthFeatureBlock`] (`depth` is then
+    /// required; it is ignored otherwise).
+    pub fn features_with_depth(&self, images: Tensor<4>, depth: Option<Tensor<4>>) -> Tensor<4> {
         // Instance norms follow its layers: they magnify a change of rounding.
         let numerics = Numerics::Sensitive;
         let x = self.norm1.conv_forward_relu(&self.conv1, images, true, numerics);
         let x = forward_layer(&self.layer1, x, numerics);
         let x = forward_layer(&self.layer2, x, numerics);
-        let x = forward_layer(&self.layer3, x, numerics);
+        let mut x = forward_layer(&self.layer3, x, numerics);
+        if let (Some(block), Some(depth)) = (&self.convd, depth) {
+            x = x + block.forward(depth, numerics);
+        }
         conv2d_forward(&self.conv2, x, numerics)
+    }
+}
+
+impl FeatureExtractor for FeatureEncoder {
+    fn features(&self, images: Tensor<4>) -> Tensor<4> {
+        self.features_with_depth(images, None)
     }
 }
 

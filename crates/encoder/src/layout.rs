@@ -2,12 +2,13 @@
 
 use burn::module::Module;
 use burn::tensor::Tensor;
-use dgstereo_core::Probe;
+use dgstereo_core::{Error, MonocularFeatures, Probe, Result};
 use dgstereo_kernels::Numerics;
 
+use crate::ContextFeatures;
 use crate::context::ContextEncoder;
+use crate::depth_block::InputNormalisation;
 use crate::feature::{FeatureEncoder, SharedFeatureHead};
-use crate::{ContextExtractor, ContextFeatures, FeatureExtractor};
 
 /// What the encoders give the rest of the network.
 ///
@@ -32,6 +33,8 @@ pub struct EncoderInputs {
     pub features_left: Tensor<4>,
     /// The right view for the matching features.
     pub features_right: Tensor<4>,
+    /// A monocular network's features, for encoders that add them (DEFOM-Stereo).
+    pub depth: Option<MonocularFeatures>,
 }
 
 /// RAFT-Stereo's two encoders, each with its own trunk (the reference's `fnet` and `cnet`).
@@ -41,6 +44,9 @@ pub struct SeparateEncoders {
     pub fnet: FeatureEncoder,
     /// Context encoder.
     pub cnet: ContextEncoder,
+    /// How images become the encoders' input.
+    #[module(skip)]
+    pub normalisation: InputNormalisation,
 }
 
 /// The shared-backbone variant: the context encoder's trunk also feeds the feature head (the
@@ -64,17 +70,29 @@ pub enum Encoders {
     Shared(SharedBackbone),
 }
 
-/// `x / 255 * 2 - 1`: the encoders' input range.
-fn normalise(x: Tensor<4>) -> Tensor<4> {
-    x.div_scalar(255.0).mul_scalar(2.0).sub_scalar(1.0)
-}
-
 impl Encoders {
     /// The context encoder (either layout has one).
     pub fn context_encoder(&self) -> &ContextEncoder {
         match self {
             Self::Separate(e) => &e.cnet,
             Self::Shared(e) => &e.cnet,
+        }
+    }
+
+    /// How images in 0..255 become the encoders' input (the monocular network of DEFOM-Stereo
+    /// reads them so normalised too).
+    pub fn normalisation(&self) -> InputNormalisation {
+        match self {
+            Self::Separate(e) => e.normalisation,
+            Self::Shared(_) => InputNormalisation::SignedUnit,
+        }
+    }
+
+    /// Whether the encoders add a monocular network's features (and so need them).
+    pub fn takes_depth_features(&self) -> bool {
+        match self {
+            Self::Separate(e) => e.fnet.convd.is_some() || e.cnet.conv08.is_some(),
+            Self::Shared(_) => false,
         }
     }
 
@@ -91,16 +109,37 @@ impl Encoders {
     ///
     /// The shared backbone runs its trunk on `context_left` and `features_right` (as the
     /// reference, whose trunk sees the image pair once); `features_left` is unused there.
-    pub fn encode(&self, inputs: EncoderInputs, levels: usize, probe: &mut Probe<'_>) -> Encoded {
-        let EncoderInputs { context_left, features_left, features_right } = inputs;
-        match self {
-            Self::Separate(SeparateEncoders { fnet, cnet }) => {
-                let context = probe.time("context encoder", || cnet.context(normalise(context_left), levels));
+    ///
+    /// # Errors
+    /// [`Error::Config`] keyed `encoder.depth_features` when the encoders add monocular features
+    /// and `inputs.depth` is `None`, or do not and it is given.
+    pub fn encode(&self, inputs: EncoderInputs, levels: usize, probe: &mut Probe<'_>) -> Result<Encoded> {
+        let EncoderInputs { context_left, features_left, features_right, depth } = inputs;
+        if depth.is_some() != self.takes_depth_features() {
+            let reason = if depth.is_some() {
+                "the encoders add no monocular features, but some were given"
+            } else {
+                "the encoders add monocular features (depth_features = \"added\"), but none were given"
+            };
+            return Err(Error::config("encoder.depth_features", reason));
+        }
+        let normalise = |x: Tensor<4>| self.normalisation().apply(x);
+        Ok(match self {
+            Self::Separate(SeparateEncoders { fnet, cnet, .. }) => {
+                let (context_depth, left_depth, right_depth) = match depth {
+                    Some(MonocularFeatures { context, left, right, .. }) => (Some(context), Some(left), Some(right)),
+                    None => (None, None, None),
+                };
+                let context = probe.time("context encoder", || {
+                    cnet.context_with_depth(normalise(context_left), levels, context_depth.as_deref())
+                });
                 // One image at a time (the reference batches the pair): the result is the same,
                 // as every layer acts per image, and the full-resolution activations of the
                 // stem and layer1, the process's peak memory, are half as large.
-                let fmap1 = probe.time("feature encoder", || fnet.features(normalise(features_left)));
-                let fmap2 = probe.time("feature encoder", || fnet.features(normalise(features_right)));
+                let fmap1 =
+                    probe.time("feature encoder", || fnet.features_with_depth(normalise(features_left), left_depth));
+                let fmap2 =
+                    probe.time("feature encoder", || fnet.features_with_depth(normalise(features_right), right_depth));
                 Encoded { fmap1, fmap2, context }
             }
             Self::Shared(SharedBackbone { cnet, conv2 }) => {
@@ -111,11 +150,12 @@ impl Encoders {
                 let trunk = probe.time("context encoder", || {
                     cnet.trunk(normalise(Tensor::cat(vec![context_left, features_right], 0)), Numerics::Sensitive)
                 });
-                let context = probe
-                    .time("context encoder", || cnet.heads(trunk.clone().narrow(0, 0, n), levels, cnet.numerics()));
+                let context = probe.time("context encoder", || {
+                    cnet.heads(trunk.clone().narrow(0, 0, n), levels, cnet.numerics(), None)
+                });
                 let feats = probe.time("feature encoder", || conv2.forward(trunk));
                 Encoded { fmap1: feats.clone().narrow(0, 0, n), fmap2: feats.narrow(0, n, n), context }
             }
-        }
+        })
     }
 }

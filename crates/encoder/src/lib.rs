@@ -12,10 +12,15 @@
 //! The layout is a module enum, so its variant name is part of each module path
 //! (`encoder.Separate.fnet...`); checkpoints keep the reference's keys (`fnet.`, `cnet.`,
 //! `conv2.`), and the model's checkpoint code maps between the two.
+//!
+//! DEFOM-Stereo's combined encoders are a variant of the separate layout
+//! ([`DepthFeatureInput::Added`]): a monocular network's features are added after the trunks
+//! ([`depth_block`]) and the images are ImageNet-normalised.
 #![deny(missing_docs)]
 
 pub mod config;
 pub mod context;
+pub mod depth_block;
 pub mod feature;
 pub mod layout;
 pub mod norm;
@@ -25,6 +30,7 @@ use burn::tensor::Tensor;
 
 pub use config::EncoderConfig;
 pub use context::ContextEncoder;
+pub use depth_block::{DepthFeatureBlock, DepthFeatureInput, InputNormalisation};
 pub use feature::{FeatureEncoder, SharedFeatureHead};
 pub use layout::{Encoded, EncoderInputs, Encoders, SeparateEncoders, SharedBackbone};
 pub use norm::NormKind;

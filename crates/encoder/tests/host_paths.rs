@@ -47,7 +47,7 @@ fn perturb_block(block: &mut ResidualBlock, device: &Device) {
 #[test]
 fn feature_encoder_host_path_equals_tensor_operations() {
     let device = Device::flex();
-    let encoder = FeatureEncoder::new(32, [16, 24, 32], NormKind::Instance, 2, &device);
+    let encoder = FeatureEncoder::new(32, [16, 24, 32], NormKind::Instance, 2, None, &device);
     let x = image(&device);
     let host = encoder.features(x.clone());
     let ad = device.clone().autodiff();
@@ -60,7 +60,7 @@ fn feature_encoder_host_path_equals_tensor_operations() {
 #[test]
 fn context_encoder_host_path_equals_tensor_operations() {
     let device = Device::flex();
-    let mut encoder = ContextEncoder::new([16, 16, 16], [16, 24, 32], NormKind::Batch, 2, &device);
+    let mut encoder = ContextEncoder::new([16, 16, 16], [16, 24, 32], NormKind::Batch, 2, None, &device);
     perturb_batch_norm(&mut encoder.norm1, &device);
     for block in encoder.layer1.iter_mut().chain(&mut encoder.layer2).chain(&mut encoder.layer3) {
         perturb_block(block, &device);
@@ -91,12 +91,12 @@ fn context_encoder_training_forward_takes_winograd_only_with_fixed_norms() {
         } else {
             {
                 let plain = dgstereo_kernels::Numerics::Sensitive;
-                encoder.heads(encoder.trunk(x.clone(), plain), 3, plain)
+                encoder.heads(encoder.trunk(x.clone(), plain), 3, plain, None)
             }
         };
         features.levels.into_iter().flatten().map(dgstereo_core::tensor::to_vec).collect::<Vec<_>>()
     };
-    let batch = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Batch, 2, &ad);
+    let batch = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Batch, 2, None, &ad);
     assert!(batch.norms_are_fixed());
     let (winograd, plain) = (outputs(&batch, true), outputs(&batch, false));
     assert_ne!(winograd, plain, "the context encoder's training forward kept the plain products");
@@ -105,7 +105,7 @@ fn context_encoder_training_forward_takes_winograd_only_with_fixed_norms() {
         let worst = a.iter().zip(b).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max) / scale;
         assert!(worst < 1e-4, "Winograd and plain products differ by {worst} (relative)");
     }
-    let instance = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Instance, 2, &ad);
+    let instance = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Instance, 2, None, &ad);
     assert!(!instance.norms_are_fixed());
     assert_eq!(outputs(&instance, true), outputs(&instance, false), "an instance-norm encoder took Winograd");
 }
@@ -118,16 +118,20 @@ fn shared_backbone_takes_winograd_in_its_heads_only() {
     let ad = Device::flex().autodiff();
     let image = || Tensor::<4>::random([1, 3, 96, 128], Distribution::Uniform(0.0, 255.0), &ad);
     let (left, right) = (image(), image());
-    let cnet = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Batch, 2, &ad);
+    let cnet = ContextEncoder::new([32, 32, 32], [32, 48, 64], NormKind::Batch, 2, None, &ad);
     let encoders = Encoders::Shared(SharedBackbone { cnet, conv2: SharedFeatureHead::new(64, 64, &ad) });
-    let inputs =
-        EncoderInputs { context_left: left.clone(), features_left: left.clone(), features_right: right.clone() };
-    let encoded = encoders.encode(inputs, 3, &mut Probe::none());
+    let inputs = EncoderInputs {
+        context_left: left.clone(),
+        features_left: left.clone(),
+        features_right: right.clone(),
+        depth: None,
+    };
+    let encoded = encoders.encode(inputs, 3, &mut Probe::none()).unwrap();
 
     let Encoders::Shared(SharedBackbone { cnet, conv2 }) = &encoders else { unreachable!() };
     let normalise = |x: Tensor<4>| x.div_scalar(255.0).mul_scalar(2.0).sub_scalar(1.0);
     let trunk = cnet.trunk(normalise(Tensor::cat(vec![left, right], 0)), dgstereo_kernels::Numerics::Sensitive);
-    let plain = cnet.heads(trunk.clone().narrow(0, 0, 1), 3, dgstereo_kernels::Numerics::Sensitive);
+    let plain = cnet.heads(trunk.clone().narrow(0, 0, 1), 3, dgstereo_kernels::Numerics::Sensitive, None);
     let feats = conv2.forward(trunk);
     let to_vec = dgstereo_core::tensor::to_vec;
     assert_eq!(to_vec(encoded.fmap1), to_vec(feats.clone().narrow(0, 0, 1)), "the trunk or feature head changed path");

@@ -1,23 +1,33 @@
 //! Loading official RAFT-Stereo checkpoints and saving/loading our own.
 //!
 //! Official `.pth` files (`raftstereo-*.pth`, saved from `DataParallel`, keys prefixed
-//! `module.`) load directly through burn-store's PyTorch reader, into a model built with the
-//! checkpoint's configuration ([`crate::checkpoint_config`] reads it from the tensors). A few keys are renamed where a
-//! PyTorch `Sequential` index has no Rust field name (`outputs08.0.1` → `outputs08.0.conv`,
-//! `mask.2` → `mask.conv2`, `downsample.0` → `downsample`); `downsample.1` is the same module as
-//! `norm3` in the reference and `num_batches_tracked` is unused, so both are ignored. Any other
-//! unknown key, any missing key and any shape mismatch is an error naming the key, and
-//! non-finite weights are refused. Our own checkpoints are safetensors with the resolved config
-//! in the metadata.
+//! `module.`; DEFOM-Stereo's `defomstereo_*.pth`) load directly through burn-store's PyTorch
+//! reader, into a model built with the checkpoint's configuration ([`crate::checkpoint_config`]
+//! reads it from the tensors). A few keys are renamed where a PyTorch `Sequential` index has no
+//! Rust field name (`outputs08.0.1` → `outputs08.0.conv`, `mask.2` → `mask.conv2`, `downsample.0`
+//! → `downsample`, Depth Anything's `resize_layers.0` → `upsample_4x`, ...), and DEFOM-Stereo's
+//! `defomencoder.depth_anything.` is `monocular.`; `downsample.1` is the same module as `norm3`
+//! in the reference, `num_batches_tracked` is unused and DEFOM-Stereo's `mean` and `std` are the
+//! ImageNet constants its encoders apply ([`dgstereo_encoder::InputNormalisation`]), so these are
+//! ignored. Any other unknown key, any missing key and any shape mismatch is an error naming the
+//! key, and non-finite weights are refused. A state dict held in memory (the seeded weights of a
+//! conformance file, [`crate::seeded`]) goes through the same renames and checks
+//! ([`load_state_dict`]). Our own checkpoints are safetensors with the resolved config in the
+//! metadata.
 
 use std::path::Path;
 
-use burn::store::{ApplyError, ModuleSnapshot, PytorchStore, SafetensorsStore};
+use burn::store::burn_pack::Tensor as PackTensor;
+use burn::store::{
+    ApplyError, ApplyResult, KeyRemapper, ModuleSnapshot, PyTorchToBurnAdapter, PytorchStore, SafetensorsStore, bridge,
+};
+use burn::tensor::TensorData;
 use dgstereo_core::atomic_file::commit_file;
 use dgstereo_core::{Error, Result};
 
 use crate::RaftStereo;
 use crate::file_keys::{TO_FILE, from_file};
+use crate::seeded::StateDict;
 
 /// Renames from the reference's state-dict keys to our module paths, applied in order.
 const RENAMES: &[(&str, &str)] = &[
@@ -31,6 +41,14 @@ const RENAMES: &[(&str, &str)] = &[
     (r"update_block\.mask\.2\.", "update_block.mask.conv2."),
     // The encoder layout's module (enum variants are skipped when reading `.pth` files).
     (r"^(fnet|cnet|conv2)\.", "encoder.$1."),
+    // DEFOM-Stereo's Depth Anything V2, and the PyTorch names of its DPT heads.
+    (r"^defomencoder\.depth_anything\.", "monocular."),
+    (r"\.(depth_head|depth_feat)\.resize_layers\.0\.", ".$1.upsample_4x."),
+    (r"\.(depth_head|depth_feat)\.resize_layers\.1\.", ".$1.upsample_2x."),
+    (r"\.(depth_head|depth_feat)\.resize_layers\.3\.", ".$1.downsample_2x."),
+    (r"\.output_conv2\.0\.", ".output_conv2_hidden."),
+    (r"\.output_conv2\.2\.", ".output_conv2_out."),
+    (r"\.resConfUnit([12])\.", ".res_conf_unit$1."),
 ];
 
 /// Our module path of an official state-dict key (with or without the `module.` prefix): the
@@ -45,9 +63,10 @@ pub fn module_path_of_official_key(key: &str) -> String {
     path.replace("downsample.1.", "norm3.")
 }
 
-/// Whether an unused checkpoint key is one the reference stores redundantly.
+/// Whether an unused checkpoint key is one the reference stores redundantly (or, DEFOM-Stereo's
+/// `mean` and `std`, as constants the encoders apply).
 fn ignorable(key: &str) -> bool {
-    key.ends_with("num_batches_tracked") || key.contains("downsample.1.")
+    key.ends_with("num_batches_tracked") || key.contains("downsample.1.") || key == "mean" || key == "std"
 }
 
 /// Loads an official RAFT-Stereo `.pth` checkpoint into `model` (built with the matching config).
@@ -68,6 +87,38 @@ fn load_pytorch_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Result
     let result = model
         .load_from(&mut store)
         .map_err(|e| Error::Checkpoint { path: path.into(), message: format!("cannot read checkpoint: {e}") })?;
+    check_official(model, result, path, strict)
+}
+
+/// Loads a state dict in the official layout held in memory (the seeded weights of a
+/// conformance file, [`crate::seeded::golden_state_dict`]) into `model`, through the same
+/// renames and checks as an official `.pth` file (strict: every key must land, every parameter
+/// come from it); `origin` names it in errors.
+///
+/// # Errors
+/// [`Error::Checkpoint`] naming `origin` and the keys that are missing, unknown, mis-shaped or
+/// not finite.
+pub fn load_state_dict(mut model: RaftStereo, state: &StateDict, origin: &Path) -> Result<RaftStereo> {
+    let tensors: Vec<PackTensor> = state
+        .iter()
+        .map(|t| bridge::from_data(TensorData::new(t.values.clone(), t.shape.clone()), t.key.clone(), None))
+        .collect();
+    let renames = KeyRemapper::from_patterns(RENAMES.to_vec()).expect("the renames are valid patterns");
+    let (tensors, _) = renames.remap(tensors);
+    // As the PyTorch store applies a file's tensors: PyTorch's layouts, enum variants skipped.
+    let result = model.apply(tensors, None, Some(Box::new(PyTorchToBurnAdapter)), true);
+    check_official(model, result, origin, true).map(|(m, _)| m)
+}
+
+/// What a load of the official layout into `model` left: an error naming the keys that did not
+/// land (all of them strictly; else only keys unknown to the model and errors other than shape
+/// mismatches), or the model with the parameters it kept from its initialisation.
+fn check_official(
+    model: RaftStereo,
+    result: ApplyResult,
+    path: &Path,
+    strict: bool,
+) -> Result<(RaftStereo, Vec<String>)> {
     let fail = |message: String| Err(Error::Checkpoint { path: path.into(), message });
     let (kept, errors) = split_errors(&result.errors, strict);
     if let Some(e) = errors.first() {

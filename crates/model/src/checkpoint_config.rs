@@ -19,7 +19,8 @@
 //! configuration is an error listing the keys that disagree. What the tensors cannot show comes
 //! from the official README's commands ([`OfficialPreset`]): the realtime architecture (shared
 //! backbone, n_downsample 3, 2 GRU levels) runs with `slow_fast_gru` and 7 iterations, the
-//! others with the defaults and 32 iterations.
+//! others with the defaults and 32 iterations. A DEFOM-Stereo checkpoint adds its own variants
+//! ([`crate::defom_config`]) and runs with its evaluation's arguments.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -30,7 +31,7 @@ use dgstereo_core::{Error, Result};
 use dgstereo_encoder::NormKind;
 
 use crate::official_keys::{KeyShape, model_official_keys, pth_keys, redundant};
-use crate::{ModelConfig, RaftStereo, checkpoint};
+use crate::{ModelConfig, RaftStereo, checkpoint, defom_config};
 
 /// The most disagreeing keys an error lists.
 const LISTED: usize = 12;
@@ -46,6 +47,9 @@ pub enum OfficialPreset {
     InstanceContext,
     /// `raftstereo-{sceneflow,middlebury,eth3d}.pth`: the argparse defaults, 32 iterations.
     Default,
+    /// `defomstereo_*.pth`: `evaluate_stereo.py`'s defaults, 32 iterations of which 8 scale
+    /// iterations ([`crate::defom_config`]).
+    Defom,
     /// An architecture no official checkpoint has: the argparse defaults for the rest.
     Custom,
 }
@@ -53,6 +57,9 @@ pub enum OfficialPreset {
 impl OfficialPreset {
     /// The preset of a detected architecture.
     pub fn of(config: &ModelConfig) -> Self {
+        if config.monocular != dgstereo_prior::MonocularConfig::None {
+            return Self::Defom;
+        }
         let (e, u) = (&config.encoder, &config.updater);
         let c = &config.correlation;
         let standard = u.hidden_dims == [128; 3]
@@ -94,6 +101,7 @@ impl OfficialPreset {
             Self::Realtime => "realtime (raftstereo-realtime.pth)",
             Self::InstanceContext => "instance-norm context (iraftstereo_rvc.pth)",
             Self::Default => "default (raftstereo-sceneflow/middlebury/eth3d.pth)",
+            Self::Defom => "DEFOM-Stereo (defomstereo_*.pth, evaluate_stereo.py's arguments)",
             Self::Custom => "no official preset (argparse defaults)",
         }
     }
@@ -121,7 +129,7 @@ impl fmt::Display for CheckpointConfig {
 pub fn summary(config: &ModelConfig) -> String {
     let (e, u, c) = (&config.encoder, &config.updater, &config.correlation);
     let norm = serde_json::to_value(e.context_norm).ok().and_then(|v| v.as_str().map(String::from));
-    format!(
+    let raft = format!(
         "{}, n_downsample {}, {} GRU levels, hidden {:?}, context_norm {}, corr {} levels x radius {}, slow_fast_gru {}",
         if e.shared_backbone { "shared backbone" } else { "separate feature encoder" },
         u.n_downsample,
@@ -131,7 +139,11 @@ pub fn summary(config: &ModelConfig) -> String {
         c.levels,
         c.radius,
         if u.slow_fast_gru { "on" } else { "off" },
-    )
+    );
+    match defom_config::summary(config) {
+        Some(defom) => format!("{raft}; {defom}"),
+        None => raft,
+    }
 }
 
 /// Splits the motion encoder's input channels into `(levels, radius)`: radius 4 and 4 levels
@@ -238,6 +250,9 @@ fn architecture(keys: &BTreeMap<&str, &[usize]>) -> std::result::Result<ModelCon
             problems.push(format!("'cnet.norm1.weight' is a group norm (width/8 groups), but a width is {w}"));
         }
     }
+    if defom_config::is_defom(keys) {
+        defom_config::complete(&mut config, keys, &mut problems);
+    }
     if problems.is_empty() { Ok(config) } else { Err(problems) }
 }
 
@@ -274,9 +289,21 @@ pub fn config_from_keys(keys: &[KeyShape], device: &Device) -> std::result::Resu
     config_and_model(keys, device).map(|(c, _)| c)
 }
 
+/// The configuration whose official state dict `keys` is, and a model of it built on `device`
+/// (fresh weights, for the loader) after comparing its every key; the error lists the keys that
+/// disagree.
+pub fn model_from_keys(
+    keys: &[KeyShape],
+    device: &Device,
+) -> std::result::Result<(CheckpointConfig, RaftStereo), String> {
+    config_and_model(keys, device)
+}
+
 fn config_and_model(keys: &[KeyShape], device: &Device) -> std::result::Result<(CheckpointConfig, RaftStereo), String> {
     let primary: BTreeMap<&str, &[usize]> = keys.iter().map(|(k, s)| (k.as_str(), s.as_slice())).collect();
-    let fail = |p: &[String]| format!("the tensors match no consistent RAFT-Stereo configuration: {}", listing(p));
+    let fail = |p: &[String]| {
+        format!("the tensors match no consistent RAFT-Stereo (or DEFOM-Stereo) configuration: {}", listing(p))
+    };
     let mut model_config = architecture(&primary).map_err(|p| fail(&p))?;
     model_config.validate().map_err(|e| fail(&[e.to_string()]))?;
     let preset = OfficialPreset::of(&model_config);

@@ -2,12 +2,18 @@
 
 use dgstereo_core::{Error, Problem, Result};
 use dgstereo_costvolume::CorrelationConfig;
+use dgstereo_encoder::DepthFeatureInput;
 pub use dgstereo_encoder::EncoderConfig;
 use dgstereo_fusion::FusionConfig;
+use dgstereo_prior::MonocularConfig;
 use dgstereo_updater::{GuidanceKind, UpdaterConfig};
 use serde::{Deserialize, Serialize};
 
-/// The whole network: RAFT-Stereo's options plus the paper's fusion and guidance.
+use crate::initial_disparity::InitialDisparity;
+
+/// The whole network: RAFT-Stereo's options plus the paper's fusion and guidance, and the
+/// variants that make it DEFOM-Stereo (an embedded monocular network, encoders that add its
+/// features, the disparity initialiser, the scale lookup and update).
 ///
 /// Every field has RAFT-Stereo's default, so an empty TOML table is the reference model.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
@@ -25,20 +31,74 @@ pub struct ModelConfig {
     /// Image/depth fusion before the encoders.
     #[serde(default)]
     pub fusion: FusionConfig,
+    /// A monocular depth network inside the stereo network (DEFOM-Stereo's Depth Anything V2).
+    #[serde(default)]
+    pub monocular: MonocularConfig,
+    /// The disparity the update loop starts from.
+    #[serde(default)]
+    pub initial_disparity: InitialDisparity,
 }
 
 impl ModelConfig {
     /// Everything wrong with the options, keys relative to the model table
     /// (`updater.n_gru_layers`, `fusion.features`): each stage's own
-    /// [`problems`](UpdaterConfig::problems), gathered under its table.
+    /// [`problems`](UpdaterConfig::problems), gathered under its table, and the ones between
+    /// stages ([`Self::stage_problems`]).
     pub fn problems(&self) -> Vec<Problem> {
         let stages = [
             ("updater", self.updater.problems()),
             ("correlation", self.correlation.problems()),
             ("encoder", self.encoder.problems()),
             ("fusion", self.fusion.problems()),
+            ("monocular", self.monocular.problems()),
+            ("initial_disparity", self.initial_disparity.problems()),
         ];
-        stages.into_iter().flat_map(|(table, problems)| problems.into_iter().map(move |p| p.within(table))).collect()
+        let mut problems: Vec<Problem> = stages
+            .into_iter()
+            .flat_map(|(table, problems)| problems.into_iter().map(move |p| p.within(table)))
+            .collect();
+        problems.extend(self.stage_problems());
+        problems
+    }
+
+    /// The problems between stages: a stage that reads what no other stage makes (the
+    /// encoders' or the initialiser's monocular features without a monocular network, the scale
+    /// update without the scale lookup), and a monocular network that nothing reads.
+    pub fn stage_problems(&self) -> Vec<Problem> {
+        let mut problems = Vec::new();
+        let monocular = self.monocular != MonocularConfig::None;
+        if self.encoder.depth_features == DepthFeatureInput::Added && !monocular {
+            problems.push(Problem::new(
+                "encoder.depth_features",
+                "\"added\" needs a monocular network's features: set model.monocular (kind = \"depth-anything-v2\")",
+            ));
+        }
+        if self.initial_disparity.needs_monocular() && !monocular {
+            problems.push(Problem::new(
+                "initial_disparity.kind",
+                format!(
+                    "\"{}\" scales a monocular network's inverse depth: set model.monocular (kind = \"depth-anything-v2\")",
+                    self.initial_disparity.kind()
+                ),
+            ));
+        }
+        if monocular
+            && self.encoder.depth_features == DepthFeatureInput::None
+            && !self.initial_disparity.needs_monocular()
+        {
+            problems.push(Problem::new(
+                "monocular.kind",
+                "nothing reads the monocular network: set encoder.depth_features = \"added\" or an initial_disparity \
+                 that uses it",
+            ));
+        }
+        if self.updater.scale_update.is_some() && self.correlation.scale_lookup.is_none() {
+            problems.push(Problem::new(
+                "updater.scale_update",
+                "the scale update reads the correlation's scale lookup: set model.correlation.scale_lookup",
+            ));
+        }
+        problems
     }
 
     /// Checks the combination of options.

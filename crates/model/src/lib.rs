@@ -7,27 +7,39 @@
 //! `.pth` checkpoints load directly ([`checkpoint`]) into the architecture their tensors show
 //! ([`checkpoint_config`], which reads the state-dict keys through [`official_keys`]), and
 //! [`verify`] compares a forward pass with the activations the official code computed.
+//!
+//! DEFOM-Stereo is the same network with other variants chosen ([`ModelConfig`]'s monocular
+//! network, encoders that add its features, [`InitialDisparity`], the scale lookup and update);
+//! its official checkpoints load through the same loader ([`checkpoint`]), their configuration
+//! read from their tensors ([`defom_config`]), and [`verify_defom`] checks it against the official
+//! code's activations with seeded weights ([`seeded`]).
 #![deny(missing_docs)]
 
 pub mod canonical_safetensors;
 pub mod checkpoint;
 pub mod checkpoint_config;
 pub mod config;
+pub mod defom_config;
+mod encode;
 pub mod file_keys;
 pub mod grown_inputs;
 pub mod inference;
+pub mod initial_disparity;
 pub mod network;
 pub mod official_keys;
 pub mod profile;
+pub mod seeded;
 pub mod stage_backward;
 pub mod verify;
+pub mod verify_defom;
 
 pub use config::{EncoderConfig, ModelConfig};
 pub use inference::{StereoModel, padded_disparities};
+pub use initial_disparity::InitialDisparity;
 pub use network::{FlowOutput, ForwardOptions, Probe, RaftStereo, Trace};
 /// The stage crates, re-exported so benchmarks and tools can drive single stages of a model
 /// (their traits included) through this crate alone.
 pub use {
-    dgstereo_costvolume as costvolume, dgstereo_encoder as encoder, dgstereo_fusion as fusion,
+    dgstereo_costvolume as costvolume, dgstereo_encoder as encoder, dgstereo_fusion as fusion, dgstereo_prior as prior,
     dgstereo_updater as updater,
 };

@@ -6,35 +6,49 @@
 //! one [`Probe`].
 //!
 //! The pass is written once, as stage functions that [`RaftStereo::forward_flow`] calls in
-//! sequence: `encode` (fusion, encoders, the GRUs' initial states and context), then
-//! `correlation_volume` and `update_grid` once, per iteration `lookup` and `update`, and
-//! `upsample_weights` with `upsample` where a flow is returned. The per-stage backward profile
+//! sequence: `encode` (monocular network, fusion, encoders, the GRUs' initial states and context,
+//! the initial disparity; the `encode` module), then `correlation_volume` and `update_grid` once,
+//! per iteration `lookup` (or `scale_lookup`) and `update`, and `upsample_weights` with
+//! `upsample` where a flow is returned. The per-stage backward profile
 //! ([`crate::stage_backward`]) runs the same functions, one stage at a time.
+//!
+//! DEFOM-Stereo is this pass with its variants chosen: the loop's state is then a positive
+//! disparity ([`MotionKind::Disparity`], looked up at `x - d`) rather than RAFT-Stereo's x flow
+//! (at `x + f`), it starts from the initialiser's disparity, and its first `scale_iters`
+//! iterations run the scale block on the scale lookup and multiply the disparity. What the
+//! pass returns is the x flow either way.
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
-use burn::tensor::activation::{relu, tanh};
 use burn::tensor::{DType, Device, FloatDType, Tensor, TensorData};
-use dgstereo_core::DepthPrior;
 use dgstereo_core::device::float_dtype;
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::tensor::cast_float;
+use dgstereo_core::{DepthPrior, Error};
 use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementation, CostVolume};
-use dgstereo_encoder::{ContextFeatures, Encoded, EncoderInputs, Encoders};
-use dgstereo_fusion::{Fusion, FusionTarget, ImageFusion};
-use dgstereo_kernels::{Numerics, UpdateLoop, conv2d_forward};
-use dgstereo_updater::{GateContext, GuidanceKind, MultiLevelUpdateBlock, Updater, convex_upsample};
+use dgstereo_encoder::Encoders;
+use dgstereo_fusion::{Fusion, FusionTarget};
+use dgstereo_kernels::UpdateLoop;
+use dgstereo_prior::DepthAnythingV2Features;
+use dgstereo_updater::{
+    GateContext, GuidanceKind, HeadOutput, MotionKind, MultiLevelUpdateBlock, UpdateOutput, Updater, convex_upsample,
+};
 
 use crate::config::ModelConfig;
+use crate::initial_disparity::InitialDisparity;
 
 pub use dgstereo_core::{Probe, Trace};
 
-/// RAFT-Stereo with the paper's optional depth fusion and GRU guidance.
+/// RAFT-Stereo with the paper's optional depth fusion and GRU guidance, and DEFOM-Stereo's
+/// variants.
 ///
-/// Field names follow the official state dict (`context_zqr_convs`, `update_block`; the encoder
-/// layout holds `fnet`, `cnet` and `conv2`), so official checkpoints load by path.
+/// Field names follow the official state dicts (`context_zqr_convs`, `update_block`,
+/// `scale_update_block`; the encoder layout holds `fnet`, `cnet` and `conv2`), so official
+/// checkpoints load by path; DEFOM-Stereo's `defomencoder.depth_anything` is `monocular`.
 #[derive(Module, Debug)]
 pub struct RaftStereo {
+    /// The monocular network inside the stereo network (DEFOM-Stereo), none in RAFT-Stereo.
+    pub monocular: Option<DepthAnythingV2Features>,
     /// Image/depth fusion (identity for RAFT-Stereo).
     pub fusion: Fusion,
     /// Feature and context encoders, separate or with a shared backbone.
@@ -43,6 +57,16 @@ pub struct RaftStereo {
     pub context_zqr_convs: Vec<Conv2d>,
     /// The update operator.
     pub update_block: MultiLevelUpdateBlock,
+    /// The scale update operator run for the first `scale_iters` iterations (DEFOM-Stereo).
+    pub scale_update_block: Option<MultiLevelUpdateBlock>,
+    /// Iterations that run the scale update block.
+    pub scale_iters: usize,
+    /// What the loop iterates: RAFT-Stereo's x flow or a positive disparity.
+    #[module(skip)]
+    pub motion: MotionKind,
+    /// Where the loop starts.
+    #[module(skip)]
+    pub initial_disparity: InitialDisparity,
     /// Correlation options.
     #[module(skip)]
     pub correlation: CorrelationConfig,
@@ -85,6 +109,9 @@ pub(crate) struct Encodings {
     pub hidden: Vec<Tensor<4>>,
     /// Per GRU level, finest first, the gates' context terms.
     pub gates: Vec<GateContext>,
+    /// The loop's initial state (f32, the motion's convention) where the initialiser gives
+    /// one; zero otherwise.
+    pub initial: Option<Tensor<4>>,
 }
 
 /// The fixed inputs of the update loop at the update grid `[N, 1, H/f, W/f]`
@@ -133,9 +160,33 @@ impl RaftStereo {
     pub fn new(config: &ModelConfig, device: &Device) -> dgstereo_core::Result<Self> {
         let u = &config.updater;
         let dims = u.hidden_dims;
+        let c = &config.correlation;
+        let monocular = config.monocular.init(device);
+        let depth_channels = monocular.as_ref().map(DepthAnythingV2Features::feature_channels);
+        let output = match u.delta_clip {
+            // The lookup's reach: `radius` at the coarsest of `levels` levels, in pixels of level 0.
+            true => HeadOutput::ClippedDelta { bound: ((1usize << c.levels.saturating_sub(1)) * c.radius) as f32 },
+            false => HeadOutput::Delta,
+        };
+        let scale_update_block = match (&u.scale_update, &c.scale_lookup) {
+            (None, _) => None,
+            (Some(_), Some(lookup)) => {
+                Some(MultiLevelUpdateBlock::new(u, lookup.channels(), HeadOutput::Scale, device))
+            }
+            (Some(_), None) => {
+                return Err(Error::config(
+                    "updater.scale_update",
+                    "the scale update reads the correlation's scale lookup: set model.correlation.scale_lookup",
+                ));
+            }
+        };
         Ok(Self {
+            monocular,
             fusion: config.fusion.init(device)?,
-            encoder: config.encoder.init(dims, u.n_downsample, device),
+            encoder: config
+                .encoder
+                .init(dims, u.n_downsample, depth_channels, device)
+                .map_err(|e| e.within("encoder"))?,
             // Level `i` counts from the finest (1/4, `hidden_dims[2]`) as the context does.
             context_zqr_convs: (0..u.n_gru_layers)
                 .map(|i| {
@@ -143,8 +194,12 @@ impl RaftStereo {
                     conv2d([d, d * 3], 3, 1, 1, ConvInit::TorchDefault, device)
                 })
                 .collect(),
-            update_block: MultiLevelUpdateBlock::new(u, config.correlation.channels(), device),
-            correlation: config.correlation.clone(),
+            update_block: MultiLevelUpdateBlock::new(u, c.channels(), output, device),
+            scale_update_block,
+            scale_iters: u.scale_update.as_ref().map_or(0, |s| s.iters),
+            motion: u.motion,
+            initial_disparity: config.initial_disparity,
+            correlation: c.clone(),
             guidance: u.guidance,
             fuse_features: config.fusion.target() == FusionTarget::Both,
             n_gru_layers: u.n_gru_layers,
@@ -175,59 +230,56 @@ impl RaftStereo {
     ) -> dgstereo_core::Result<FlowOutput> {
         let ForwardOptions { flow_init, implementation, all_iterations, mut probe } = options;
         let probe = &mut probe;
-        let Encodings { fmap1, fmap2, mut hidden, gates } = self.encode(left, right, prior, probe)?;
+        let Encodings { fmap1, fmap2, mut hidden, gates, initial } = self.encode(left, right, prior, probe)?;
         let implementation = implementation.unwrap_or(self.correlation.implementation);
         let corr_fn = self.correlation_volume(fmap1, fmap2, implementation, probe);
         let grid = self.update_grid(&hidden[0], prior, probe)?;
-        let mut flow_x = match flow_init {
-            Some(flow) => cast_float(flow, FloatDType::F32),
-            None => grid.zero_flow(),
+        // The loop's state: the x flow, or a positive disparity (`MotionKind`), in f32.
+        let mut state = match (flow_init, initial) {
+            (Some(flow), _) => state_of_flow(self.motion, cast_float(flow, FloatDType::F32)),
+            (None, Some(initial)) => initial,
+            (None, None) => grid.zero_flow(),
         };
         let mut flow_up = Vec::new();
         // The iterations run the same convolutions: their transformed weights are kept until the
         // loop ends, and the training forward takes Winograd in it (see `UpdateLoop`).
         let _update_loop = UpdateLoop::new();
         for k in 0..iters {
-            flow_x = flow_x.detach();
-            let corr = self.lookup(&corr_fn, &grid, flow_x.clone(), probe);
+            state = state.detach();
+            let (block, corr) = match &self.scale_update_block {
+                Some(scale_block) if k < self.scale_iters => {
+                    (scale_block, self.scale_lookup(&corr_fn, &grid, state.clone(), probe))
+                }
+                _ => (&self.update_block, self.lookup(&corr_fn, &grid, state.clone(), probe)),
+            };
             probe.record(format_args!("iter.{k}.corr"), &corr);
-            let delta_x = self.update(&mut hidden, &gates, corr, &grid, flow_x.clone(), probe);
-            flow_x = flow_x + cast_float(delta_x, FloatDType::F32);
+            let update = self.update(block, &mut hidden, &gates, corr, &grid, state.clone(), probe);
+            probe.record(format_args!("iter.{k}.prediction"), &update.prediction);
+            state = update.apply(state);
             for (i, hi) in hidden.iter().enumerate() {
                 probe.record(format_args!("iter.{k}.hidden.{i}"), hi);
             }
-            probe.record(format_args!("iter.{k}.flow_lowres"), &flow_x);
+            if probe.tracing() {
+                probe.record(format_args!("iter.{k}.flow_lowres"), &flow_of_state(self.motion, state.clone()));
+            }
             // The mask never feeds back into the state: computed only where it is used.
             let upsampled = all_iterations || k + 1 == iters;
             if upsampled || probe.tracing() {
-                let up_mask = self.upsample_weights(&hidden, probe);
+                let up_mask = self.upsample_weights(block, &hidden, probe);
                 probe.record(format_args!("iter.{k}.up_mask"), &up_mask);
                 if !upsampled {
                     continue;
                 }
-                let up = self.upsample(flow_x.clone(), up_mask, probe);
+                let up = self.upsample(state.clone(), up_mask, probe);
+                if self.motion == MotionKind::Disparity {
+                    probe.record(format_args!("iter.{k}.disparity_up"), &up);
+                }
+                let up = flow_of_state(self.motion, up);
                 probe.record(format_args!("iter.{k}.flow_up"), &up);
                 flow_up.push(up);
             }
         }
-        Ok(FlowOutput { flow_up, flow_lowres: flow_x })
-    }
-
-    /// Stage 1, fusion and encoders: both views' features, and per GRU level the initial hidden
-    /// state and the gates' context terms.
-    pub(crate) fn encode(
-        &self,
-        left: Tensor<4>,
-        right: Tensor<4>,
-        prior: Option<&DepthPrior>,
-        probe: &mut Probe<'_>,
-    ) -> dgstereo_core::Result<Encodings> {
-        let Encoded { fmap1, fmap2, context } =
-            self.encoder.encode(self.fuse(left, right, prior, probe)?, self.n_gru_layers, probe);
-        probe.record("fnet.left", &fmap1);
-        probe.record("fnet.right", &fmap2);
-        let (hidden, gates) = self.gru_context(context, probe);
-        Ok(Encodings { fmap1, fmap2, hidden, gates })
+        Ok(FlowOutput { flow_up, flow_lowres: flow_of_state(self.motion, state) })
     }
 
     /// Stage 2, the cost volume of `fmap1` against `fmap2` (`[N, C, H/f, W/f]`) by
@@ -290,90 +342,87 @@ impl RaftStereo {
     }
 
     /// Stage 3, one iteration's lookup: the cost volume sampled around each pixel's match at
-    /// `x + flow_x` (`flow_x`: `[N, 1, H/f, W/f]`, f32), in the update block's dtype.
+    /// `x + f` for the x flow `f`, `x - d` for the disparity `d` (the loop's `state`:
+    /// `[N, 1, H/f, W/f]`, f32), in the update block's dtype.
     pub(crate) fn lookup(
         &self,
         corr_fn: &Correlation,
         grid: &UpdateGrid,
-        flow_x: Tensor<4>,
+        state: Tensor<4>,
         probe: &mut Probe<'_>,
     ) -> Tensor<4> {
-        probe.time("correlation lookup", || cast_float(corr_fn.lookup(grid.coords0.clone() + flow_x), grid.dtype))
+        let at = match self.motion {
+            MotionKind::Flow => grid.coords0.clone() + state,
+            MotionKind::Disparity => grid.coords0.clone() - state,
+        };
+        probe.time("correlation lookup", || cast_float(corr_fn.lookup(at), grid.dtype))
     }
 
-    /// Stage 4, one update step: advances `hidden` from the lookup `corr` and the current
-    /// `flow_x` (f32) and returns the x flow's update, in the update block's dtype.
+    /// Stage 3 of a scale iteration: the correlation's scale lookup around the matches of the
+    /// scaled x flows (`state` as in [`Self::lookup`]), in the update block's dtype.
+    pub(crate) fn scale_lookup(
+        &self,
+        corr_fn: &Correlation,
+        grid: &UpdateGrid,
+        state: Tensor<4>,
+        probe: &mut Probe<'_>,
+    ) -> Tensor<4> {
+        let Some(lookup) = &self.correlation.scale_lookup else {
+            // A scale block exists only with its lookup (`ModelConfig::stage_problems`).
+            return self.lookup(corr_fn, grid, state, probe);
+        };
+        let flow_x = flow_of_state(self.motion, state);
+        probe.time("correlation lookup", || {
+            cast_float(corr_fn.scale_lookup(grid.coords0.clone(), flow_x, lookup), grid.dtype)
+        })
+    }
+
+    /// Stage 4, one update step of `block`: advances `hidden` from the lookup `corr` and the
+    /// loop's `state` (f32) and returns the block's prediction, in the update block's dtype.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn update(
         &self,
+        block: &MultiLevelUpdateBlock,
         hidden: &mut [Tensor<4>],
         gates: &[GateContext],
         corr: Tensor<4>,
         grid: &UpdateGrid,
-        flow_x: Tensor<4>,
+        state: Tensor<4>,
+        probe: &mut Probe<'_>,
+    ) -> UpdateOutput {
+        let motion = match self.motion {
+            MotionKind::Flow => Tensor::cat(vec![cast_float(state, grid.dtype), grid.zeros.clone()], 1),
+            MotionKind::Disparity => cast_float(state, grid.dtype),
+        };
+        block.step(hidden, gates, corr, motion, grid.guidance.as_ref(), probe)
+    }
+
+    /// Stage 5a, `block`'s mask head: the convex upsampling's weights from the finest state.
+    pub(crate) fn upsample_weights(
+        &self,
+        block: &MultiLevelUpdateBlock,
+        hidden: &[Tensor<4>],
         probe: &mut Probe<'_>,
     ) -> Tensor<4> {
-        let flow = Tensor::cat(vec![cast_float(flow_x, grid.dtype), grid.zeros.clone()], 1);
-        self.update_block.step(hidden, gates, corr, flow, grid.guidance.as_ref(), probe).delta_x
+        probe.time("mask head", || block.upsample_mask(hidden))
     }
 
-    /// Stage 5a, the mask head: the convex upsampling's weights from the finest state.
-    pub(crate) fn upsample_weights(&self, hidden: &[Tensor<4>], probe: &mut Probe<'_>) -> Tensor<4> {
-        probe.time("mask head", || self.update_block.upsample_mask(hidden))
-    }
-
-    /// Stage 5b, convex upsampling of `flow_x` (f32) to full resolution by `mask`.
-    pub(crate) fn upsample(&self, flow_x: Tensor<4>, mask: Tensor<4>, probe: &mut Probe<'_>) -> Tensor<4> {
+    /// Stage 5b, convex upsampling of the loop's state (f32) to full resolution by `mask`.
+    pub(crate) fn upsample(&self, state: Tensor<4>, mask: Tensor<4>, probe: &mut Probe<'_>) -> Tensor<4> {
         let factor = 1usize << self.n_downsample;
-        probe.time("convex upsample", || convex_upsample(flow_x, cast_float(mask, FloatDType::F32), factor))
+        probe.time("convex upsample", || convex_upsample(state, cast_float(mask, FloatDType::F32), factor))
     }
+}
 
-    /// The images each encoder sees: the fused left view for the context, and for the features
-    /// the fused views or the raw ones ([`FusionTarget`]); an error when the fusion needs the
-    /// prior and there is none.
-    pub(crate) fn fuse(
-        &self,
-        left: Tensor<4>,
-        right: Tensor<4>,
-        prior: Option<&DepthPrior>,
-        probe: &mut Probe<'_>,
-    ) -> dgstereo_core::Result<EncoderInputs> {
-        let (prior_left, prior_right) = match prior {
-            Some(p) => (Some(p.left.clone()), Some(p.right.clone())),
-            None => (None, None),
-        };
-        let context_left = probe.time("fusion", || self.fusion.fuse(left.clone(), prior_left))?;
-        let (features_left, features_right) = if self.fuse_features {
-            (context_left.clone(), probe.time("fusion", || self.fusion.fuse(right, prior_right))?)
-        } else {
-            (left, right)
-        };
-        Ok(EncoderInputs { context_left, features_left, features_right })
+/// The loop's state of an x flow (f32): the flow itself, or the disparity `-flow`.
+pub(crate) fn state_of_flow(motion: MotionKind, flow_x: Tensor<4>) -> Tensor<4> {
+    match motion {
+        MotionKind::Flow => flow_x,
+        MotionKind::Disparity => flow_x.neg(),
     }
+}
 
-    /// The GRUs' initial hidden states (tanh of the first heads) and their gate context terms
-    /// (the `context_zqr_convs` of the ReLU of the second heads), finest level first.
-    pub(crate) fn gru_context(
-        &self,
-        context: ContextFeatures,
-        probe: &mut Probe<'_>,
-    ) -> (Vec<Tensor<4>>, Vec<GateContext>) {
-        let levels = context.levels.len();
-        let mut hidden: Vec<Tensor<4>> = Vec::with_capacity(levels);
-        let mut gates: Vec<GateContext> = Vec::with_capacity(levels);
-        for (i, [h, c]) in context.levels.into_iter().enumerate() {
-            let (h, g) = probe.time("context encoder", || {
-                (
-                    tanh(h),
-                    GateContext::from_zqr(conv2d_forward(&self.context_zqr_convs[i], relu(c), Numerics::Sensitive)),
-                )
-            });
-            probe.record(format_args!("context.hidden.{i}"), &h);
-            probe.record(format_args!("context.z.{i}"), &g.z);
-            probe.record(format_args!("context.r.{i}"), &g.r);
-            probe.record(format_args!("context.q.{i}"), &g.q);
-            hidden.push(h);
-            gates.push(g);
-        }
-        (hidden, gates)
-    }
+/// The x flow (f32) of the loop's state: the state itself, or `-disparity`.
+pub(crate) fn flow_of_state(motion: MotionKind, state: Tensor<4>) -> Tensor<4> {
+    state_of_flow(motion, state)
 }

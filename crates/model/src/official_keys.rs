@@ -1,5 +1,5 @@
-//! The state-dict keys of official RAFT-Stereo checkpoints, read from a file or derived from a
-//! model.
+//! The state-dict keys of official RAFT-Stereo (and DEFOM-Stereo) checkpoints, read from a file
+//! or derived from a model.
 //!
 //! [`pth_keys`] lists a `.pth` file's tensors as the file names them, without the `DataParallel`
 //! prefix `module.`. [`model_official_keys`] lists the keys an official checkpoint of a model's
@@ -33,6 +33,14 @@ const INVERSE_RENAMES: &[(&str, &str)] = &[
     (r"^conv2\.conv\.", "conv2.1."),
     (r"update_block\.mask\.conv1\.", "update_block.mask.0."),
     (r"update_block\.mask\.conv2\.", "update_block.mask.2."),
+    // DEFOM-Stereo's Depth Anything V2 and the PyTorch names of its DPT heads.
+    (r"^monocular\.", "defomencoder.depth_anything."),
+    (r"\.(depth_head|depth_feat)\.upsample_4x\.", ".$1.resize_layers.0."),
+    (r"\.(depth_head|depth_feat)\.upsample_2x\.", ".$1.resize_layers.1."),
+    (r"\.(depth_head|depth_feat)\.downsample_2x\.", ".$1.resize_layers.3."),
+    (r"\.output_conv2_hidden\.", ".output_conv2.0."),
+    (r"\.output_conv2_out\.", ".output_conv2.2."),
+    (r"\.res_conf_unit([12])\.", ".resConfUnit$1."),
 ];
 
 /// The official state-dict key (without `module.`) of one of our module paths (enum variants,
@@ -46,10 +54,11 @@ pub fn official_key_of_module_path(path: &str) -> String {
     key
 }
 
-/// Whether a key is one the reference stores redundantly (`num_batches_tracked`, and
-/// `downsample.1.*`, the same BatchNorm as the block's `norm3`).
+/// Whether a key is one the reference stores redundantly (`num_batches_tracked`,
+/// `downsample.1.*`, the same BatchNorm as the block's `norm3`, and DEFOM-Stereo's constant
+/// ImageNet `mean` and `std`).
 pub fn redundant(key: &str) -> bool {
-    key.ends_with("num_batches_tracked") || key.contains("downsample.1.")
+    key.ends_with("num_batches_tracked") || key.contains("downsample.1.") || key == "mean" || key == "std"
 }
 
 /// The keys (official names, no `module.` prefix) and shapes an official checkpoint of

@@ -111,7 +111,7 @@ pub fn profile_backward(
         outputs.extend(encodings.gates.iter().flat_map(|g| [g.zr.clone(), g.q.clone()]));
         Ok((outputs, encodings))
     })?;
-    let Encodings { fmap1, fmap2, hidden, gates } = encodings;
+    let Encodings { fmap1, fmap2, hidden, gates, .. } = encodings;
 
     let [n, _, h, w] = hidden[0].dims();
     let f32_on = (&device, DType::F32);
@@ -137,7 +137,9 @@ pub fn profile_backward(
         let mut deltas = Vec::with_capacity(iters);
         let mut states = Vec::with_capacity(iters);
         for (corr, flow_x) in corrs.iter().zip(&flows) {
-            deltas.push(model.update(&mut state, &context, leaf(corr), &grid, flow_x.clone(), &mut probe));
+            let block = &model.update_block;
+            let update = model.update(block, &mut state, &context, leaf(corr), &grid, flow_x.clone(), &mut probe);
+            deltas.push(update.prediction);
             states.push(state[0].clone());
         }
         Ok((deltas, states))
@@ -148,7 +150,7 @@ pub fn profile_backward(
             .iter()
             .zip(&flows)
             .map(|(state, flow_x)| {
-                let mask = model.upsample_weights(&[leaf(state)], &mut probe);
+                let mask = model.upsample_weights(&model.update_block, &[leaf(state)], &mut probe);
                 model.upsample(leaf(flow_x), mask, &mut probe)
             })
             .collect();

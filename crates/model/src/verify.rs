@@ -63,10 +63,13 @@ impl VerifyReport {
 impl fmt::Display for VerifyReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(f, "configuration: {}", self.configuration)?;
+        // The key column fits the longest key (24 at least, RAFT-Stereo's).
+        let width =
+            self.lines.iter().map(|l| l.key.len()).chain(self.unmatched.iter().map(String::len)).fold(24, usize::max);
         for l in &self.lines {
             writeln!(
                 f,
-                "{:<24} {:<18} max abs error {:.3e}  rel {:.3e}  {}",
+                "{:<width$} {:<18} max abs error {:.3e}  rel {:.3e}  {}",
                 l.key,
                 format!("{:?}", l.shape),
                 l.max_abs_error,
@@ -75,7 +78,7 @@ impl fmt::Display for VerifyReport {
             )?;
         }
         for k in &self.unmatched {
-            writeln!(f, "{k:<24} not produced by this implementation  FAIL")?;
+            writeln!(f, "{k:<width$} not produced by this implementation  FAIL")?;
         }
         write!(f, "final flow max abs error: {:e}", self.final_flow_error)
     }

@@ -3,8 +3,10 @@
 //!
 //! Random points of the configuration space (n_downsample, context norm, correlation levels and
 //! radius, equal and unequal hidden widths, GRU levels, shared backbone, slow-fast schedule,
-//! fusion and guidance kinds, correlation implementation, trunk widths) at small widths and
-//! sizes: a configuration either fails
+//! fusion and guidance kinds, correlation implementation, trunk widths, motion kind, update
+//! clip, scale lookup and update, the encoders' depth features and the initialiser without a
+//! monocular network) at small widths and sizes; DEFOM-Stereo's monocular network beside it, in
+//! a few small configurations. A configuration either fails
 //! validation with an error naming a key, or builds, runs an inference pass (finite disparity
 //! of the input's size after padding by `pad_divisor`) and a training-mode pass on the autodiff
 //! device whose backward gives finite gradients. Beside it: unequal hidden widths at the
@@ -14,11 +16,12 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Gradients, Tensor};
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_core::{DepthPrior, default_device};
-use dgstereo_model::costvolume::CorrelationImplementation;
-use dgstereo_model::encoder::NormKind;
+use dgstereo_model::costvolume::{CorrelationImplementation, ScaleLookup};
+use dgstereo_model::encoder::{DepthFeatureInput, NormKind};
 use dgstereo_model::fusion::{FusionConfig, FusionTarget};
-use dgstereo_model::updater::GuidanceKind;
-use dgstereo_model::{ModelConfig, StereoModel};
+use dgstereo_model::prior::{DepthAnythingV2Encoder, MonocularConfig};
+use dgstereo_model::updater::{GuidanceKind, MotionKind, ScaleUpdateConfig};
+use dgstereo_model::{InitialDisparity, ModelConfig, StereoModel};
 use proptest::prelude::*;
 
 fn norm() -> impl Strategy<Value = NormKind> {
@@ -42,6 +45,34 @@ fn hidden_dims() -> impl Strategy<Value = [usize; 3]> {
     prop_oneof![width.clone().prop_map(|d| [d; 3]), [width.clone(), width.clone(), width]]
 }
 
+/// DEFOM-Stereo's variants without its monocular network (the kinds that need one are refused):
+/// the motion kind, the update clip, the scale lookup's radius and the scale iterations (a scale
+/// update without a lookup is refused), the encoders' depth features and the initialiser.
+type DefomVariants = (MotionKind, bool, Option<usize>, Option<usize>, DepthFeatureInput, InitialDisparity);
+
+fn defom_variants() -> impl Strategy<Value = DefomVariants> {
+    (
+        prop::sample::select(MotionKind::ALL.to_vec()),
+        any::<bool>(),
+        prop::option::of(0usize..=2),
+        prop::option::of(0usize..=3),
+        prop::sample::select(DepthFeatureInput::ALL.to_vec()),
+        prop::sample::select(InitialDisparity::variants()),
+    )
+}
+
+/// Applies [`DefomVariants`] to `c`.
+fn with_defom_variants(mut c: ModelConfig, v: DefomVariants) -> ModelConfig {
+    let (motion, clip, scale_radius, scale_iters, depth_features, initial) = v;
+    c.updater.motion = motion;
+    c.updater.delta_clip = clip;
+    c.correlation.scale_lookup = scale_radius.map(|radius| ScaleLookup { radius, ..ScaleLookup::default() });
+    c.updater.scale_update = scale_iters.map(|iters| ScaleUpdateConfig { iters });
+    c.encoder.depth_features = depth_features;
+    c.initial_disparity = initial;
+    c
+}
+
 fn config() -> impl Strategy<Value = ModelConfig> {
     let updater = (2usize..=3, 1usize..=3, hidden_dims(), any::<bool>(), guidance());
     // Trunk widths that a group norm (width / 8 groups) can and cannot split.
@@ -49,12 +80,13 @@ fn config() -> impl Strategy<Value = ModelConfig> {
     let encoder = (norm(), any::<bool>(), prop::sample::select(vec![16usize, 32]), trunk);
     let implementation = prop_oneof![Just(CorrelationImplementation::Reg), Just(CorrelationImplementation::Alt)];
     let correlation = (0usize..=4, 0usize..=4, implementation);
-    (updater, encoder, correlation, fusion()).prop_map(
+    (updater, encoder, correlation, fusion(), defom_variants()).prop_map(
         |(
             (n_downsample, n_gru_layers, hidden, slow_fast, guidance),
             (norm, shared, feature_dim, trunk),
             (levels, radius, implementation),
             fusion,
+            defom,
         )| {
             let mut c = ModelConfig { fusion, ..Default::default() };
             c.updater.n_downsample = n_downsample;
@@ -69,7 +101,7 @@ fn config() -> impl Strategy<Value = ModelConfig> {
             c.correlation.levels = levels;
             c.correlation.radius = radius;
             c.correlation.implementation = implementation;
-            c
+            with_defom_variants(c, defom)
         },
     )
 }
@@ -156,7 +188,7 @@ proptest! {
         match config.validate() {
             Err(e) => {
                 let message = e.to_string();
-                let keys = ["updater.", "encoder.", "correlation.", "fusion."];
+                let keys = ["updater.", "encoder.", "correlation.", "fusion.", "initial_disparity."];
                 prop_assert!(keys.iter().any(|k| message.contains(k)), "{message} names no key");
             }
             Ok(()) => {
@@ -199,6 +231,53 @@ fn every_kind_is_covered_by_the_prior_check() {
             }
         }
     }
+}
+
+/// DEFOM-Stereo's network at small widths (its monocular network is ViT-S whatever the rest):
+/// the whole variant, and the monocular network with only the encoders or only the initialiser
+/// reading it, on both cost volumes and both grids, build, run and train.
+#[test]
+fn defom_configurations_build_and_run() {
+    let small = |c: &mut ModelConfig| {
+        c.updater.hidden_dims = [8; 3];
+        c.encoder.feature_dim = 16;
+        c.encoder.trunk_dims = [16, 16, 24];
+        c.monocular = MonocularConfig::DepthAnythingV2 { encoder: DepthAnythingV2Encoder::Vits };
+    };
+    let full = || {
+        let mut c = with_defom_variants(
+            ModelConfig::default(),
+            (
+                MotionKind::Disparity,
+                true,
+                Some(2),
+                Some(2),
+                DepthFeatureInput::Added,
+                InitialDisparity::scaled_inverse_depth(),
+            ),
+        );
+        c.correlation.levels = 2;
+        small(&mut c);
+        c
+    };
+    let mut encoders_only = full();
+    encoders_only.initial_disparity = InitialDisparity::Zero;
+    encoders_only.correlation.implementation = CorrelationImplementation::Alt;
+    encoders_only.updater.n_downsample = 3;
+    let mut initialiser_only = full();
+    initialiser_only.encoder.depth_features = DepthFeatureInput::None;
+    initialiser_only.updater.motion = MotionKind::Flow;
+    initialiser_only.updater.n_gru_layers = 2;
+    for config in [full(), encoders_only, initialiser_only] {
+        config.validate().unwrap_or_else(|e| panic!("{config:?}: {e}"));
+        builds_and_runs(&config, [40, 56], 3).unwrap_or_else(|e| panic!("{config:?}: {e}"));
+    }
+    // A monocular network nothing reads is refused by its key.
+    let mut unread = full();
+    unread.encoder.depth_features = DepthFeatureInput::None;
+    unread.initial_disparity = InitialDisparity::Zero;
+    let e = unread.validate().unwrap_err().to_string();
+    assert!(e.contains("monocular.kind"), "{e}");
 }
 
 /// The reference's widths with unequal hidden widths (each level's context convolution takes its

@@ -15,6 +15,10 @@
 //!   for training and ablations without running a network ([`simulated`]);
 //! - `none`: no prior, which makes the model plain RAFT-Stereo.
 //!
+//! A stereo network may also embed a monocular network whose weights are its own
+//! ([`MonocularConfig`], `[model.monocular]`: DEFOM-Stereo's Depth Anything V2 with a feature
+//! trunk, [`DepthAnythingV2Features`]); the model crate composes it like the other stages.
+//!
 //! Design decision: every provider returns plain tensors in one convention (relative inverse
 //! depth, arbitrary scale and shift, non-negative, at the image resolution) and the fusion stage
 //! normalises them. A provider never falls back silently: a missing checkpoint, file or
@@ -27,6 +31,7 @@ pub mod content_hash;
 pub mod depth_anything;
 pub mod file;
 pub mod formats;
+pub mod monocular;
 pub mod safetensors_io;
 pub mod simulated;
 
@@ -37,8 +42,9 @@ pub use cache::CachedPrior;
 pub use config::{Prior, PriorConfig};
 pub use depth_anything::preprocess::DEFAULT_INPUT_SIZE;
 pub use depth_anything::verify::{TensorComparison, VerificationReport, verify_depth_anything_v2};
-pub use depth_anything::{DepthAnythingV2, DepthAnythingV2Encoder, DepthAnythingV2Prior};
+pub use depth_anything::{DepthAnythingV2, DepthAnythingV2Encoder, DepthAnythingV2Features, DepthAnythingV2Prior};
 pub use file::FilePrior;
+pub use monocular::MonocularConfig;
 pub use simulated::{SimulatedPrior, SimulatedPriorConfig};
 
 /// The inputs a provider may use.

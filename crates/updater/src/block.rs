@@ -10,15 +10,15 @@ use dgstereo_kernels::{conv2d_forward, conv2d_forward_then, conv2d_relu_forward}
 
 use crate::gru::{ConvGru, GateContext};
 use crate::loop_numerics::UPDATE_LOOP;
-use crate::motion::MotionEncoder;
-use crate::{UpdateOutput, Updater, UpdaterConfig};
+use crate::motion::{MotionEncoder, MotionKind};
+use crate::{HeadOutput, UpdateOutput, Updater, UpdaterConfig};
 
-/// Two convolutions predicting the disparity update (`FlowHead`).
+/// Two convolutions predicting the update (`FlowHead`, and DEFOM-Stereo's `DispHead`).
 #[derive(Module, Debug)]
 pub struct FlowHead {
     /// 3x3 to 256 channels.
     pub conv1: Conv2d,
-    /// 3x3 to 2 channels (x, y; y is discarded).
+    /// 3x3 to the motion's channels (x and y of the flow, y discarded; or the disparity).
     pub conv2: Conv2d,
 }
 
@@ -33,7 +33,9 @@ pub struct MaskHead {
 }
 
 /// ConvGRUs at 1/4, 1/8 and 1/16 (always built, as in the reference), the motion encoder and
-/// the two heads.
+/// the two heads. The update head is `flow_head` (RAFT-Stereo's flow) or `disp_head` (a
+/// disparity, [`MotionKind::Disparity`]); what its prediction does is the block's
+/// [`HeadOutput`] (DEFOM-Stereo's scale block multiplies).
 ///
 /// One call runs, in the reference's order, the 1/16 GRU (fed by the pooled old 1/8 state),
 /// the 1/8 GRU (pooled old 1/4 state and the upsampled new 1/16 state), then the motion encoder
@@ -50,14 +52,19 @@ pub struct MultiLevelUpdateBlock {
     pub gru16: ConvGru,
     /// GRU at 1/16.
     pub gru32: ConvGru,
-    /// Disparity head.
-    pub flow_head: FlowHead,
+    /// Flow head (RAFT-Stereo).
+    pub flow_head: Option<FlowHead>,
+    /// Disparity head (DEFOM-Stereo's `disp_head`).
+    pub disp_head: Option<FlowHead>,
     /// Upsampling-weight head.
     pub mask: MaskHead,
     /// GRU levels in use (1..=3).
     pub n_gru_layers: usize,
     /// Extra coarse-level updates before each step (`slow_fast_gru`).
     pub slow_fast_gru: bool,
+    /// What the head's prediction does to the state.
+    #[module(skip)]
+    pub output: HeadOutput,
 }
 
 /// `F.avg_pool2d(x, 3, stride=2, padding=1)` (padding counted in the average): a finer
@@ -74,38 +81,50 @@ pub fn interp(x: Tensor<4>, dest: &Tensor<4>) -> Tensor<4> {
 }
 
 impl MultiLevelUpdateBlock {
-    /// Builds the block.
-    pub fn new(config: &UpdaterConfig, corr_channels: usize, device: &Device) -> Self {
+    /// Builds the block for `corr_channels` lookup channels, its head's prediction applied as
+    /// `output`.
+    pub fn new(config: &UpdaterConfig, corr_channels: usize, output: HeadOutput, device: &Device) -> Self {
         let [d32, d16, d08] = config.hidden_dims;
         let n = config.n_gru_layers;
         let factor = 1usize << config.n_downsample;
         let init = ConvInit::TorchDefault;
+        let motion = config.motion;
+        let head = |kind: MotionKind| {
+            (motion == kind).then(|| FlowHead {
+                conv1: conv2d([d08, 256], 3, 1, 1, init, device),
+                conv2: conv2d([256, kind.channels()], 3, 1, 1, init, device),
+            })
+        };
         Self {
-            encoder: MotionEncoder::new(corr_channels, config.guidance.channels(), device),
+            encoder: MotionEncoder::new(corr_channels, motion, config.guidance.channels(), device),
             gru08: ConvGru::new(d08, 128 + d16 * (n > 1) as usize, device),
             gru16: ConvGru::new(d16, d32 * (n == 3) as usize + d08, device),
             gru32: ConvGru::new(d32, d16, device),
-            flow_head: FlowHead {
-                conv1: conv2d([d08, 256], 3, 1, 1, init, device),
-                conv2: conv2d([256, 2], 3, 1, 1, init, device),
-            },
+            flow_head: head(MotionKind::Flow),
+            disp_head: head(MotionKind::Disparity),
             mask: MaskHead {
                 conv1: conv2d([d08, 256], 3, 1, 1, init, device),
                 conv2: conv2d([256, factor * factor * 9], 1, 1, 0, init, device),
             },
             n_gru_layers: n,
             slow_fast_gru: config.slow_fast_gru,
+            output,
         }
     }
 
-    /// The disparity update of the finest state (the flow head's x channel).
+    /// The head's prediction from the finest state: the flow head's x channel, or the disparity
+    /// head's output; for a scale block ([`HeadOutput::Scale`]) the factor `relu6(exp(x / 4))`.
     ///
     /// # Shapes
     /// - `hidden_fine`: `[N, hidden, H, W]`; output `[N, 1, H, W]`
-    pub fn delta_x(&self, hidden_fine: Tensor<4>) -> Tensor<4> {
-        let hidden = conv2d_relu_forward(&self.flow_head.conv1, hidden_fine, UPDATE_LOOP);
-        let delta = conv2d_forward(&self.flow_head.conv2, hidden, UPDATE_LOOP);
-        delta.narrow(1, 0, 1)
+    pub fn prediction(&self, hidden_fine: Tensor<4>) -> Tensor<4> {
+        let head = self.flow_head.as_ref().or(self.disp_head.as_ref()).expect("the constructor builds one head");
+        let hidden = conv2d_relu_forward(&head.conv1, hidden_fine, UPDATE_LOOP);
+        let x = conv2d_forward(&head.conv2, hidden, UPDATE_LOOP).narrow(1, 0, 1);
+        match self.output {
+            HeadOutput::Scale => x.mul_scalar(0.25).exp().clamp(0.0, 6.0),
+            HeadOutput::Delta | HeadOutput::ClippedDelta { .. } => x,
+        }
     }
 
     /// Updates the coarser GRUs only: the 1/16 level with `iter32`, then the 1/8 level with
@@ -155,7 +174,8 @@ impl Updater for MultiLevelUpdateBlock {
             inputs.push(probe.time("interpolation", || interp(hidden[1].clone(), &hidden[0])));
         }
         hidden[0] = probe.time("GRU 1/4", || self.gru08.forward(hidden[0].clone(), &context[0], inputs));
-        UpdateOutput { delta_x: probe.time("flow head", || self.delta_x(hidden[0].clone())) }
+        let prediction = probe.time("flow head", || self.prediction(hidden[0].clone()));
+        UpdateOutput { prediction, output: self.output }
     }
 
     /// The mask head on the finest state, its logits scaled by 0.25 as in the reference.

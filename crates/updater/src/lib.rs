@@ -7,6 +7,11 @@
 //! `none`, so the guidance reaches the GRU input but never the disparity head directly. Bilinear
 //! resizes between levels are matrix products (see `dgstereo_kernels::resize_bilinear`), which train on
 //! every backend.
+//!
+//! DEFOM-Stereo's variants: the loop may iterate a positive disparity instead of the x flow
+//! ([`MotionKind`]), clip each additive update to the lookup's reach (`delta_clip`), and run a
+//! second block first ([`ScaleUpdateConfig`]) whose head multiplies the disparity
+//! ([`HeadOutput::Scale`]).
 #![deny(missing_docs)]
 
 pub mod block;
@@ -15,7 +20,8 @@ pub mod guidance;
 mod loop_numerics;
 pub mod motion;
 
-use burn::tensor::Tensor;
+use burn::tensor::{FloatDType, Tensor};
+use dgstereo_core::tensor::cast_float;
 use dgstereo_core::{Probe, Problem};
 use serde::{Deserialize, Serialize};
 
@@ -23,15 +29,47 @@ pub use block::MultiLevelUpdateBlock;
 pub use dgstereo_kernels::convex_upsample;
 pub use gru::{ConvGru, GateContext};
 pub use guidance::{GuidanceKind, gradient_feature};
+pub use motion::MotionKind;
+
+/// What a block's head predicts and how it changes the iterated state.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum HeadOutput {
+    /// An additive update (RAFT-Stereo).
+    #[default]
+    Delta,
+    /// An additive update clipped to `±bound` (DEFOM-Stereo: `2^(levels-1)·radius`, the
+    /// lookup's reach).
+    ClippedDelta {
+        /// The largest magnitude of an update.
+        bound: f32,
+    },
+    /// A factor `relu6(exp(x / 4))` of the head's output `x` (DEFOM-Stereo's scale update).
+    Scale,
+}
 
 /// What one update step returns.
 ///
 /// # Shapes
-/// - `delta_x`: `[N, 1, H, W]` (x-flow update at the update grid)
+/// - `prediction`: `[N, 1, H, W]` at the update grid
 #[derive(Debug, Clone)]
 pub struct UpdateOutput {
-    /// Update of the x flow (negative disparity).
-    pub delta_x: Tensor<4>,
+    /// The head's prediction: the state's additive update before any clip, or its factor.
+    pub prediction: Tensor<4>,
+    /// How the prediction applies.
+    pub output: HeadOutput,
+}
+
+impl UpdateOutput {
+    /// The iterated `state` after this update (the prediction cast to the state's dtype):
+    /// `state + delta`, `state + clip(delta, ±bound)` or `factor · state`.
+    pub fn apply(self, state: Tensor<4>) -> Tensor<4> {
+        let prediction = cast_float(self.prediction, FloatDType::from(state.dtype()));
+        match self.output {
+            HeadOutput::Delta => state + prediction,
+            HeadOutput::ClippedDelta { bound } => state + prediction.clamp(-bound, bound),
+            HeadOutput::Scale => prediction * state,
+        }
+    }
 }
 
 /// The update stage.
@@ -81,6 +119,38 @@ pub struct UpdaterConfig {
     /// The guidance branch.
     #[serde(default)]
     pub guidance: GuidanceKind,
+    /// What the loop iterates: the x flow (RAFT-Stereo) or a positive disparity (DEFOM-Stereo).
+    #[serde(default)]
+    pub motion: MotionKind,
+    /// Clip each additive update to `±2^(levels-1)·radius` of the correlation lookup
+    /// (DEFOM-Stereo); off in RAFT-Stereo.
+    #[serde(default)]
+    pub delta_clip: bool,
+    /// A scale update block run for the first iterations (DEFOM-Stereo); none in RAFT-Stereo.
+    #[serde(default)]
+    pub scale_update: Option<ScaleUpdateConfig>,
+}
+
+/// DEFOM-Stereo's scale update: a second update block, reading the correlation's scale lookup,
+/// whose head multiplies the disparity ([`HeadOutput::Scale`]); it runs instead of the normal
+/// block for the first `iters` iterations.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScaleUpdateConfig {
+    /// Iterations that run the scale block (`scale_iters`: 8 in DEFOM-Stereo's evaluation and
+    /// training).
+    #[serde(default = "default_scale_iters")]
+    pub iters: usize,
+}
+
+fn default_scale_iters() -> usize {
+    8
+}
+
+impl Default for ScaleUpdateConfig {
+    fn default() -> Self {
+        Self { iters: default_scale_iters() }
+    }
 }
 
 fn default_hidden() -> [usize; 3] {
@@ -101,6 +171,9 @@ impl Default for UpdaterConfig {
             n_downsample: 2,
             slow_fast_gru: false,
             guidance: GuidanceKind::None,
+            motion: MotionKind::Flow,
+            delta_clip: false,
+            scale_update: None,
         }
     }
 }

@@ -314,6 +314,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         a.device,
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );
+    println!("model: {}", dgstereo_model::checkpoint_config::summary(&config));
     println!("{}", machine_line());
     println!("runs {} after {} warm-up: median {med:.3} s, min {min:.3} s", a.runs, a.warmup);
     println!("CPU time per run (all threads): median {:.2} s", median(&mut cpu));

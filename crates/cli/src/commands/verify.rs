@@ -3,14 +3,16 @@
 //! Each subcommand loads a checkpoint in the official layout, runs it on the input stored in a
 //! reference file, prints one line per compared value with its error, and exits with status 1
 //! when any is outside the tolerance. `raft-stereo` and `depth-anything-v2` check inference
-//! against reference activations; `train-step` checks two training steps against the official
-//! training loop.
+//! against reference activations; `defom` checks DEFOM-Stereo against the official code's
+//! activations with the seeded weights the file's metadata lists; `train-step` checks two
+//! training steps against the official training loop.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Args, Subcommand};
 use dgstereo_model::verify::verify_raft_stereo;
+use dgstereo_model::verify_defom::verify_defom;
 use dgstereo_prior::verify_depth_anything_v2;
 use dgstereo_train::TrainParts;
 use dgstereo_train::verify_step::verify_train_step;
@@ -24,6 +26,14 @@ pub enum VerifyCommand {
     /// ends with `final flow max abs error: X`; fails above 1e-3 on flows, 1e-4 relative on
     /// the rest.
     RaftStereo(VerifyArgs),
+    /// DEFOM-Stereo: a seeded golden file (`defom_stereo_*_seeded.activations.safetensors`),
+    /// whose weights are rebuilt from its metadata and loaded as an official checkpoint, the
+    /// configuration read from their keys and shapes. Prints the configuration, then every
+    /// tensor the reference holds (Depth Anything V2's features and depth, the initial disparity,
+    /// the encoders, every scale and normal update block's outputs, each iteration's disparity);
+    /// ends with `final flow max abs error: X` (the final disparity's); fails above 1e-4 px on
+    /// disparities, 1e-4 relative on the rest.
+    Defom(SeededArgs),
     /// Depth Anything V2 (vits, vitb or vitl, read from the checkpoint): a `.pth` checkpoint
     /// against a reference activations file. Ends with `depth max abs error: X`; fails above
     /// 1e-3 of each tensor's range.
@@ -53,6 +63,14 @@ pub struct TrainStepArgs {
     experiment: Option<PathBuf>,
 }
 
+/// The file of a verification on seeded weights.
+#[derive(Args)]
+pub struct SeededArgs {
+    /// The reference activations with the seeded weights' keys in their metadata (safetensors).
+    #[arg(long)]
+    reference: PathBuf,
+}
+
 /// Files of a verification.
 #[derive(Args)]
 pub struct VerifyArgs {
@@ -69,6 +87,11 @@ pub fn run(cmd: VerifyCommand) -> anyhow::Result<ExitCode> {
     let passed = match cmd {
         VerifyCommand::RaftStereo(a) => {
             let report = verify_raft_stereo(&a.weights, &a.reference, &device)?;
+            println!("{report}");
+            report.passed()
+        }
+        VerifyCommand::Defom(a) => {
+            let report = verify_defom(&a.reference, &device)?;
             println!("{report}");
             report.passed()
         }

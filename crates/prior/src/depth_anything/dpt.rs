@@ -24,7 +24,7 @@ use super::dinov2::{IntermediateLayer, PATCH_SIZE};
 /// Channels of the hidden layer of `output_conv2` (`head_features_2` upstream).
 const OUTPUT_HIDDEN: usize = 32;
 
-fn conv(cin: usize, cout: usize, kernel: usize, stride: usize, bias: bool, device: &Device) -> Conv2d {
+pub(crate) fn conv(cin: usize, cout: usize, kernel: usize, stride: usize, bias: bool, device: &Device) -> Conv2d {
     let pad = kernel / 2;
     Conv2dConfig::new([cin, cout], [kernel, kernel])
         .with_stride([stride, stride])
@@ -33,7 +33,7 @@ fn conv(cin: usize, cout: usize, kernel: usize, stride: usize, bias: bool, devic
         .init(device)
 }
 
-fn conv_transpose(channels: usize, factor: usize, device: &Device) -> ConvTranspose2d {
+pub(crate) fn conv_transpose(channels: usize, factor: usize, device: &Device) -> ConvTranspose2d {
     ConvTranspose2dConfig::new([channels, channels], [factor, factor]).with_stride([factor, factor]).init(device)
 }
 
@@ -76,7 +76,7 @@ pub struct FeatureFusionBlock {
 }
 
 impl FeatureFusionBlock {
-    fn new(features: usize, device: &Device) -> Self {
+    pub(crate) fn new(features: usize, device: &Device) -> Self {
         Self {
             out_conv: conv(features, features, 1, 1, true, device),
             res_conf_unit1: ResidualConvUnit::new(features, device),
@@ -84,18 +84,18 @@ impl FeatureFusionBlock {
         }
     }
 
-    /// `out_conv(up(rcu2(path + rcu1(skip))))`, upsampled to `size` or by 2 when `None`.
+    /// `out_conv(resize(rcu2(path + rcu1(skip))))`, resized (bilinear, align corners) to `size`:
+    /// twice the input's in Depth Anything V2's last block, the input's own (no resize) in
+    /// DEFOM-Stereo's modified blocks.
     ///
     /// # Shapes
-    /// - `path`, `skip`: `[B, F, h, w]` -> `[B, F, size]` (or `[B, F, 2h, 2w]`)
-    fn forward(&self, path: Tensor<4>, skip: Option<Tensor<4>>, size: Option<[usize; 2]>) -> Tensor<4> {
+    /// - `path`, `skip`: `[B, F, h, w]` -> `[B, F, size]`
+    pub(crate) fn forward(&self, path: Tensor<4>, skip: Option<Tensor<4>>, size: [usize; 2]) -> Tensor<4> {
         let mut x = path;
         if let Some(skip) = skip {
             x = x + self.res_conf_unit1.forward(skip);
         }
-        let x = self.res_conf_unit2.forward(x);
-        let [_, _, h, w] = x.dims();
-        let x = resize_bilinear(x, size.unwrap_or([2 * h, 2 * w]), true);
+        let x = resize_bilinear(self.res_conf_unit2.forward(x), size, true);
         conv2d_forward(&self.out_conv, x, Numerics::Sensitive)
     }
 }
@@ -173,38 +173,102 @@ impl DptHead {
     /// - `layers[i].tokens`: `[B, h·w, C]`
     /// - output: `[B, 1, 14h, 14w]`, non-negative
     pub fn forward(&self, layers: &[IntermediateLayer], grid: [usize; 2]) -> Tensor<4> {
-        assert_eq!(layers.len(), 4, "the DPT head takes four encoder layers");
         let [h, w] = grid;
-        let maps: Vec<Tensor<4>> = layers
-            .iter()
-            .zip(&self.projects)
-            .map(|(layer, project)| {
-                let [b, n, c] = layer.tokens.dims();
-                assert_eq!(n, h * w, "token count {n} does not match the {h}x{w} patch grid");
-                conv2d_forward(project, layer.tokens.clone().swap_dims(1, 2).reshape([b, c, h, w]), Numerics::Sensitive)
-            })
-            .collect();
-        let [l1, l2, l3, l4]: [Tensor<4>; 4] = maps.try_into().expect("four maps");
+        let path = self.fused(layers, grid, None, |[fh, fw]| [2 * fh, 2 * fw]);
+        self.output(path, [h * PATCH_SIZE, w * PATCH_SIZE])
+    }
+
+    /// DEFOM-Stereo's `DPTHead`: the first `batch` images of the layers only (the left views of
+    /// a stacked pair), its modified last fusion block that keeps the finest level's size, and the
+    /// output convolutions' resize to `out_size` (the stereo network's update grid) instead of
+    /// the input's size.
+    ///
+    /// # Shapes
+    /// - `layers[i].tokens`: `[2·batch, h·w, C]`; output: `[batch, 1, out_size]`, non-negative
+    pub fn inverse_depth_at(
+        &self,
+        layers: &[IntermediateLayer],
+        grid: [usize; 2],
+        batch: usize,
+        out_size: [usize; 2],
+    ) -> Tensor<4> {
+        let path = self.fused(layers, grid, Some(batch), |size| size);
+        self.output(path, out_size)
+    }
+
+    /// The fused finest level: reassembly, the channel adapters and the four fusion blocks, the
+    /// last resized to `finest(size of level 1)`; of the first `batch` images when given.
+    fn fused(
+        &self,
+        layers: &[IntermediateLayer],
+        grid: [usize; 2],
+        batch: Option<usize>,
+        finest: impl Fn([usize; 2]) -> [usize; 2],
+    ) -> Tensor<4> {
+        let resize = [&self.upsample_4x, &self.upsample_2x];
+        let [l1, l2, l3, l4] = reassemble(&self.projects, resize, &self.downsample_2x, layers, grid, batch);
         let s = &self.scratch;
-        let l1 = conv2d_forward(&s.layer1_rn, self.upsample_4x.forward(l1), Numerics::Sensitive);
-        let l2 = conv2d_forward(&s.layer2_rn, self.upsample_2x.forward(l2), Numerics::Sensitive);
-        let l3 = conv2d_forward(&s.layer3_rn, l3, Numerics::Sensitive);
-        let l4 = conv2d_forward(
-            &s.layer4_rn,
-            conv2d_forward(&self.downsample_2x, l4, Numerics::Sensitive),
-            Numerics::Sensitive,
-        );
-        let size = |t: &Tensor<4>| {
-            let [_, _, th, tw] = t.dims();
-            [th, tw]
-        };
-        let path = s.refinenet4.forward(l4, None, Some(size(&l3)));
-        let path = s.refinenet3.forward(path, Some(l3.clone()), Some(size(&l2)));
-        let path = s.refinenet2.forward(path, Some(l2.clone()), Some(size(&l1)));
-        let path = s.refinenet1.forward(path, Some(l1), None);
+        let [l1, l2, l3, l4] = adapt([&s.layer1_rn, &s.layer2_rn, &s.layer3_rn, &s.layer4_rn], [l1, l2, l3, l4]);
+        let path = s.refinenet4.forward(l4, None, spatial(&l3));
+        let path = s.refinenet3.forward(path, Some(l3), spatial(&l2));
+        let path = s.refinenet2.forward(path, Some(l2), spatial(&l1));
+        let size = finest(spatial(&l1));
+        s.refinenet1.forward(path, Some(l1), size)
+    }
+
+    /// `output_conv1`, the resize to `size` (bilinear, align corners), `output_conv2` with its
+    /// two ReLUs.
+    fn output(&self, path: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
+        let s = &self.scratch;
         let out = conv2d_forward(&s.output_conv1, path, Numerics::Sensitive);
-        let out = resize_bilinear(out, [h * PATCH_SIZE, w * PATCH_SIZE], true);
+        let out = resize_bilinear(out, size, true);
         let out = conv2d_relu_forward(&s.output_conv2_hidden, out, Numerics::Sensitive);
         conv2d_relu_forward(&s.output_conv2_out, out, Numerics::Sensitive)
     }
+}
+
+/// The spatial size `[h, w]` of `[B, C, h, w]`.
+pub(crate) fn spatial(t: &Tensor<4>) -> [usize; 2] {
+    let [_, _, h, w] = t.dims();
+    [h, w]
+}
+
+/// The DPT reassembly: each layer's patch tokens (of the first `batch` images when given) as a
+/// map on the `grid`, its 1x1 projection, then the level's resize (transposed conv 4x and 2x,
+/// identity, 3x3 conv stride 2).
+///
+/// # Shapes
+/// - `layers[i].tokens`: `[B, h·w, C]` -> level `i`: `[B', out_channels[i], 4h, 4w]`, `[.., 2h, 2w]`,
+///   `[.., h, w]`, `[.., ceil(h/2), ceil(w/2)]`
+pub(crate) fn reassemble(
+    projects: &[Conv2d],
+    [upsample_4x, upsample_2x]: [&ConvTranspose2d; 2],
+    downsample_2x: &Conv2d,
+    layers: &[IntermediateLayer],
+    grid: [usize; 2],
+    batch: Option<usize>,
+) -> [Tensor<4>; 4] {
+    assert_eq!(layers.len(), 4, "the DPT head takes four encoder layers");
+    let [h, w] = grid;
+    let maps: Vec<Tensor<4>> = layers
+        .iter()
+        .zip(projects)
+        .map(|(layer, project)| {
+            let tokens = match batch {
+                Some(n) => layer.tokens.clone().narrow(0, 0, n),
+                None => layer.tokens.clone(),
+            };
+            let [b, n, c] = tokens.dims();
+            assert_eq!(n, h * w, "token count {n} does not match the {h}x{w} patch grid");
+            conv2d_forward(project, tokens.swap_dims(1, 2).reshape([b, c, h, w]), Numerics::Sensitive)
+        })
+        .collect();
+    let [l1, l2, l3, l4]: [Tensor<4>; 4] = maps.try_into().expect("four maps");
+    [upsample_4x.forward(l1), upsample_2x.forward(l2), l3, conv2d_forward(downsample_2x, l4, Numerics::Sensitive)]
+}
+
+/// The bias-free 3x3 channel adapters `layerN_rn` on the four reassembled levels.
+pub(crate) fn adapt(convs: [&Conv2d; 4], levels: [Tensor<4>; 4]) -> [Tensor<4>; 4] {
+    let mut out = levels.into_iter().zip(convs).map(|(l, c)| conv2d_forward(c, l, Numerics::Sensitive));
+    std::array::from_fn(|_| out.next().expect("four levels"))
 }

@@ -91,25 +91,35 @@ impl OnTheFlyCorrelation {
     /// # Shapes
     /// - `coords_x`: `[N, 1, H, W1]`; output `[N, levels · (2·radius + 1), H, W1]`, level-major
     pub fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
-        let _work = crate::work::operation(|| crate::work::on_the_fly_macs(self.dims, self.levels, self.radius));
+        self.lookup_levels(coords_x, self.levels, self.radius)
+    }
+
+    /// Samples the first `levels` levels (at most its own count) around `coords_x` with
+    /// `radius`, which may differ from its own (DEFOM-Stereo's scale lookup).
+    ///
+    /// # Shapes
+    /// - `coords_x`: `[N, 1, H, W1]`; output `[N, levels · (2·radius + 1), H, W1]`, level-major
+    pub fn lookup_levels(&self, coords_x: Tensor<4>, levels: usize, radius: usize) -> Tensor<4> {
+        assert!(levels <= self.levels, "{levels} levels looked up in a volume of {}", self.levels);
+        let _work = crate::work::operation(|| crate::work::on_the_fly_macs(self.dims, levels, radius));
         let [n, c, h, w1] = self.dims;
-        let k = 2 * self.radius + 1;
+        let k = 2 * radius + 1;
         let (fmap1, pooled) = match &self.storage {
             Storage::Tensors { fmap1, pooled } => (fmap1, pooled),
             Storage::Host { fmap1, pooled, device } => {
                 assert_eq!(coords_x.dims(), [n, 1, h, w1], "coordinates must be [N, 1, H, W1] of the left features");
-                let out = on_the_fly_lookup::lookup(fmap1, &pooled[..self.levels], &host_values(coords_x), self.radius);
-                return Tensor::from_data(TensorData::new(out, [n, self.levels * k, h, w1]), device);
+                let out = on_the_fly_lookup::lookup(fmap1, &pooled[..levels], &host_values(coords_x), radius);
+                return Tensor::from_data(TensorData::new(out, [n, levels * k, h, w1]), device);
             }
         };
         let m = n * h * w1;
-        let taps_n = 2 * self.radius + 2;
+        let taps_n = 2 * radius + 2;
         let x = coords_x.reshape([m, 1]);
-        let mut out = Vec::with_capacity(self.levels);
-        for (i, f2) in pooled.iter().enumerate() {
+        let mut out = Vec::with_capacity(levels);
+        for (i, f2) in pooled.iter().take(levels).enumerate() {
             let width = f2.dims()[3];
             let xi = x.clone().div_scalar((1u64 << i) as f64);
-            let (idx, inside, w) = taps(xi, self.radius, width.max(1));
+            let (idx, inside, w) = taps(xi, radius, width.max(1));
             let mut dots = Vec::with_capacity(taps_n);
             for t in 0..taps_n {
                 if width == 0 {
@@ -123,8 +133,8 @@ impl OnTheFlyCorrelation {
             // [N, T, H, W1] -> [M, T]
             let values =
                 Tensor::cat(dots, 1).permute([0, 2, 3, 1]).reshape([m, taps_n]).div_scalar((c as f64).sqrt()) * inside;
-            out.push(interpolate_taps(values, w, self.radius));
+            out.push(interpolate_taps(values, w, radius));
         }
-        Tensor::cat(out, 1).reshape([n, h, w1, self.levels * k]).permute([0, 3, 1, 2])
+        Tensor::cat(out, 1).reshape([n, h, w1, levels * k]).permute([0, 3, 1, 2])
     }
 }

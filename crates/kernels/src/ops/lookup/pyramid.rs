@@ -121,31 +121,42 @@ impl CorrelationPyramid {
     /// # Shapes
     /// - `coords_x`: `[N, 1, H, W1]`; output `[N, levels · (2·radius + 1), H, W1]`, level-major
     pub fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
+        self.lookup_levels(coords_x, self.levels, self.radius)
+    }
+
+    /// Samples the first `levels` levels (at most the pyramid's own count) around `coords_x`
+    /// with `radius`, which may differ from the pyramid's own: DEFOM-Stereo's scale lookup reads
+    /// level 0 with radius 2 from the same volume.
+    ///
+    /// # Shapes
+    /// - `coords_x`: `[N, 1, H, W1]`; output `[N, levels · (2·radius + 1), H, W1]`, level-major
+    pub fn lookup_levels(&self, coords_x: Tensor<4>, levels: usize, radius: usize) -> Tensor<4> {
+        assert!(levels <= self.levels, "{levels} levels looked up in a pyramid of {}", self.levels);
         let [n, h, w1] = self.dims;
-        let k = 2 * self.radius + 1;
+        let k = 2 * radius + 1;
         let pyramid = match &self.pyramid {
             Storage::Tensors(t) => t,
-            Storage::Gathered(_, gathered) => {
+            Storage::Gathered(_, gathered) if (levels, radius) == (self.levels, self.radius) => {
                 let out = gathered.lookup(coords_x.reshape([n * h * w1, 1]));
-                return out.reshape([n, h, w1, self.levels * k]).permute([0, 3, 1, 2]);
+                return out.reshape([n, h, w1, levels * k]).permute([0, 3, 1, 2]);
             }
-            Storage::Host { levels, device } => {
+            Storage::Gathered(t, _) => t,
+            Storage::Host { levels: host, device } => {
                 let coords = coords_x.into_data().convert::<f32>().try_into_vec::<f32>().expect("float coordinates");
-                let out = pyramid_lookup::lookup(&levels[..self.levels], &coords, self.dims, self.radius);
-                return Tensor::from_data(TensorData::new(out, [n, self.levels * k, h, w1]), device);
+                let out = pyramid_lookup::lookup(&host[..levels], &coords, self.dims, radius);
+                return Tensor::from_data(TensorData::new(out, [n, levels * k, h, w1]), device);
             }
         };
         let m = n * h * w1;
         let x = coords_x.reshape([m, 1]);
-        let mut out = Vec::with_capacity(self.levels);
-        for (i, level) in pyramid.iter().take(self.levels).enumerate() {
+        let mut out = Vec::with_capacity(levels);
+        for (i, level) in pyramid.iter().take(levels).enumerate() {
             let width = level.dims()[1];
             let xi = x.clone().div_scalar((1u64 << i) as f64);
-            let (idx, inside, w) = taps(xi, self.radius, width.max(1));
+            let (idx, inside, w) = taps(xi, radius, width.max(1));
             let values = if width == 0 { inside.zeros_like() } else { level.clone().gather(1, idx) * inside };
-            out.push(interpolate_taps(values, w, self.radius));
+            out.push(interpolate_taps(values, w, radius));
         }
-        let levels = self.levels;
         Tensor::cat(out, 1).reshape([n, h, w1, levels * k]).permute([0, 3, 1, 2])
     }
 }
