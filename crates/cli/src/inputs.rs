@@ -16,7 +16,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use dgstereo_data::datasets::pair_finder::find_folder_pairs;
+use dgstereo_data::datasets::pair_finder::{SIDE_WORDS, Side, find_folder_pairs, side_key};
 
 /// One stereo pair to process.
 #[derive(Clone, Debug, PartialEq)]
@@ -71,20 +71,9 @@ pub fn expand_patterns(patterns: &[String]) -> anyhow::Result<Vec<PathBuf>> {
     Ok(out)
 }
 
-/// A key telling which side a path belongs to: the path with the side's words neutralised.
-fn side_key(p: &Path, words: &[&str]) -> String {
-    let stem = p.file_stem().map(|s| s.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    let parent = p.parent().map(|d| d.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    let mut key = format!("{parent}/{stem}");
-    for w in words {
-        key = key.replace(w, "#");
-    }
-    key
-}
-
 /// Pairs `-l` with `-r` inputs: zipped in order when both sides have as many files, otherwise
-/// matched by name (`left`↔`right`, `im0`↔`im1`, `image_2`↔`image_3`), unmatched files being
-/// problems.
+/// matched by the data crate's side words (`left`↔`right`, `im0`↔`im1`, `image_2`↔`image_3`,
+/// [`dgstereo_data::datasets::pair_finder::side_key`]), unmatched files being problems.
 pub fn from_left_right(left: &[String], right: &[String]) -> anyhow::Result<PairList> {
     if left.is_empty() || right.is_empty() {
         bail!("give both -l/--left and -r/--right images (files or glob patterns), or --pairs DIR, or --list FILE");
@@ -94,13 +83,11 @@ pub fn from_left_right(left: &[String], right: &[String]) -> anyhow::Result<Pair
     if lefts.len() == rights.len() {
         return Ok(named(lefts.into_iter().zip(rights).collect(), Vec::new()));
     }
-    let left_words = ["left", "im0", "image_2", "colored_0"];
-    let right_words = ["right", "im1", "image_3", "colored_1"];
-    let mut by_key: HashMap<String, PathBuf> = rights.iter().map(|r| (side_key(r, &right_words), r.clone())).collect();
+    let mut by_key: HashMap<String, PathBuf> = rights.iter().map(|r| (side_key(r, Side::Right), r.clone())).collect();
     let mut pairs = Vec::new();
     let mut problems = Vec::new();
     for l in lefts {
-        match by_key.remove(&side_key(&l, &left_words)) {
+        match by_key.remove(&side_key(&l, Side::Left)) {
             Some(r) => pairs.push((l, r)),
             None => {
                 problems.push(PairProblem { path: l, message: "missing right image: no -r file matches it".into() })
@@ -191,14 +178,18 @@ fn common_folder(paths: &[&Path]) -> PathBuf {
     common.unwrap_or_default().into_iter().collect()
 }
 
-/// Drops the words that only say "left" from a name; separators left dangling are removed.
+/// Drops the words that only say "left" from a name (the data crate's left side words, and `l`
+/// as in `scene_l.png`); separators left dangling are removed.
 fn without_side_words(name: &str) -> String {
     let seps = ['_', '-', '.', ' '];
     let mut parts: Vec<String> = Vec::new();
     for component in name.split('/') {
         let tokens: Vec<&str> = component
             .split(seps)
-            .filter(|t| !t.is_empty() && !["left", "im0", "l"].contains(&t.to_ascii_lowercase().as_str()))
+            .filter(|t| {
+                let t = t.to_ascii_lowercase();
+                !t.is_empty() && t != "l" && !SIDE_WORDS.iter().any(|(left, _)| *left == t)
+            })
             .collect();
         let joined = tokens.join("_");
         if !joined.is_empty() {

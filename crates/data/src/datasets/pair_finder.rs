@@ -14,6 +14,10 @@
 //!   `right`, `Left` -> `Right`, `LEFT` -> `RIGHT`), any image extension;
 //! - a left view without its right view is reported as unpaired, never silently dropped; each
 //!   caller decides what to do with it (`infer` counts it as a failed pair, a data set skips it).
+//!
+//! Views given as two lists (`infer -l ... -r ...` of unequal lengths) pair by [`side_key`]: the
+//! whole path with its side words ([`SIDE_WORDS`], folder names such as KITTI's `image_2` and
+//! `image_3` among them) neutralised.
 
 use std::path::{Path, PathBuf};
 
@@ -26,6 +30,33 @@ pub const PAIR_IMAGE_EXTENSIONS: [&str; 8] = ["png", "jpg", "jpeg", "bmp", "tif"
 
 /// Words (lower case) that mark a file as not a view: ground truth, masks, priors.
 const NOT_A_VIEW: [&str; 4] = ["disp", "occ", "mask", "depth"];
+
+/// The words (lower case) that name a view's side, each left word with its right word: in a
+/// stem (`left`, `im0`) or in a folder's name (KITTI's `image_2`/`image_3`, its stereo
+/// flow's `colored_0`/`colored_1`).
+pub const SIDE_WORDS: [(&str, &str); 4] =
+    [("left", "right"), ("im0", "im1"), ("image_2", "image_3"), ("colored_0", "colored_1")];
+
+/// Which view of a pair a path is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// The left (reference) view.
+    Left,
+    /// The right view.
+    Right,
+}
+
+/// The key a left view shares with its right view: the folder and stem, lower case, with every
+/// side word of `side` ([`SIDE_WORDS`]) replaced by `#`.
+pub fn side_key(path: &Path, side: Side) -> String {
+    let stem = path.file_stem().map(|s| s.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let parent = path.parent().map(|d| d.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let mut key = format!("{parent}/{stem}");
+    for (left, right) in SIDE_WORDS {
+        key = key.replace(if side == Side::Left { left } else { right }, "#");
+    }
+    key
+}
 
 /// One pair of a folder.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -118,6 +149,16 @@ mod tests {
         assert_eq!(right_stem("IM0").as_deref(), Some("IM1"));
         assert_eq!(right_stem("image"), None);
         assert_eq!(replace_side_word("Left_0001", "disp").as_deref(), Some("disp_0001"));
+    }
+
+    #[test]
+    fn listed_views_share_a_key_with_their_other_side() {
+        let key = |p: &str, side| side_key(Path::new(p), side);
+        assert_eq!(key("kitti/image_2/000000_10.png", Side::Left), key("kitti/image_3/000000_10.png", Side::Right));
+        assert_eq!(key("a/Left_03.jpg", Side::Left), key("a/right_03.png", Side::Right));
+        assert_eq!(key("scene/im0.png", Side::Left), key("scene/im1.png", Side::Right));
+        assert_ne!(key("a/left_03.png", Side::Left), key("a/right_04.png", Side::Right));
+        assert_ne!(key("x/left.png", Side::Left), key("y/right.png", Side::Right));
     }
 
     #[test]
