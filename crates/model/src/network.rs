@@ -242,7 +242,8 @@ impl RaftStereo {
         };
         let mut flow_up = Vec::new();
         // The iterations run the same convolutions: their transformed weights are kept until the
-        // loop ends, and the training forward takes Winograd in it (see `UpdateLoop`).
+        // loop ends (see `UpdateLoop`); which algorithm each convolution takes is the dispatch's
+        // choice, from the `Numerics` the update passes.
         let _update_loop = UpdateLoop::new();
         for k in 0..iters {
             state = state.detach();

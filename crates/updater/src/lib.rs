@@ -2,7 +2,8 @@
 //!
 //! The [`Updater`] stage takes the GRU states, the precomputed context terms, the correlation
 //! lookup, the current disparity and (optionally) a guidance feature, and returns the
-//! disparity update and the convex-upsampling weights. [`MultiLevelUpdateBlock`] is RAFT-Stereo's
+//! disparity update ([`UpdateOutput`]); the convex-upsampling weights are asked for apart
+//! ([`Updater::upsample_mask`]), only for the iterations whose full-resolution disparity is used. [`MultiLevelUpdateBlock`] is RAFT-Stereo's
 //! three-level ConvGRU; its motion encoder gains a guidance branch when [`GuidanceKind`] is not
 //! `none`, so the guidance reaches the GRU input but never the disparity head directly. Bilinear
 //! resizes between levels are matrix products (see `dgstereo_kernels::resize_bilinear`), which train on

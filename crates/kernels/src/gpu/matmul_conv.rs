@@ -63,8 +63,8 @@ enum Columns {
 
 /// `conv2d(x, weight, bias, options)` for groups 1 as one matrix product over the input's
 /// shifted windows (explicit im2col from burn's operations), the columns gathered unless
-/// `DGSTEREO_GPU_STOCK` names `im2col`; with at most 4 outputs from at least 32 inputs the
-/// product comes first and the shift after (`few_outputs`) unless it names `few-outputs`.
+/// the kernel settings name `stock-route=im2col`; with at most 4 outputs from at least 32 inputs
+/// the product comes first and the shift after (`few_outputs`) unless they name `few-outputs`.
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`
