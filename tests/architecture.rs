@@ -81,23 +81,48 @@ fn source_roots() -> Vec<PathBuf> {
     roots
 }
 
-/// **Architecture Invariant:** stage crates depend on `core` and `kernels` only, never on each
-/// other.
+/// **Architecture Invariant:** stage crates depend on `core`, `kernels` and `formats` only, never
+/// on each other.
 #[test]
-fn stage_crates_depend_on_core_and_kernels_only() {
+fn stage_crates_depend_on_core_kernels_and_formats_only() {
+    let allowed = ["dgstereo-core", "dgstereo-kernels", "dgstereo-formats"];
     for stage in STAGES {
         let deps = dependencies(stage);
-        let others: Vec<_> = deps.iter().filter(|d| *d != "dgstereo-core" && *d != "dgstereo-kernels").collect();
+        let others: Vec<_> = deps.iter().filter(|d| !allowed.contains(&d.as_str())).collect();
         assert!(others.is_empty(), "stage crate '{stage}' depends on {others:?}");
     }
 }
 
-/// **Architecture Invariant:** `kernels` depends on `core` only, and `core` on nothing of ours.
+/// **Architecture Invariant:** `kernels` and `formats` depend on `core` only, and `core` on
+/// nothing of ours.
 #[test]
-fn kernels_depend_on_core_only_and_core_on_nothing() {
-    let kernels = dependencies("kernels");
-    assert!(kernels.iter().all(|d| d == "dgstereo-core"), "kernels depends on {kernels:?}");
+fn kernels_and_formats_depend_on_core_only_and_core_on_nothing() {
+    for low in ["kernels", "formats"] {
+        let deps = dependencies(low);
+        assert!(deps.iter().all(|d| d == "dgstereo-core"), "{low} depends on {deps:?}");
+    }
     assert!(dependencies("core").is_empty(), "core depends on {:?}", dependencies("core"));
+}
+
+/// **Architecture Invariant:** `.npy` and PFM bytes are read and written in `crates/formats`
+/// only: no other source file holds the NumPy magic or matches on a PFM magic.
+#[test]
+fn array_files_are_read_in_the_formats_crate_only() {
+    let mut found = Vec::new();
+    for src in source_roots() {
+        if src.starts_with(root().join("crates/formats")) {
+            continue;
+        }
+        let mut files = Vec::new();
+        rust_files(&src, &mut files);
+        for file in files {
+            let code = std::fs::read_to_string(&file).expect("source file");
+            if code.contains(r"\x93NUMPY") || code.contains(r#""Pf" =>"#) || code.contains(r#""PF" =>"#) {
+                found.push(relative(&file));
+            }
+        }
+    }
+    assert!(found.is_empty(), "NPY/PFM codecs outside crates/formats: {found:?}");
 }
 
 /// **Architecture Invariant:** no two source files import each other, directly or round a loop.

@@ -1,8 +1,8 @@
 //! Shared types of the dgstereo workspace.
 //!
 //! Every stage crate (prior, fusion, encoder, cost volume, updater, loss) depends on this crate
-//! and on the kernels crate only, never on another stage, so the stages stay swappable and
-//! independent. What lives
+//! and on the kernels and formats crates only, never on another stage, so the stages stay
+//! swappable and independent. What lives
 //! here is what more than one stage needs: the device and precision choice, the error type, the
 //! input padder that makes any image size a multiple of 32, a few tensor helpers, the locator of
 //! the shared reference data, the atomic replacement of output files, the stage clock of the profiler and the probe through which a

@@ -17,7 +17,6 @@
 pub mod augment;
 pub mod datasets;
 pub mod disparity_io;
-mod file_start;
 pub mod headers;
 pub mod image;
 pub mod kitti_png;

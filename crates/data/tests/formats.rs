@@ -168,7 +168,7 @@ fn npy_errors_name_the_file() {
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         ("trunc.npy", good[..good.len() - 1].to_vec(), "truncated"),
         ("magic.npy", b"hello world, not numpy".to_vec(), "magic"),
-        ("dtype.npy", replace_bytes(&good, b"<f4", b"<i4"), "dtype"),
+        ("dtype.npy", replace_bytes(&good, b"<f4", b"<c8"), "dtype"),
         ("fortran.npy", replace_bytes(&good, b"False", b"True "), "Fortran"),
     ];
     for (name, bytes, needle) in cases {

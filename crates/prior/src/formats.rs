@@ -1,14 +1,15 @@
 //! Readers (and writers, for tests and exports) of single-channel maps: `.npy`, `.pfm`, `.png`.
 //!
-//! Small and self-contained on purpose (the data crate is another stage's): NumPy arrays of any
-//! float or integer dtype in C order whose shape is `(H, W)` up to leading/trailing 1s; PFM in
-//! either byte order (`Pf` grey, or `PF` colour, first channel), stored bottom row first; PNG
-//! grey at 16 or 8 bits, the stored integer taken as the value (the scale of a relative prior
-//! does not matter).
+//! The `.npy` and `.pfm` bytes are the workspace's one codec's (`dgstereo-formats`, below this
+//! stage and the data crate alike); this file says what a prior map is: NumPy arrays of any
+//! dtype that codec reads whose shape is `(H, W)` up to leading/trailing 1s; PFM in either byte
+//! order (`Pf` grey, or `PF` colour, first channel); PNG grey at 16 or 8 bits, the stored
+//! integer taken as the value (the scale of a relative prior does not matter).
 
 use std::path::Path;
 
 use dgstereo_core::{Error, Result};
+use dgstereo_formats::{npy, pfm};
 
 /// A single-channel map, row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,40 +36,11 @@ pub fn read_depth_map(path: &Path) -> Result<DepthMap> {
     }
 }
 
-fn header_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
-    let start = header.find(&format!("'{key}'"))? + key.len() + 2;
-    let rest = header[start..].trim_start().strip_prefix(':')?.trim_start();
-    Some(rest)
-}
-
-/// Reads a `.npy` file holding a 2-D array (extra axes of length 1 allowed).
+/// Reads a `.npy` file holding a 2-D array (extra axes of length 1 allowed), of any dtype the
+/// workspace's codec reads ([`dgstereo_formats::npy`]).
 pub fn read_npy(path: &Path) -> Result<DepthMap> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let bad = |m: &str| Error::format(path, format!("npy: {m}"));
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
-        return Err(bad("missing magic string"));
-    }
-    let (header_len, offset) = match bytes[6] {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        2 | 3 if bytes.len() >= 12 => (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12),
-        v => return Err(bad(&format!("unsupported version {v}"))),
-    };
-    let header = std::str::from_utf8(bytes.get(offset..offset + header_len).ok_or_else(|| bad("truncated header"))?)
-        .map_err(|_| bad("header is not text"))?;
-    let descr = header_value(header, "descr").ok_or_else(|| bad("no 'descr'"))?;
-    let descr = descr.trim_start_matches(['\'', '"']).split(['\'', '"']).next().unwrap_or("");
-    if header_value(header, "fortran_order").is_some_and(|v| v.starts_with("True")) {
-        return Err(bad("Fortran-ordered arrays are not supported"));
-    }
-    let shape_text = header_value(header, "shape").ok_or_else(|| bad("no 'shape'"))?;
-    let shape_text = shape_text.trim_start_matches('(').split(')').next().unwrap_or("");
-    let shape: Vec<usize> = shape_text
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse().map_err(|_| bad(&format!("bad shape '{shape_text}'"))))
-        .collect::<Result<_>>()?;
-    let mut dims = shape.as_slice();
+    let array = npy::read_npy(path)?;
+    let mut dims = array.shape.as_slice();
     while dims.len() > 2 && dims[0] == 1 {
         dims = &dims[1..];
     }
@@ -76,103 +48,28 @@ pub fn read_npy(path: &Path) -> Result<DepthMap> {
         dims = &dims[..dims.len() - 1];
     }
     let &[height, width] = dims else {
-        return Err(bad(&format!("shape {shape:?} is not a single 2-D map")));
+        return Err(Error::format(path, format!("npy: shape {:?} is not a single 2-D map", array.shape)));
     };
-    if descr.len() < 3 {
-        return Err(bad(&format!("bad dtype '{descr}'")));
-    }
-    let (order, kind) = descr.split_at(1);
-    let big_endian = order == ">";
-    let data = &bytes[offset + header_len..];
-    let count = height * width;
-    let size: usize = kind[1..].parse().map_err(|_| bad(&format!("bad dtype '{descr}'")))?;
-    if data.len() < count * size {
-        return Err(bad("truncated data"));
-    }
-    let word = |i: usize| -> Vec<u8> {
-        let mut w = data[i * size..(i + 1) * size].to_vec();
-        if big_endian {
-            w.reverse();
-        }
-        w
-    };
-    let convert: Box<dyn Fn(Vec<u8>) -> f32> = match kind {
-        "f4" => Box::new(|w| f32::from_le_bytes(w.try_into().unwrap())),
-        "f8" => Box::new(|w| f64::from_le_bytes(w.try_into().unwrap()) as f32),
-        "u1" => Box::new(|w| w[0] as f32),
-        "u2" => Box::new(|w| u16::from_le_bytes(w.try_into().unwrap()) as f32),
-        "i2" => Box::new(|w| i16::from_le_bytes(w.try_into().unwrap()) as f32),
-        "i4" => Box::new(|w| i32::from_le_bytes(w.try_into().unwrap()) as f32),
-        "u4" => Box::new(|w| u32::from_le_bytes(w.try_into().unwrap()) as f32),
-        _ => return Err(bad(&format!("unsupported dtype '{descr}'"))),
-    };
-    Ok(DepthMap { height, width, values: (0..count).map(|i| convert(word(i))).collect() })
+    Ok(DepthMap { height, width, values: array.data })
 }
 
 /// Writes a map as a little-endian float32 `.npy` of shape `(H, W)`.
 pub fn write_npy(path: &Path, map: &DepthMap) -> Result<()> {
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}), }}", map.height, map.width);
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend((header.len() as u16).to_le_bytes());
-    out.extend(header.as_bytes());
-    out.extend(map.values.iter().flat_map(|v| v.to_le_bytes()));
-    std::fs::write(path, out).map_err(|e| Error::io(path, e))
+    let array = npy::NpyArray { shape: vec![map.height, map.width], data: map.values.clone() };
+    npy::write_npy(path, &array, npy::NpyDtype::F32)
 }
 
 /// Reads a `.pfm` file (first channel of colour files).
 pub fn read_pfm(path: &Path) -> Result<DepthMap> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let bad = |m: &str| Error::format(path, format!("pfm: {m}"));
-    // Three whitespace-separated header tokens after the magic, then one whitespace byte.
-    let mut tokens = Vec::new();
-    let mut pos = 0;
-    while tokens.len() < 4 {
-        while pos < bytes.len() && bytes[pos].is_ascii_whitespace() {
-            pos += 1;
-        }
-        let start = pos;
-        while pos < bytes.len() && !bytes[pos].is_ascii_whitespace() {
-            pos += 1;
-        }
-        if start == pos {
-            return Err(bad("truncated header"));
-        }
-        tokens.push(std::str::from_utf8(&bytes[start..pos]).map_err(|_| bad("header is not text"))?.to_string());
-    }
-    let data = &bytes[pos + 1..];
-    let channels = match tokens[0].as_str() {
-        "Pf" => 1,
-        "PF" => 3,
-        m => return Err(bad(&format!("bad magic '{m}'"))),
-    };
-    let width: usize = tokens[1].parse().map_err(|_| bad("bad width"))?;
-    let height: usize = tokens[2].parse().map_err(|_| bad("bad height"))?;
-    let scale: f32 = tokens[3].parse().map_err(|_| bad("bad scale"))?;
-    if data.len() < width * height * channels * 4 {
-        return Err(bad("truncated data"));
-    }
-    let mut values = vec![0f32; width * height];
-    for row in 0..height {
-        for col in 0..width {
-            let i = ((height - 1 - row) * width + col) * channels * 4;
-            let b = [data[i], data[i + 1], data[i + 2], data[i + 3]];
-            values[row * width + col] = if scale < 0.0 { f32::from_le_bytes(b) } else { f32::from_be_bytes(b) };
-        }
-    }
-    Ok(DepthMap { height, width, values })
+    let map = pfm::read_pfm(path)?;
+    let values = map.data.chunks_exact(map.channels).map(|c| c[0]).collect();
+    Ok(DepthMap { height: map.height, width: map.width, values })
 }
 
 /// Writes a map as a little-endian grey `.pfm`.
 pub fn write_pfm(path: &Path, map: &DepthMap) -> Result<()> {
-    let mut out = format!("Pf\n{} {}\n-1.0\n", map.width, map.height).into_bytes();
-    for row in (0..map.height).rev() {
-        out.extend(map.values[row * map.width..(row + 1) * map.width].iter().flat_map(|v| v.to_le_bytes()));
-    }
-    std::fs::write(path, out).map_err(|e| Error::io(path, e))
+    let file = pfm::Pfm { width: map.width, height: map.height, channels: 1, data: map.values.clone() };
+    pfm::write_pfm(path, &file, pfm::Endian::Little)
 }
 
 /// Reads a grey `.png` (16 or 8 bits); the values are the stored integers.
@@ -226,35 +123,20 @@ mod tests {
     }
 
     #[test]
-    fn npy_reads_other_dtypes_and_rejects_3d() {
+    fn npy_maps_drop_unit_axes_and_refuse_cubes() {
         let dir = std::env::temp_dir().join(format!("dgstereo-prior-npy-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let write = |name: &str, descr: &str, shape: &str, data: Vec<u8>| {
-            let header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}\n");
-            let mut out = b"\x93NUMPY\x01\x00".to_vec();
-            out.extend((header.len() as u16).to_le_bytes());
-            out.extend(header.as_bytes());
-            out.extend(data);
+        let write = |name: &str, shape: Vec<usize>| {
+            let n = shape.iter().product::<usize>();
             let p = dir.join(name);
-            std::fs::write(&p, out).unwrap();
+            let array = npy::NpyArray { shape, data: (0..n).map(|i| i as f32).collect() };
+            npy::write_npy(&p, &array, npy::NpyDtype::F64).unwrap();
             p
         };
-        let f8 = write(
-            "a.npy",
-            "<f8",
-            "(1, 2, 3)",
-            [1.5f64, 2.0, 3.0, 4.0, 5.0, 6.25].iter().flat_map(|v| v.to_le_bytes()).collect(),
-        );
-        let m = read_npy(&f8).unwrap();
-        assert_eq!((m.height, m.width), (2, 3));
-        assert_eq!(m.values, vec![1.5, 2.0, 3.0, 4.0, 5.0, 6.25]);
-        let be = write("b.npy", ">f4", "(2, 1)", [7.0f32, -1.0].iter().flat_map(|v| v.to_be_bytes()).collect());
-        assert_eq!(read_npy(&be).unwrap().values, vec![7.0, -1.0]);
-        let u2 = write("c.npy", "<u2", "(1, 2)", [300u16, 65535].iter().flat_map(|v| v.to_le_bytes()).collect());
-        assert_eq!(read_npy(&u2).unwrap().values, vec![300.0, 65535.0]);
-        let cube = write("d.npy", "<f4", "(2, 2, 2)", vec![0; 32]);
-        let err = read_npy(&cube).unwrap_err().to_string();
-        assert!(err.contains("d.npy"), "{err}");
+        let m = read_npy(&write("a.npy", vec![1, 2, 3, 1])).unwrap();
+        assert_eq!((m.height, m.width, m.values.len()), (2, 3, 6));
+        let err = read_npy(&write("d.npy", vec![2, 2, 2])).unwrap_err().to_string();
+        assert!(err.contains("d.npy") && err.contains("2-D"), "{err}");
         std::fs::remove_dir_all(&dir).ok();
     }
 }
