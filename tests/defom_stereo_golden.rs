@@ -99,6 +99,6 @@ fn the_reference_tells_the_scale_iterations_and_the_initialiser() {
     assert!(right <= DISPARITY_TOLERANCE, "the official configuration is off by {right}");
     let no_scale = run(&|m| m.scale_iters = 0);
     assert!(no_scale > 100.0 * DISPARITY_TOLERANCE, "without scale iterations within {no_scale}");
-    let from_zero = run(&|m| m.initial_disparity = InitialDisparity::Zero);
+    let from_zero = run(&|m| m.initial_disparity = InitialDisparity::Zero {});
     assert!(from_zero > 100.0 * DISPARITY_TOLERANCE, "from zero within {from_zero}");
 }

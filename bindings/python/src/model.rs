@@ -75,7 +75,7 @@ impl Engine {
                 (Some(m), p)
             }
             None if run.is_some() => return Err(input("`run` names a run of an experiment: give `experiment` too")),
-            None => (None, PriorConfig::None),
+            None => (None, PriorConfig::None {}),
         };
         // Names of official checkpoints become files (fetched on first use, without progress
         // bars); the environment sets the cache, the servers, offline mode and the timeout.

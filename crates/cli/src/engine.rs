@@ -216,7 +216,7 @@ pub fn load_engine(a: &ModelArgs) -> anyhow::Result<(Engine, PredictOptions)> {
             let (m, pr) = experiment_configs(p, a.run.as_deref()).map_err(with_flags)?;
             (Some(m), pr)
         }
-        None => (None, PriorConfig::None),
+        None => (None, PriorConfig::None {}),
     };
     let prior = match (&a.prior, &a.prior_weights) {
         (Some(spec), _) => parse_prior(spec).map_err(with_flags)?,

@@ -16,6 +16,7 @@ pub mod error;
 pub mod layers;
 pub mod padding;
 pub mod probe;
+pub mod serde_names;
 pub mod shared;
 pub mod tensor;
 pub mod timing;

@@ -102,8 +102,11 @@ fn experiment(c: &Combination) -> ExperimentConfig {
     model.encoder.context_norm = c.context_norm;
     model.updater.n_downsample = c.n_downsample;
     (model.correlation.levels, model.correlation.radius) = c.correlation;
-    let prior =
-        if model.needs_prior() { PriorConfig::Simulated(SimulatedPriorConfig::default()) } else { PriorConfig::None };
+    let prior = if model.needs_prior() {
+        PriorConfig::Simulated(SimulatedPriorConfig::default())
+    } else {
+        PriorConfig::None {}
+    };
     ExperimentConfig {
         name: "swap".into(),
         description: None,
@@ -277,7 +280,7 @@ proptest! {
         hidden in prop_oneof![Just(8usize), Just(16), Just(24)],
     ) {
         let mut config = experiment(&c).model;
-        config.fusion = FusionConfig::None;
+        config.fusion = FusionConfig::None {};
         config.updater.guidance = GuidanceKind::None;
         config.updater.hidden_dims = [hidden; 3];
         prop_assert!(config.validate().is_ok(), "{:?}", config.validate());
@@ -296,7 +299,7 @@ fn every_kind_is_checked_against_the_prior() {
             let mut model = ModelConfig { fusion: fusion.clone(), ..Default::default() };
             model.updater.guidance = guidance;
             let label = format!("{} fusion, {} guidance", fusion.kind(), guidance.name());
-            for prior in [PriorConfig::None, PriorConfig::Simulated(SimulatedPriorConfig::default())] {
+            for prior in [PriorConfig::None {}, PriorConfig::Simulated(SimulatedPriorConfig::default())] {
                 let config = ExperimentConfig {
                     name: "kinds".into(),
                     description: None,

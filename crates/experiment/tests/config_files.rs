@@ -74,7 +74,7 @@ fn an_empty_file_is_raft_stereo_with_every_default() {
     assert_eq!(config.name, "empty");
     assert_eq!(config.description, None);
     assert_eq!(config.model, Default::default());
-    assert_eq!(config.prior, PriorConfig::None);
+    assert_eq!(config.prior, PriorConfig::None {});
     assert_eq!(config.loss, LossConfig::default());
     assert_eq!(config.train, Default::default());
 }

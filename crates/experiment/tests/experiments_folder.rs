@@ -35,7 +35,7 @@ fn one(relative: &str) -> ExperimentConfig {
 /// The modules of a row: (fusion kind, fusion target, guidance, edge-aware loss, has a prior).
 fn modules(config: &ExperimentConfig) -> (&'static str, FusionTarget, GuidanceKind, bool, bool) {
     let fusion = match config.model.fusion {
-        FusionConfig::None => "none",
+        FusionConfig::None {} => "none",
         FusionConfig::Deformable { .. } => "deformable",
         FusionConfig::Conv { .. } => "conv",
     };

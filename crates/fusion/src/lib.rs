@@ -92,12 +92,11 @@ fn default_features() -> usize {
 }
 
 /// Which fusion an experiment uses.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum FusionConfig {
     /// The image passes unchanged.
-    #[default]
-    None,
+    None {},
     /// DGIA: depth-guided deformable conv ([`DeformableFusion`]).
     Deformable {
         /// Which encoders see the enhanced image.
@@ -118,18 +117,24 @@ pub enum FusionConfig {
     },
 }
 
+impl Default for FusionConfig {
+    fn default() -> Self {
+        Self::None {}
+    }
+}
+
 impl FusionConfig {
     /// One configuration of every kind, with the paper's parameters, in the order of the enum.
     /// Tests and the experiment crate's checks draw the kinds from here, so a new kind is
     /// listed once, in this crate (`every_kind_is_listed` in the tests fails otherwise).
     pub fn variants() -> Vec<Self> {
-        vec![Self::None, Self::deformable(), Self::conv()]
+        vec![Self::None {}, Self::deformable(), Self::conv()]
     }
 
     /// The kind's name as the TOML key `kind` writes it.
     pub fn kind(&self) -> &'static str {
         match self {
-            Self::None => "none",
+            Self::None {} => "none",
             Self::Deformable { .. } => "deformable",
             Self::Conv { .. } => "conv",
         }
@@ -139,7 +144,7 @@ impl FusionConfig {
     #[must_use]
     pub fn with_parameters(&self, target: FusionTarget, features: usize) -> Self {
         match self {
-            Self::None => Self::None,
+            Self::None {} => Self::None {},
             Self::Deformable { .. } => Self::Deformable { target, features },
             Self::Conv { .. } => Self::Conv { target, features },
         }
@@ -159,7 +164,7 @@ impl FusionConfig {
     /// enhanced image is the image itself).
     pub fn target(&self) -> FusionTarget {
         match self {
-            Self::None => FusionTarget::Both,
+            Self::None {} => FusionTarget::Both,
             Self::Deformable { target, .. } | Self::Conv { target, .. } => *target,
         }
     }
@@ -167,13 +172,13 @@ impl FusionConfig {
     /// Whether [`ImageFusion::fuse`] needs the depth prior (`Some(depth)`); the model can skip
     /// running the prior network when it does not.
     pub fn needs_prior(&self) -> bool {
-        !matches!(self, Self::None)
+        !matches!(self, Self::None {})
     }
 
     /// Everything wrong with the parameters, keys relative to the fusion table (`features`).
     pub fn problems(&self) -> Vec<Problem> {
         match self {
-            Self::None => Vec::new(),
+            Self::None {} => Vec::new(),
             Self::Deformable { features, .. } | Self::Conv { features, .. } => {
                 projection::features_problem(*features).into_iter().collect()
             }
@@ -194,7 +199,7 @@ impl FusionConfig {
     /// [`Error::Config`] when [`validate`](Self::validate) fails.
     pub fn init(&self, device: &Device) -> Result<Fusion> {
         Ok(match self {
-            Self::None => Fusion::None(IdentityFusion),
+            Self::None {} => Fusion::None(IdentityFusion),
             Self::Deformable { features, .. } => Fusion::Deformable(DeformableFusion::new(*features, device)?),
             Self::Conv { features, .. } => Fusion::Conv(ConvFusion::new(*features, device)?),
         })

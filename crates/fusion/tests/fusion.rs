@@ -29,7 +29,10 @@ fn learned(device: &Device) -> Vec<(&'static str, Fusion)> {
 #[test]
 fn configs_read_from_toml() {
     let read = |text: &str| toml::from_str::<FusionConfig>(text);
-    assert_eq!(read("kind = \"none\"").unwrap(), FusionConfig::None);
+    assert_eq!(read("kind = \"none\"").unwrap(), FusionConfig::None {});
+    // `none` takes no keys either: a key meant for another kind is an error naming it.
+    let e = read("kind = \"none\"\nfeatures = 4").unwrap_err().to_string();
+    assert!(e.contains("features"), "{e}");
     let config = read("kind = \"deformable\"").unwrap();
     assert_eq!(config, FusionConfig::deformable());
     assert_eq!(config.target(), FusionTarget::Both);
@@ -37,7 +40,7 @@ fn configs_read_from_toml() {
     let config = read("kind = \"conv\"\ntarget = \"context-only\"\nfeatures = 4").unwrap();
     assert_eq!(config, FusionConfig::Conv { target: FusionTarget::ContextOnly, features: 4 });
     assert_eq!(config.target(), FusionTarget::ContextOnly);
-    assert!(!FusionConfig::None.needs_prior());
+    assert!(!FusionConfig::None {}.needs_prior());
     assert!(read("kind = \"deformable\"\ntau = 1").is_err());
     assert!(read("kind = \"deformable\"\ntarget = \"feature\"").is_err());
     let thin = FusionConfig::Deformable { target: FusionTarget::Both, features: 2 };
@@ -53,7 +56,7 @@ fn configs_read_from_toml() {
 fn none_is_the_identity() {
     let device = default_device();
     let x = image(&device);
-    let out = FusionConfig::None.init(&device).unwrap().fuse(x.clone(), None).unwrap();
+    let out = FusionConfig::None {}.init(&device).unwrap().fuse(x.clone(), None).unwrap();
     assert_eq!(max_abs_diff(out, x), 0.0);
 }
 
@@ -114,20 +117,12 @@ fn init_refuses_an_invalid_config() {
     assert!(ConvFusion::new(2, &device).is_err());
 }
 
-/// The kinds serde accepts for `kind`, read from its error for an unknown kind ("unknown
-/// variant `?`, expected one of `a`, `b`").
-fn kinds_serde_accepts() -> Vec<String> {
-    let message = toml::from_str::<FusionConfig>("kind = \"?\"").unwrap_err().to_string();
-    let expected = message.split_once("expected").map(|(_, rest)| rest).unwrap_or_default();
-    expected.split('`').skip(1).step_by(2).map(str::to_string).collect()
-}
-
 /// `FusionConfig::variants` lists every kind, once, in the enum's order, and names each as TOML
 /// does: the tests and checks that draw their kinds from it see every kind.
 #[test]
 fn every_kind_is_listed() {
     let listed: Vec<String> = FusionConfig::variants().iter().map(|v| v.kind().to_string()).collect();
-    assert_eq!(listed, kinds_serde_accepts());
+    assert_eq!(listed, dgstereo_core::serde_names::accepted_kinds::<FusionConfig>("kind").unwrap());
     for variant in FusionConfig::variants() {
         let text = toml::to_string(&variant).unwrap();
         assert!(text.contains(&format!("kind = \"{}\"", variant.kind())), "{text}");

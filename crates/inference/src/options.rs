@@ -48,7 +48,7 @@ impl Default for EngineConfig {
         Self {
             weights: None,
             model: None,
-            prior: PriorConfig::None,
+            prior: PriorConfig::None {},
             device: DeviceChoice::default(),
             precision: Precision::F32,
             slow_fast_gru: None,

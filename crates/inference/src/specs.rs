@@ -14,7 +14,7 @@ use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig};
 pub fn parse_prior(spec: &str) -> Result<PriorConfig> {
     let (kind, arg) = spec.split_once(':').unwrap_or((spec, ""));
     Ok(match (kind.to_ascii_lowercase().as_str(), arg) {
-        ("none", _) => PriorConfig::None,
+        ("none", _) => PriorConfig::None {},
         ("file", dir) if !dir.is_empty() => PriorConfig::File {
             dir: dir.into(),
             left: dgstereo_prior::file::DEFAULT_LEFT_PATTERN.into(),
@@ -75,7 +75,7 @@ mod tests {
 
     #[test]
     fn prior_specs_parse() {
-        assert_eq!(parse_prior("none").unwrap(), PriorConfig::None);
+        assert_eq!(parse_prior("none").unwrap(), PriorConfig::None {});
         assert!(matches!(parse_prior("file:/tmp/p").unwrap(), PriorConfig::File { .. }));
         assert!(matches!(parse_prior("dav2:w.pth").unwrap(), PriorConfig::DepthAnythingV2 { .. }));
         let e = parse_prior("magic").unwrap_err().to_string();

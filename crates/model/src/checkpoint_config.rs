@@ -57,7 +57,7 @@ pub enum OfficialPreset {
 impl OfficialPreset {
     /// The preset of a detected architecture.
     pub fn of(config: &ModelConfig) -> Self {
-        if config.monocular != dgstereo_prior::MonocularConfig::None {
+        if !matches!(config.monocular, dgstereo_prior::MonocularConfig::None {}) {
             return Self::Defom;
         }
         let (e, u) = (&config.encoder, &config.updater);

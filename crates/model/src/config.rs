@@ -66,7 +66,7 @@ impl ModelConfig {
     /// update without the scale lookup), and a monocular network that nothing reads.
     pub fn stage_problems(&self) -> Vec<Problem> {
         let mut problems = Vec::new();
-        let monocular = self.monocular != MonocularConfig::None;
+        let monocular = self.monocular != MonocularConfig::None {};
         if self.encoder.depth_features == DepthFeatureInput::Added && !monocular {
             problems.push(Problem::new(
                 "encoder.depth_features",

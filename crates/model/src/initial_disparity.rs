@@ -20,12 +20,11 @@ fn default_scale() -> f32 {
 }
 
 /// Which disparity the update loop starts from.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum InitialDisparity {
     /// Zero (RAFT-Stereo).
-    #[default]
-    Zero,
+    Zero {},
     /// DEFOM-Stereo's: the monocular inverse depth `m` at the update grid of width `w`,
     /// `m / (max(m) + 1e-8) · scale · w + 0.01` with the maximum per sample; the nearest point
     /// starts at `scale · w` (half the grid's width by default).
@@ -37,11 +36,17 @@ pub enum InitialDisparity {
     },
 }
 
+impl Default for InitialDisparity {
+    fn default() -> Self {
+        Self::Zero {}
+    }
+}
+
 impl InitialDisparity {
     /// One configuration of every kind, with the reference's parameters, in the order of the
     /// enum (the kinds tests, property strategies and experiment checks draw from).
     pub fn variants() -> Vec<Self> {
-        vec![Self::Zero, Self::scaled_inverse_depth()]
+        vec![Self::Zero {}, Self::scaled_inverse_depth()]
     }
 
     /// DEFOM-Stereo's initialiser with its `idepth_scale` (0.5).
@@ -52,7 +57,7 @@ impl InitialDisparity {
     /// The kind's name as the TOML key `kind` writes it.
     pub fn kind(&self) -> &'static str {
         match self {
-            Self::Zero => "zero",
+            Self::Zero {} => "zero",
             Self::ScaledInverseDepth { .. } => "scaled-inverse-depth",
         }
     }
@@ -83,7 +88,7 @@ impl InitialDisparity {
     /// - output: `[N, 1, H/f, W/f]`, the monocular inverse depth's
     pub fn disparity(&self, monocular: Option<&MonocularFeatures>) -> Result<Option<Tensor<4>>> {
         match self {
-            Self::Zero => Ok(None),
+            Self::Zero {} => Ok(None),
             Self::ScaledInverseDepth { scale } => {
                 let depth = &monocular
                     .ok_or_else(|| {
@@ -111,13 +116,14 @@ mod tests {
     #[test]
     fn every_kind_is_listed() {
         let listed: Vec<&str> = InitialDisparity::variants().iter().map(|v| v.kind()).collect();
-        assert_eq!(listed, ["zero", "scaled-inverse-depth"]);
+        assert_eq!(listed, dgstereo_core::serde_names::accepted_kinds::<InitialDisparity>("kind").unwrap());
         for variant in InitialDisparity::variants() {
             let back: InitialDisparity =
                 serde_json::from_str(&format!("{{\"kind\": \"{}\"}}", variant.kind())).unwrap();
             assert_eq!(back, variant);
         }
         assert!(serde_json::from_str::<InitialDisparity>("{\"kind\": \"soft-argmin\"}").is_err());
+        assert!(serde_json::from_str::<InitialDisparity>("{\"kind\": \"zero\", \"scale\": 0.5}").is_err());
         assert_eq!(InitialDisparity::ScaledInverseDepth { scale: 0.0 }.problems()[0].key, "scale");
     }
 
@@ -141,7 +147,7 @@ mod tests {
                 assert_eq!(out[sample * h * w + i], expected, "sample {sample} element {i}");
             }
         }
-        assert!(InitialDisparity::Zero.disparity(None).unwrap().is_none());
+        assert!(InitialDisparity::Zero {}.disparity(None).unwrap().is_none());
         assert!(init.disparity(None).is_err());
     }
 }

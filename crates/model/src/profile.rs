@@ -190,7 +190,7 @@ mod tests {
             let fusion = profile.stages.iter().find(|s| s.name == "fusion").map_or(0, |s| s.macs);
             (profile.macs, fusion)
         };
-        let (plain, none) = run(FusionConfig::None);
+        let (plain, none) = run(FusionConfig::None {});
         assert_eq!(none, 0);
         for target in [FusionTarget::ContextOnly, FusionTarget::Both] {
             let features = 8;

@@ -261,7 +261,7 @@ fn defom_configurations_build_and_run() {
         c
     };
     let mut encoders_only = full();
-    encoders_only.initial_disparity = InitialDisparity::Zero;
+    encoders_only.initial_disparity = InitialDisparity::Zero {};
     encoders_only.correlation.implementation = CorrelationImplementation::Alt;
     encoders_only.updater.n_downsample = 3;
     let mut initialiser_only = full();
@@ -275,7 +275,7 @@ fn defom_configurations_build_and_run() {
     // A monocular network nothing reads is refused by its key.
     let mut unread = full();
     unread.encoder.depth_features = DepthFeatureInput::None;
-    unread.initial_disparity = InitialDisparity::Zero;
+    unread.initial_disparity = InitialDisparity::Zero {};
     let e = unread.validate().unwrap_err().to_string();
     assert!(e.contains("monocular.kind"), "{e}");
 }

@@ -38,12 +38,11 @@ fn default_right_pattern() -> String {
 /// #         gamma = [0.7, 1.4], blur_sigma = 1.5, noise_std = 0.01
 /// # [prior] kind = "cache", dir = "cache/priors"  with the wrapped provider in [prior.inner]
 /// ```
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum PriorConfig {
     /// No prior: plain RAFT-Stereo.
-    #[default]
-    None,
+    None {},
     /// Depth Anything V2 run on both views ([`DepthAnythingV2Prior`]).
     DepthAnythingV2 {
         /// The official checkpoint (`depth_anything_v2_vit{s,b,l}.pth`). Required.
@@ -78,6 +77,12 @@ pub enum PriorConfig {
     Simulated(SimulatedPriorConfig),
 }
 
+impl Default for PriorConfig {
+    fn default() -> Self {
+        Self::None {}
+    }
+}
+
 /// A built provider, chosen by [`PriorConfig`].
 #[derive(Debug, Clone)]
 pub enum Prior {
@@ -98,7 +103,7 @@ impl PriorConfig {
     /// value is out of range; there is no fallback to another provider.
     pub fn init(&self, device: &Device) -> Result<Prior> {
         match self {
-            Self::None => Ok(Prior::None),
+            Self::None {} => Ok(Prior::None),
             Self::DepthAnythingV2 { weights, encoder, input_size } => Ok(Prior::DepthAnythingV2(Box::new(
                 DepthAnythingV2Prior::load(weights, *encoder, *input_size, device)?,
             ))),
@@ -125,7 +130,7 @@ impl PriorConfig {
     /// kinds from here (`every_kind_is_listed` fails when a kind is missing).
     pub fn variants() -> Vec<Self> {
         vec![
-            Self::None,
+            Self::None {},
             Self::DepthAnythingV2 { weights: PathBuf::new(), encoder: None, input_size: DEFAULT_INPUT_SIZE },
             Self::File { dir: PathBuf::new(), left: default_left_pattern(), right: default_right_pattern() },
             Self::Cache { dir: PathBuf::new(), inner: Box::new(Self::Simulated(SimulatedPriorConfig::default())) },
@@ -136,7 +141,7 @@ impl PriorConfig {
     /// The kind's name as the TOML key `kind` writes it.
     pub fn kind(&self) -> &'static str {
         match self {
-            Self::None => "none",
+            Self::None {} => "none",
             Self::DepthAnythingV2 { .. } => "depth-anything-v2",
             Self::File { .. } => "file",
             Self::Cache { .. } => "cache",
@@ -152,7 +157,7 @@ impl PriorConfig {
         let mut problems = Vec::new();
         let mut add = |key: &str, reason: &str| problems.push(Problem::new(key, reason));
         match self {
-            Self::None => {}
+            Self::None {} => {}
             Self::DepthAnythingV2 { weights, input_size, .. } => {
                 if weights.as_os_str().is_empty() {
                     add("weights", "is empty: name the Depth Anything V2 checkpoint");
@@ -191,7 +196,7 @@ impl PriorConfig {
     /// Whether this configuration yields a prior.
     pub fn gives_prior(&self) -> bool {
         match self {
-            Self::None => false,
+            Self::None {} => false,
             Self::Cache { inner, .. } => inner.gives_prior(),
             _ => true,
         }

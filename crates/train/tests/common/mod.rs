@@ -48,7 +48,7 @@ pub fn tiny_parts(steps: usize, iters: usize, lr: f64, count: Option<usize>, bat
     TrainParts {
         name: "tiny".into(),
         model: tiny_model(),
-        prior: PriorConfig::None,
+        prior: PriorConfig::None {},
         loss: LossConfig::default(),
         train,
         data,
