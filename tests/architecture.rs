@@ -100,6 +100,49 @@ fn kernels_depend_on_core_only_and_core_on_nothing() {
     assert!(dependencies("core").is_empty(), "core depends on {:?}", dependencies("core"));
 }
 
+/// The crates of ours that `krate` builds with: its normal dependencies, theirs, and so on (a
+/// dev-dependency is left out: it builds only the crate's tests).
+fn transitive_dependencies(krate: &str) -> Vec<String> {
+    let mut found: Vec<String> = Vec::new();
+    let mut pending = vec![krate.to_string()];
+    while let Some(next) = pending.pop() {
+        for dep in dependency_names(&next, &["dependencies"]) {
+            let Some(name) = dep.strip_prefix("dgstereo-") else { continue };
+            if !found.iter().any(|f| f == name) {
+                found.push(name.to_string());
+                pending.push(name.to_string());
+            }
+        }
+    }
+    found.sort();
+    found
+}
+
+/// **Architecture Invariant:** the schema sits below what executes it: the experiment crate
+/// (the `[train]` and `[data]` tables included) and the inference crate, and with it the Python
+/// package, never build the trainer; the launcher meets the trainer through the small
+/// `collective` crate alone.
+#[test]
+fn the_schema_and_inference_do_not_depend_on_the_trainer() {
+    for krate in ["experiment", "inference", "distributed", "collective"] {
+        let deps = transitive_dependencies(krate);
+        assert!(!deps.iter().any(|d| d == "train"), "'{krate}' builds the trainer through {deps:?}");
+    }
+    let bindings = root().join("bindings/python/Cargo.toml");
+    let bindings: toml::Table = std::fs::read_to_string(&bindings).expect("bindings manifest").parse().expect("TOML");
+    let wheel = bindings["dependencies"].as_table().expect("[dependencies]");
+    for dep in wheel.keys().filter_map(|d| d.strip_prefix("dgstereo-")) {
+        let mut deps = transitive_dependencies(dep);
+        deps.push(dep.to_string());
+        assert!(!deps.iter().any(|d| d == "train"), "the Python package builds the trainer through '{dep}'");
+    }
+    // Not even for its tests: a dev-dependency on the trainer would be a cycle.
+    assert!(!dependencies("experiment").iter().any(|d| d == "dgstereo-train"), "experiment depends on train");
+    let collective = transitive_dependencies("collective");
+    assert_eq!(collective, ["core"], "collective depends on {collective:?}");
+    assert!(transitive_dependencies("train").iter().any(|d| d == "experiment"), "the trainer reads the schema");
+}
+
 /// **Architecture Invariant:** no two source files import each other, directly or round a loop.
 #[test]
 fn no_source_files_import_each_other() {

@@ -1,7 +1,7 @@
 //! [`Collective`] over MPI's world communicator.
 
+use dgstereo_collective::Collective;
 use dgstereo_core::{Error, Result};
-use dgstereo_train::Collective;
 use mpi::collective::SystemOperation;
 use mpi::datatype::PartitionMut;
 use mpi::environment::Universe;

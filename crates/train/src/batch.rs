@@ -12,12 +12,11 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::{Error, Result};
 use dgstereo_data::datasets::{KittiVersion, SceneFlowPass, SceneFlowSubset};
 use dgstereo_data::{AugmentConfig, Dataset, DisparityMap, FileDataset, Mask, RgbImage, SyntheticConfig, synthetic};
+use dgstereo_experiment::{DataSource, TrainingConfig, TrainingDataConfig};
 use dgstereo_loss::LossTarget;
 use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-
-use crate::config::{DataSource, TrainingConfig, TrainingDataConfig};
 
 /// SplitMix64 finaliser: a well-mixed 64-bit hash of `x`.
 pub fn mix64(mut x: u64) -> u64 {

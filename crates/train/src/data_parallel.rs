@@ -13,12 +13,12 @@ use std::time::Instant;
 
 use burn::module::Module;
 use burn::optim::GradientsParams;
+use dgstereo_collective::{Collective, agree};
 use dgstereo_core::{Error, Result};
 use dgstereo_eval::MetricSums;
 use dgstereo_loss::DisparityLoss;
 
 use crate::batch::{TensorBatch, to_tensors};
-use crate::collective::{Collective, agree};
 use crate::ema::Ema;
 use crate::gradient_exchange::{WeightCheck, share_weights, sum_gradients};
 use crate::step_timing::StepSeconds;

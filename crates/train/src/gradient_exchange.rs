@@ -11,9 +11,9 @@ use std::time::Instant;
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
 use burn::optim::GradientsParams;
 use burn::tensor::Tensor;
+use dgstereo_collective::Collective;
 use dgstereo_core::{Error, Result};
 
-use crate::collective::Collective;
 use crate::params::PathStack;
 
 /// The most values one exchange carries (64 MiB of f32).

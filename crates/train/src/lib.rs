@@ -19,8 +19,14 @@
 //! ([`paper_tables`]), each column filled by the benchmark that scores its data set
 //! ([`paper_match`]). [`verify_step`] checks two steps against the official training loop.
 //!
-//! Data parallelism is one seam: a run is `N` ranks meeting through a [`Collective`] (the
-//! world of one is [`SingleProcess`]; MPI's lives in `dgstereo-distributed`).
+//! The configuration it executes (`[train]`, `[data]`) is the experiment crate's schema
+//! ([`dgstereo_experiment::TrainingConfig`], [`dgstereo_experiment::TrainingDataConfig`]): the
+//! trainer depends on the schema, never the reverse, so reading an experiment (inference, the
+//! Python package) does not pull in the trainer.
+//!
+//! Data parallelism is one seam: a run is `N` ranks meeting through a
+//! [`dgstereo_collective::Collective`] (the world of one is
+//! [`dgstereo_collective::SingleProcess`]; MPI's lives in `dgstereo-distributed`).
 //! [`Trainer::step_among`] splits the global batch among them and sums their gradients
 //! ([`data_parallel`], [`gradient_exchange`]); [`train_among`] is the loop in which rank 0 alone
 //! writes the run's files.
@@ -32,8 +38,6 @@ pub mod ablation_table;
 pub mod batch;
 pub mod checkpoint;
 pub mod clip;
-pub mod collective;
-mod config;
 pub mod data_parallel;
 pub mod ema;
 pub mod gradient_exchange;
@@ -53,8 +57,6 @@ pub mod trainer;
 pub mod validate;
 pub mod verify_step;
 
-pub use collective::{Collective, SingleProcess};
-pub use config::{DataSource, PhotoTextures, SyntheticScenes, TrainingConfig, TrainingDataConfig, ValidationConfig};
 pub use progress::{Progress, ProgressObserver};
 pub use run::{RunOptions, RunSummary, train, train_among};
 pub use schedule::OneCycleLr;

@@ -23,11 +23,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use burn::tensor::Device;
+use dgstereo_collective::{Collective, SingleProcess, agree, writes_files};
 use dgstereo_core::{Error, Result};
 use serde_json::json;
 
 use crate::checkpoint::{list_checkpoints, load_checkpoint, save_checkpoint};
-use crate::collective::{Collective, SingleProcess, agree, writes_files};
 use crate::data_parallel::check_batch_divides;
 use crate::plot::write_plot;
 use crate::progress::{Progress, ProgressObserver};

@@ -9,21 +9,20 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::{DepthPrior, Error, Result};
 use dgstereo_data::DisparityMap;
 use dgstereo_eval::{MetricSums, ValidOptions, accumulate};
+use dgstereo_experiment::{ExperimentConfig, TrainingConfig, TrainingDataConfig};
 use dgstereo_loss::{DisparityLoss, LossConfig};
 use dgstereo_model::{ModelConfig, RaftStereo};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
 use crate::batch::{TensorBatch, TrainingData, to_tensors};
 use crate::clip::clip_global_norm;
-use crate::config::{TrainingConfig, TrainingDataConfig};
 use crate::ema::Ema;
 use crate::params::materialize;
 use crate::schedule::OneCycleLr;
 use crate::step_timing::StepSeconds;
 
-/// Everything a run is made of: the experiment's parts and its resolved text.
-///
-/// The experiment crate resolves files into these; the trainer does not depend on it.
+/// Everything a run is made of: the experiment's parts and its resolved text
+/// (`From<ExperimentConfig>` splits a resolved experiment into them).
 #[derive(Debug, Clone)]
 pub struct TrainParts {
     /// Name of the run.
@@ -40,6 +39,23 @@ pub struct TrainParts {
     pub data: TrainingDataConfig,
     /// The resolved experiment as TOML, stored in every checkpoint.
     pub resolved_toml: String,
+}
+
+impl From<ExperimentConfig> for TrainParts {
+    /// The parts of a resolved experiment; `resolved_toml` is its complete TOML
+    /// ([`ExperimentConfig::to_toml`]).
+    fn from(config: ExperimentConfig) -> Self {
+        let resolved_toml = config.to_toml();
+        Self {
+            name: config.name,
+            model: config.model,
+            prior: config.prior,
+            loss: config.loss,
+            train: config.train,
+            data: config.data,
+            resolved_toml,
+        }
+    }
 }
 
 impl TrainParts {

@@ -16,11 +16,12 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
+use dgstereo_collective::Collective;
 use dgstereo_core::DeviceChoice;
 use dgstereo_kernels::{Op, Path, Settings, count_work, path};
 use dgstereo_train::batch::TensorBatch;
 use dgstereo_train::step_timing::{StageBackward, StepSeconds, random_batch};
-use dgstereo_train::{Collective, TrainParts, Trainer};
+use dgstereo_train::{TrainParts, Trainer};
 
 use super::bench::{BenchArgs, machine_line, median, model_config, parse_size, peak_memory_bytes};
 use super::train::parts_of;

@@ -18,11 +18,12 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::Args;
+use dgstereo_collective::Collective;
 use dgstereo_core::DeviceChoice;
 use dgstereo_distributed::World;
+use dgstereo_train::{RunOptions, TrainParts};
 
 use crate::stop_signals::StopSignals;
-use dgstereo_train::{Collective, RunOptions, TrainParts};
 
 /// Options of `dgstereo train`.
 #[derive(Args)]
@@ -56,16 +57,7 @@ pub fn parts_of(mut config: dgstereo_experiment::ExperimentConfig, steps: Option
     if let Some(s) = steps {
         config.train.steps = s as usize;
     }
-    let resolved_toml = config.to_toml();
-    TrainParts {
-        name: config.name,
-        model: config.model,
-        prior: config.prior,
-        loss: config.loss,
-        train: config.train,
-        data: config.data,
-        resolved_toml,
-    }
+    TrainParts::from(config)
 }
 
 /// How the runs of one command train: where, whether with a progress bar, what stops them and
@@ -111,7 +103,7 @@ pub fn train_one(
     resume: bool,
     session: &Session<'_>,
 ) -> anyhow::Result<dgstereo_train::RunSummary> {
-    train_one_among(parts, out, resume, session, &dgstereo_train::SingleProcess)
+    train_one_among(parts, out, resume, session, &dgstereo_collective::SingleProcess)
 }
 
 /// Trains one run into `out` with every rank of `ranks`; rank 0 prints.
@@ -177,7 +169,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<ExitCode> {
         // rank 0, and every rank ends normally. An error of this rank alone is reported here,
         // and ends every rank of the job: the others may be waiting for this one.
         let line = crate::engine::error_line(e);
-        if !dgstereo_train::collective::is_agreed(&line, world.size()) {
+        if !dgstereo_collective::is_agreed(&line, world.size()) {
             eprintln!("error: rank {} of {}: {line}", world.rank(), world.size());
             world.abort(1);
         } else if world.rank() != 0 {

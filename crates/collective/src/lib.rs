@@ -6,7 +6,10 @@
 //! MPI. An exchange blocks until every rank has called it, so every rank must make the same
 //! calls in the same order: where one rank can fail alone (a sample it cannot read, a loss that
 //! is not finite), [`agree`] turns its error into the same error on every rank, and all ranks
-//! stop together instead of waiting for each other.
+//! stop together instead of waiting for each other. The crate is small on purpose (as ripgrep's
+//! `grep-matcher` is to its searchers): the trainer and the launcher both depend on it, and
+//! neither on the other.
+#![deny(missing_docs)]
 
 use dgstereo_core::{Error, Result};
 
