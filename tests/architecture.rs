@@ -252,3 +252,22 @@ fn no_library_crate_depends_on_anyhow() {
         .collect();
     assert!(offenders.is_empty(), "library crates depending on anyhow: {offenders:?}");
 }
+
+/// **Architecture Invariant:** errors that callers branch on are types: the library's `Error` has
+/// no catch-all variant carrying only text, so no code decides anything by an error's wording.
+#[test]
+fn no_error_is_only_text() {
+    let mut files = Vec::new();
+    for dir in ["crates", "src", "tests", "benches", "bindings"] {
+        rust_files(&root().join(dir), &mut files);
+    }
+    let catch_all = ["Error::", "Other("].concat();
+    let offenders: Vec<String> = files
+        .iter()
+        .filter(|path| std::fs::read_to_string(path).unwrap_or_default().contains(&catch_all))
+        .map(|path| relative(path))
+        .collect();
+    assert!(offenders.is_empty(), "files naming {catch_all}: {offenders:?}");
+    let error = std::fs::read_to_string(root().join("crates/core/src/error.rs")).expect("core's error.rs");
+    assert!(!error.contains("    Other("), "core's Error has a catch-all `Other` variant");
+}

@@ -76,14 +76,13 @@ pub fn evaluate_benchmark(
         |_| {},
     );
     if let Some(f) = result.failures.first() {
-        return Err(Error::Other(format!(
-            "benchmark '{}': {} of {} sample(s) failed; first: {}: {}",
+        let what = format!(
+            "benchmark '{}': {} of {} sample(s) failed; first",
             benchmark.label(),
             result.failures.len(),
             result.failures.len() + result.table.rows.len(),
-            f.name,
-            f.message
-        )));
+        );
+        return Err(Error::sample(&f.name, &f.message).context(what));
     }
     Ok(result.table.aggregates().remove(0).all)
 }

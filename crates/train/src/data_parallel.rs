@@ -23,7 +23,7 @@ use crate::batch::{TensorBatch, to_tensors};
 use crate::ema::Ema;
 use crate::gradient_exchange::{WeightCheck, share_weights, sum_gradients};
 use crate::step_timing::StepSeconds;
-use crate::trainer::{StepInternals, StepReport, Trainer, batch_metrics};
+use crate::trainer::{StepInternals, StepReport, Trainer, batch_metrics, stopping_at};
 
 /// The elements of a global batch of `batch_size` that rank `rank` of `size` computes.
 pub fn rank_elements(batch_size: usize, rank: usize, size: usize) -> Vec<usize> {
@@ -151,11 +151,8 @@ impl Trainer {
         };
         let loss_sum = f64::from(dgstereo_core::tensor::to_vec(terms.sum.clone().detach())[0]);
         if !loss_sum.is_finite() {
-            return Err(Error::Other(format!(
-                "step {}: the loss is {loss_sum} (pairs: {}); stopping with the weights after {step} completed steps",
-                step + 1,
-                batch.names.join(", "),
-            )));
+            let what = format!("the loss ({loss_sum}; pairs: {})", batch.names.join(", "));
+            return Err(Error::not_finite(what).context(stopping_at(step)));
         }
         let last = predictions.last().expect("at least one iteration").clone().detach();
         let sums = batch_metrics(last, batch.target.disparity_bilinear.clone(), batch.target.valid.clone())?;

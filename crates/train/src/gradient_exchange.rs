@@ -156,12 +156,13 @@ pub fn share_weights<M: Module>(module: M, ranks: &dyn Collective) -> Result<(M,
     let mut shared = own.values.clone();
     let lengths = ranks.all_gather(&[shared.len() as f64]);
     if let Some(r) = lengths.iter().position(|&n| n != shared.len() as f64) {
-        return Err(Error::Other(format!(
-            "rank {r} holds a network of {} weights, rank {} one of {}: the ranks built different models",
+        let cause = format!(
+            "holds a network of {} weights, rank {} one of {}: the ranks built different models",
             lengths[r],
             ranks.rank(),
             shared.len()
-        )));
+        );
+        return Err(Error::Rank { rank: r, size: ranks.size(), cause });
     }
     for bucket in shared.chunks_mut(BUCKET_FLOATS) {
         ranks.broadcast(bucket, 0);

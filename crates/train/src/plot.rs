@@ -139,7 +139,7 @@ pub fn write_plot(curves: &Curves, path: &Path) -> Result<()> {
 pub(crate) fn write_png(img: &RgbImage, path: &Path) -> Result<()> {
     let mut bytes = Vec::new();
     img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
-        .map_err(|e| Error::Other(format!("{}: cannot encode the plot: {e}", path.display())))?;
+        .map_err(|e| Error::encode(format!("the plot {}", path.display()), e))?;
     crate::checkpoint::write_atomic(path, &bytes)
 }
 

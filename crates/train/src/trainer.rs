@@ -151,6 +151,12 @@ pub struct Trainer {
     pub(crate) prior: Prior,
 }
 
+/// What a step that fails says before its cause: the step (1-based) and the weights the run
+/// keeps, those of the `step` completed ones.
+pub(crate) fn stopping_at(step: usize) -> String {
+    format!("step {}: stopping with the weights after {step} completed steps", step + 1)
+}
+
 /// The AdamW of a recipe (decoupled weight decay, PyTorch's update).
 pub fn adamw(train: &TrainingConfig) -> ModuleOptimizer {
     adamw_config(train).init()
@@ -358,10 +364,8 @@ impl Trainer {
         let started = Instant::now();
         let (grads, clip) = clip_global_norm(&self.model, grads, self.parts.train.clip);
         if let Some(param) = clip.non_finite {
-            return Err(Error::Other(format!(
-                "step {}: the gradient of '{param}' is not finite (loss {loss_value}); stopping with the weights after {step} completed steps",
-                step + 1
-            )));
+            let what = format!("the gradient of '{param}' (loss {loss_value})");
+            return Err(Error::not_finite(what).context(stopping_at(step)));
         }
         let lr = self.schedule.lr(step);
         self.model = self.optimizer.step(lr, self.model.clone(), grads);

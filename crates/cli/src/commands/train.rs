@@ -165,11 +165,12 @@ pub fn run(a: TrainArgs) -> anyhow::Result<ExitCode> {
     if let Err(e) = &result
         && world.size() > 1
     {
-        // An error every rank returned together (it names the failing rank) is reported by
-        // rank 0, and every rank ends normally. An error of this rank alone is reported here,
-        // and ends every rank of the job: the others may be waiting for this one.
-        let line = crate::engine::error_line(e);
-        if !dgstereo_collective::is_agreed(&line, world.size()) {
+        // An error every rank returned together (`Error::Rank`, naming the failing rank) is
+        // reported by rank 0, and every rank ends normally. An error of this rank alone is
+        // reported here, and ends every rank of the job: the others may be waiting for this one.
+        let agreed = e.chain().filter_map(|c| c.downcast_ref::<dgstereo_core::Error>()).any(|c| c.is_rank_failure());
+        if !agreed {
+            let line = crate::engine::error_line(e);
             eprintln!("error: rank {} of {}: {line}", world.rank(), world.size());
             world.abort(1);
         } else if world.rank() != 0 {
