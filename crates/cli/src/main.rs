@@ -12,6 +12,7 @@ mod outputs;
 mod sigpipe;
 mod stop_signals;
 mod train_progress;
+mod training;
 mod visualize;
 
 use std::process::ExitCode;

@@ -14,10 +14,9 @@
 //! (JSONL), [`progress`] events for the binary to draw, validation, plots and atomic checkpoints
 //! that keep the last N.
 //! `train.ema_decay` adds a moving average of the weights ([`ema`]) that validation, checkpoints'
-//! model weights and the final model use. [`ablation`] scores finished runs into the ablation
-//! table, and [`paper_report`] lays them out in the paper's tables beside its published figures
-//! ([`paper_tables`]), each column filled by the benchmark that scores its data set
-//! ([`paper_match`]). [`verify_step`] checks two steps against the official training loop.
+//! model weights and the final model use. [`verify_step`] checks two steps against the official
+//! training loop. A study of many runs (scores, tables, the paper's layout) is the
+//! `dgstereo-study` crate's, above this one.
 //!
 //! The configuration it executes (`[train]`, `[data]`) is the experiment crate's schema
 //! ([`dgstereo_experiment::TrainingConfig`], [`dgstereo_experiment::TrainingDataConfig`]): the
@@ -32,18 +31,12 @@
 //! writes the run's files.
 #![deny(missing_docs)]
 
-pub mod ablation;
-pub mod ablation_plot;
-pub mod ablation_table;
 pub mod batch;
 pub mod checkpoint;
 pub mod clip;
 pub mod data_parallel;
 pub mod ema;
 pub mod gradient_exchange;
-pub mod paper_match;
-pub mod paper_report;
-pub mod paper_tables;
 pub mod params;
 pub mod plot;
 pub mod preflight;

@@ -65,7 +65,7 @@ impl ValidationSet {
 
 /// The disparity of one pair at its own size, the prior given the pair's ground truth (which
 /// only a simulated prior reads).
-pub(crate) fn predict_pair(
+pub fn predict_pair(
     model: &RaftStereo,
     config: &ModelConfig,
     prior: &Prior,

@@ -24,7 +24,6 @@ use dgstereo_train::step_timing::{StageBackward, StepSeconds, random_batch};
 use dgstereo_train::{TrainParts, Trainer};
 
 use super::bench::{BenchArgs, machine_line, median, model_config, parse_size, peak_memory_bytes};
-use super::train::parts_of;
 
 /// Times `a.runs` training steps after `a.warmup` (`dgstereo bench --train`).
 pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
@@ -53,7 +52,7 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         None => toml::from_str::<dgstereo_experiment::ExperimentConfig>("name = \"bench\"")
             .context("the default experiment")?,
     };
-    let mut parts: TrainParts = parts_of(config, None);
+    let mut parts = TrainParts::from(config);
     if let Some(p) = &a.config {
         parts.model = model_config(p)?;
     }

@@ -31,7 +31,7 @@ fn one(relative: &str) -> ExperimentConfig {
 #[test]
 fn the_paper_trains_with_batch_4_and_scores_its_seven_columns() {
     use dgstereo_eval::DatasetKind;
-    use dgstereo_train::paper_tables::GENERALISATION_COLUMNS;
+    use dgstereo_study::paper_tables::GENERALISATION_COLUMNS;
     let paper = one("paper.toml");
     assert_eq!(paper.train.batch_size, 4, "the paper: \"we set batch size to 4\"");
     let benchmarks: Vec<(&str, DatasetKind, Option<&str>, Option<&str>)> = paper
@@ -54,11 +54,11 @@ fn the_paper_trains_with_batch_4_and_scores_its_seven_columns() {
     );
     // The paper's tables read these benchmarks (each matched by its data set), in this order,
     // with the metrics they show, as the paper scores them.
-    let matches = dgstereo_train::paper_match::match_benchmarks(&paper.benchmarks);
+    let matches = dgstereo_study::paper_match::match_benchmarks(&paper.benchmarks);
     assert!(matches.iter().all(|m| m.found.is_some() && m.differences().is_empty()), "{matches:?}");
     let columns: Vec<(&str, &str)> = GENERALISATION_COLUMNS
         .iter()
-        .map(|c| (dgstereo_train::paper_match::label_for(&matches, c.benchmark).unwrap_or("-"), c.metric))
+        .map(|c| (dgstereo_study::paper_match::label_for(&matches, c.benchmark).unwrap_or("-"), c.metric))
         .collect();
     let shown: Vec<(&str, &str)> =
         paper.benchmarks.iter().flat_map(|b| b.table_metrics().into_iter().map(move |m| (b.label(), m))).collect();
@@ -81,7 +81,7 @@ fn every_row_of_the_papers_tables_is_a_run_of_the_folder() {
     let mut files = Vec::new();
     toml_files(&experiments_dir(), &mut files);
     let runs: Vec<String> = files.iter().flat_map(|f| load(f).unwrap()).map(|r| r.name).collect();
-    for table in &dgstereo_train::paper_tables::PAPER_TABLES {
+    for table in &dgstereo_study::paper_tables::PAPER_TABLES {
         for row in table.rows {
             assert!(
                 runs.iter().any(|r| r == row.run),
