@@ -271,3 +271,28 @@ fn no_error_is_only_text() {
     let error = std::fs::read_to_string(root().join("crates/core/src/error.rs")).expect("core's error.rs");
     assert!(!error.contains("    Other("), "core's Error has a catch-all `Other` variant");
 }
+
+/// **Architecture Invariant:** the binary's command modules do not import each other: what two
+/// commands share is a module of the binary beside them (`training.rs`, `measurement.rs`) or a
+/// library (the study crate).
+#[test]
+fn command_modules_do_not_import_each_other() {
+    let mut files = Vec::new();
+    rust_files(&root().join("crates/cli/src/commands"), &mut files);
+    assert!(files.len() > 5, "the command modules are not where this test looks");
+    let offenders: Vec<String> = files
+        .iter()
+        .flat_map(|path| {
+            let text = std::fs::read_to_string(path).unwrap_or_default();
+            let lines: Vec<String> = text
+                .lines()
+                .filter(|l| !l.trim_start().starts_with("//"))
+                // A module's own tests see their module through `use super::*`.
+                .filter(|l| (l.contains("super::") && l.trim() != "use super::*;") || l.contains("crate::commands::"))
+                .map(|l| format!("{}: {}", relative(path), l.trim()))
+                .collect();
+            lines
+        })
+        .collect();
+    assert!(offenders.is_empty(), "command modules importing each other:\n{}", offenders.join("\n"));
+}

@@ -8,6 +8,7 @@ mod commands;
 mod engine;
 mod fetching;
 mod inputs;
+mod measurement;
 mod outputs;
 mod sigpipe;
 mod stop_signals;
@@ -47,7 +48,7 @@ enum Command {
     /// Trains (or reuses) and evaluates every run of experiment files; writes the ablation table.
     Ablate(commands::ablate::AblateArgs),
     /// Times whole inference at a given size: median/min seconds, megapixels/s, GFLOP/s, memory.
-    Bench(commands::bench::BenchArgs),
+    Bench(measurement::BenchArgs),
     /// Scores one disparity prediction against ground truth; prints JSON.
     Metrics(commands::metrics::MetricsArgs),
     /// Compares a model with activations computed by the official PyTorch code.

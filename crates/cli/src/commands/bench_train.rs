@@ -23,7 +23,7 @@ use dgstereo_train::batch::TensorBatch;
 use dgstereo_train::step_timing::{StageBackward, StepSeconds, random_batch};
 use dgstereo_train::{TrainParts, Trainer};
 
-use super::bench::{BenchArgs, machine_line, median, model_config, parse_size, peak_memory_bytes};
+use crate::measurement::{BenchArgs, machine_line, median, model_config, parse_size, peak_memory_bytes};
 
 /// Times `a.runs` training steps after `a.warmup` (`dgstereo bench --train`).
 pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
