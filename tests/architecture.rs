@@ -125,6 +125,49 @@ fn array_files_are_read_in_the_formats_crate_only() {
     assert!(found.is_empty(), "NPY/PFM codecs outside crates/formats: {found:?}");
 }
 
+/// The crates of ours that `krate` builds with: its normal dependencies, theirs, and so on (a
+/// dev-dependency is left out: it builds only the crate's tests).
+fn transitive_dependencies(krate: &str) -> Vec<String> {
+    let mut found: Vec<String> = Vec::new();
+    let mut pending = vec![krate.to_string()];
+    while let Some(next) = pending.pop() {
+        for dep in dependency_names(&next, &["dependencies"]) {
+            let Some(name) = dep.strip_prefix("dgstereo-") else { continue };
+            if !found.iter().any(|f| f == name) {
+                found.push(name.to_string());
+                pending.push(name.to_string());
+            }
+        }
+    }
+    found.sort();
+    found
+}
+
+/// **Architecture Invariant:** the schema sits below what executes it: the experiment crate
+/// (the `[train]` and `[data]` tables included) and the inference crate, and with it the Python
+/// package, never build the trainer; the launcher meets the trainer through the small
+/// `collective` crate alone.
+#[test]
+fn the_schema_and_inference_do_not_depend_on_the_trainer() {
+    for krate in ["experiment", "inference", "distributed", "collective"] {
+        let deps = transitive_dependencies(krate);
+        assert!(!deps.iter().any(|d| d == "train"), "'{krate}' builds the trainer through {deps:?}");
+    }
+    let bindings = root().join("bindings/python/Cargo.toml");
+    let bindings: toml::Table = std::fs::read_to_string(&bindings).expect("bindings manifest").parse().expect("TOML");
+    let wheel = bindings["dependencies"].as_table().expect("[dependencies]");
+    for dep in wheel.keys().filter_map(|d| d.strip_prefix("dgstereo-")) {
+        let mut deps = transitive_dependencies(dep);
+        deps.push(dep.to_string());
+        assert!(!deps.iter().any(|d| d == "train"), "the Python package builds the trainer through '{dep}'");
+    }
+    // Not even for its tests: a dev-dependency on the trainer would be a cycle.
+    assert!(!dependencies("experiment").iter().any(|d| d == "dgstereo-train"), "experiment depends on train");
+    let collective = transitive_dependencies("collective");
+    assert_eq!(collective, ["core"], "collective depends on {collective:?}");
+    assert!(transitive_dependencies("train").iter().any(|d| d == "experiment"), "the trainer reads the schema");
+}
+
 /// **Architecture Invariant:** no two source files import each other, directly or round a loop.
 #[test]
 fn no_source_files_import_each_other() {
@@ -233,4 +276,48 @@ fn no_library_crate_depends_on_anyhow() {
         .filter(|c| dependency_names(c, &["dependencies"]).iter().any(|d| d == "anyhow"))
         .collect();
     assert!(offenders.is_empty(), "library crates depending on anyhow: {offenders:?}");
+}
+
+/// **Architecture Invariant:** errors that callers branch on are types: the library's `Error` has
+/// no catch-all variant carrying only text, so no code decides anything by an error's wording.
+#[test]
+fn no_error_is_only_text() {
+    let mut files = Vec::new();
+    for dir in ["crates", "src", "tests", "benches", "bindings"] {
+        rust_files(&root().join(dir), &mut files);
+    }
+    let catch_all = ["Error::", "Other("].concat();
+    let offenders: Vec<String> = files
+        .iter()
+        .filter(|path| std::fs::read_to_string(path).unwrap_or_default().contains(&catch_all))
+        .map(|path| relative(path))
+        .collect();
+    assert!(offenders.is_empty(), "files naming {catch_all}: {offenders:?}");
+    let error = std::fs::read_to_string(root().join("crates/core/src/error.rs")).expect("core's error.rs");
+    assert!(!error.contains("    Other("), "core's Error has a catch-all `Other` variant");
+}
+
+/// **Architecture Invariant:** the binary's command modules do not import each other: what two
+/// commands share is a module of the binary beside them (`training.rs`, `measurement.rs`) or a
+/// library (the study crate).
+#[test]
+fn command_modules_do_not_import_each_other() {
+    let mut files = Vec::new();
+    rust_files(&root().join("crates/cli/src/commands"), &mut files);
+    assert!(files.len() > 5, "the command modules are not where this test looks");
+    let offenders: Vec<String> = files
+        .iter()
+        .flat_map(|path| {
+            let text = std::fs::read_to_string(path).unwrap_or_default();
+            let lines: Vec<String> = text
+                .lines()
+                .filter(|l| !l.trim_start().starts_with("//"))
+                // A module's own tests see their module through `use super::*`.
+                .filter(|l| (l.contains("super::") && l.trim() != "use super::*;") || l.contains("crate::commands::"))
+                .map(|l| format!("{}: {}", relative(path), l.trim()))
+                .collect();
+            lines
+        })
+        .collect();
+    assert!(offenders.is_empty(), "command modules importing each other:\n{}", offenders.join("\n"));
 }

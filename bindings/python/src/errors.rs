@@ -55,9 +55,9 @@ pub fn input(message: impl Into<String>) -> PyErr {
     raise(Kind::Input, message)
 }
 
-/// Whether `e` is about a file that could not be read, written or parsed.
+/// Whether `e` is about a file that could not be read, written or parsed (under any context).
 fn is_file_error(e: &Error) -> bool {
-    matches!(e, Error::Io { .. } | Error::Format { .. } | Error::Checkpoint { .. })
+    matches!(e.root(), Error::Io { .. } | Error::Format { .. } | Error::Checkpoint { .. })
 }
 
 /// `e` as an exception: a `FileError` when a file is at fault, else of class `kind`.
@@ -106,7 +106,7 @@ pub fn guarded<T>(f: impl FnOnce() -> Result<T, Error>) -> Result<T, Error> {
                 .cloned()
                 .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
                 .unwrap_or_else(|| "unknown panic".into());
-            Err(Error::Other(format!("internal error: {message}")))
+            Err(Error::Internal(message))
         }
     }
 }

@@ -8,10 +8,12 @@ mod commands;
 mod engine;
 mod fetching;
 mod inputs;
+mod measurement;
 mod outputs;
 mod sigpipe;
 mod stop_signals;
 mod train_progress;
+mod training;
 mod visualize;
 
 use std::process::ExitCode;
@@ -46,7 +48,7 @@ enum Command {
     /// Trains (or reuses) and evaluates every run of experiment files; writes the ablation table.
     Ablate(commands::ablate::AblateArgs),
     /// Times whole inference at a given size: median/min seconds, megapixels/s, GFLOP/s, memory.
-    Bench(commands::bench::BenchArgs),
+    Bench(measurement::BenchArgs),
     /// Scores one disparity prediction against ground truth; prints JSON.
     Metrics(commands::metrics::MetricsArgs),
     /// Compares a model with activations computed by the official PyTorch code.

@@ -19,8 +19,9 @@ use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 use common::{SYNTHETIC_SOURCE, TINY_VALIDATION, text, tiny_train, write_experiment};
+use dgstereo_collective::{Collective, SingleProcess};
 use dgstereo_train::gradient_exchange::{flat_gradients, flat_weights};
-use dgstereo_train::{Collective, SingleProcess, StepInternals, TrainParts, Trainer};
+use dgstereo_train::{StepInternals, TrainParts, Trainer};
 use serde::{Deserialize, Serialize};
 
 /// Open MPI's `mpirun`, or `None` (with a notice) where it is not installed; under `CI=true` its
@@ -62,16 +63,7 @@ struct Steps {
 
 fn three_steps(experiment: &Path, ranks: &dyn Collective) -> Steps {
     let config = dgstereo_experiment::load(experiment).unwrap().remove(0).config;
-    let resolved_toml = config.to_toml();
-    let parts = TrainParts {
-        name: config.name,
-        model: config.model,
-        prior: config.prior,
-        loss: config.loss,
-        train: config.train,
-        data: config.data,
-        resolved_toml,
-    };
+    let parts = TrainParts::from(config);
     let mut trainer = Trainer::new(parts, &dgstereo_core::default_device()).unwrap();
     trainer.share_weights(ranks).unwrap();
     let initial = flat_weights(&trainer.inference_model());

@@ -194,10 +194,10 @@ fn configured_gpu(device: Device, precision: Precision) -> crate::Result<Device>
     });
     std::panic::set_hook(previous);
     result.unwrap_or_else(|_| {
-        Err(crate::Error::Other(
+        Err(crate::Error::unsupported(
+            "the GPU device",
             "no usable GPU: burn's wgpu backend found no Vulkan adapter (install a Vulkan driver and loader, \
-             or use --device cpu)"
-                .into(),
+             or use --device cpu)",
         ))
     })
 }

@@ -77,9 +77,42 @@ pub enum Error {
         #[source]
         source: Box<Error>,
     },
-    /// Anything else, with a message.
-    #[error("{0}")]
-    Other(String),
+    /// A value that must be finite is not: a loss, a gradient, a disparity.
+    #[error("{what} is not finite")]
+    NotFinite {
+        /// The value and where it came from (`the loss (NaN; pairs: a, b)`).
+        what: String,
+    },
+    /// Inputs that each look right but contradict each other: shards of different evaluations,
+    /// ranks that read different checkpoints.
+    #[error("{what}: {reason}")]
+    Mismatch {
+        /// What disagrees.
+        what: String,
+        /// With what, and what to do about it.
+        reason: String,
+    },
+    /// A sample of a data set that cannot serve as asked: it lacks ground truth, or it is not in
+    /// the set.
+    #[error("{sample}: {reason}")]
+    Sample {
+        /// The sample's name (`middlebury/Cones`).
+        sample: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A value that could not be written in its format: a checkpoint, a plot, an ONNX model.
+    #[error("cannot encode {what}: {cause}")]
+    Encode {
+        /// What was being written.
+        what: String,
+        /// The encoder's error.
+        cause: String,
+    },
+    /// A broken invariant of dgstereo itself, never bad input: a caught panic, a pass that gave
+    /// no output. It is a bug to report.
+    #[error("internal error: {0}")]
+    Internal(String),
 }
 
 impl Error {
@@ -107,6 +140,33 @@ impl Error {
     /// An operation that is not supported, and why.
     pub fn unsupported(operation: impl Into<String>, reason: impl Into<String>) -> Self {
         Self::Unsupported { operation: operation.into(), reason: reason.into() }
+    }
+
+    /// A value that is not finite; `what` names it and where it came from.
+    pub fn not_finite(what: impl Into<String>) -> Self {
+        Self::NotFinite { what: what.into() }
+    }
+
+    /// Inputs that contradict each other: `what` disagrees, `reason` says with what.
+    pub fn mismatch(what: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::Mismatch { what: what.into(), reason: reason.into() }
+    }
+
+    /// A sample that cannot serve as asked.
+    pub fn sample(sample: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::Sample { sample: sample.into(), reason: reason.into() }
+    }
+
+    /// A value that could not be encoded.
+    pub fn encode(what: impl Into<String>, cause: impl ToString) -> Self {
+        Self::Encode { what: what.into(), cause: cause.to_string() }
+    }
+
+    /// Whether this error, under its [`Context`](Self::Context) wrappers, is one every rank of a
+    /// data-parallel job returned together ([`Rank`](Self::Rank)), so that no rank is left
+    /// waiting for another and the job may end normally.
+    pub fn is_rank_failure(&self) -> bool {
+        matches!(self.root(), Self::Rank { .. })
     }
 
     /// This error with `context` (what was being done) written before it; its kind stays

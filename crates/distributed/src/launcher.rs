@@ -20,12 +20,13 @@ pub fn launched_ranks(var: impl Fn(&str) -> Option<String>) -> Option<(usize, &'
 
 /// The error of a build without MPI started as `count` ranks (read from `variable`).
 pub fn without_mpi(count: usize, variable: &str) -> dgstereo_core::Error {
-    dgstereo_core::Error::Other(format!(
-        "this process is one of {count} ranks ({variable}={count}), but this dgstereo was built without MPI: \
+    dgstereo_core::Error::unsupported(
+        format!("running as one of {count} ranks ({variable}={count})"),
+        "this dgstereo was built without MPI: \
          each rank would train alone into the same folder. Build it with `cargo build --release -p dgstereo \
          --features mpi` (needs an MPI library and libclang: Debian's libopenmpi-dev and libclang-dev), or \
-         start one process"
-    ))
+         start one process",
+    )
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! and the exchanges between them.
 //!
 //! Design decision: the trainer meets other ranks through one trait,
-//! [`dgstereo_train::Collective`]; this crate decides which world a process is in and gives it
+//! [`dgstereo_collective::Collective`]; this crate decides which world a process is in and gives it
 //! one. A process no launcher started is a world of one and never touches MPI. With the `mpi`
 //! feature, a process that `mpirun` or `srun` started as one of several ranks joins MPI's world
 //! (Open MPI, MPICH, Intel MPI: whatever the `mpi` crate was built against); without it, such a
@@ -14,8 +14,8 @@ pub mod launcher;
 #[cfg(feature = "mpi")]
 mod mpi_world;
 
+use dgstereo_collective::{Collective, SingleProcess};
 use dgstereo_core::Result;
-use dgstereo_train::{Collective, SingleProcess};
 
 /// The ranks of this run, as this process sees them.
 pub struct World {

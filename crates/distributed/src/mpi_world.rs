@@ -1,7 +1,7 @@
 //! [`Collective`] over MPI's world communicator.
 
+use dgstereo_collective::Collective;
 use dgstereo_core::{Error, Result};
-use dgstereo_train::Collective;
 use mpi::collective::SystemOperation;
 use mpi::datatype::PartitionMut;
 use mpi::environment::Universe;
@@ -19,8 +19,9 @@ pub(crate) struct MpiWorld {
 impl MpiWorld {
     /// Initialises MPI (once per process).
     pub(crate) fn initialize() -> Result<Self> {
-        let universe =
-            mpi::initialize().ok_or_else(|| Error::Other("MPI was already initialised in this process".into()))?;
+        let universe = mpi::initialize().ok_or_else(|| {
+            Error::unsupported("initialising MPI twice", "MPI was already initialised in this process")
+        })?;
         let world = universe.world();
         let local = world.split_shared(world.rank());
         Ok(Self { world, local, _universe: universe })

@@ -79,14 +79,14 @@ where
     P: FnMut(&Sample) -> Result<DisparityMap>,
 {
     let (Some(gt), Some(valid)) = (&sample.disparity, &sample.valid) else {
-        return Err(Error::Other(format!("{}: no ground truth disparity to score against", sample.name)));
+        return Err(Error::sample(&sample.name, "no ground truth disparity to score against"));
     };
     let pred = predict(sample)?;
     let opts = protocol.valid_options();
     let all = accumulate(&pred, gt, Some(valid), opts)?;
     let noc = match &sample.nonoccluded {
         Some(m) => {
-            let mask = valid.and(m).map_err(|e| Error::Other(format!("{}: occlusion mask: {e}", sample.name)))?;
+            let mask = valid.and(m).map_err(|e| e.context(format!("{}: occlusion mask", sample.name)))?;
             Some(accumulate(&pred, gt, Some(&mask), opts)?)
         }
         None => None,
@@ -110,7 +110,7 @@ mod tests {
             Protocol::Generic,
             |s| {
                 if s.name.ends_with("/8") {
-                    return Err(Error::Other("model failed".into()));
+                    return Err(Error::Internal("model failed".into()));
                 }
                 // Ground truth shifted by 0.75 px: EPE 0.75, bad-0.5 100 %, bad-1 0 %.
                 let mut d = s.disparity.clone().unwrap();

@@ -100,8 +100,7 @@ impl ShardResult {
             .rows
             .iter()
             .map(|r| {
-                let index = index_of(&r.name)
-                    .ok_or_else(|| Error::Other(format!("sample '{}' is not in the data set", r.name)))?;
+                let index = index_of(&r.name).ok_or_else(|| Error::sample(&r.name, "not in the data set"))?;
                 Ok(StoredRow {
                     index,
                     name: r.name.clone(),
@@ -130,20 +129,23 @@ impl ShardResult {
 /// The table of all shards, in the data set's order. Every shard of one evaluation must be there
 /// once: same protocol, same shard count and total, each index `0..count` present.
 pub fn merge(shards: &[ShardResult]) -> Result<EvalTable> {
-    let first = shards.first().ok_or_else(|| Error::Other("no shard to merge".into()))?;
+    let first = shards.first().ok_or_else(|| Error::mismatch("shards", "none given: no shard to merge"))?;
     let count = first.shard.count;
     for s in shards {
         if s.protocol != first.protocol || s.shard.count != count || s.total != first.total {
-            return Err(Error::Other(format!(
-                "shard {}/{} ({:?}, {} samples) is not of the evaluation of shard {}/{count} ({:?}, {} samples)",
-                s.shard.index, s.shard.count, s.protocol, s.total, first.shard.index, first.protocol, first.total
-            )));
+            return Err(Error::mismatch(
+                format!("shard {}/{} ({:?}, {} samples)", s.shard.index, s.shard.count, s.protocol, s.total),
+                format!(
+                    "not of the evaluation of shard {}/{count} ({:?}, {} samples)",
+                    first.shard.index, first.protocol, first.total
+                ),
+            ));
         }
     }
     let mut present: Vec<usize> = shards.iter().map(|s| s.shard.index).collect();
     present.sort_unstable();
     if present != (0..count).collect::<Vec<_>>() {
-        return Err(Error::Other(format!("shards {present:?} given, all of 0..{count} needed once each")));
+        return Err(Error::mismatch(format!("shards {present:?}"), format!("all of 0..{count} are needed once each")));
     }
     let mut rows: Vec<&StoredRow> = shards.iter().flat_map(|s| &s.rows).collect();
     rows.sort_by_key(|r| r.index);

@@ -11,8 +11,9 @@ use dgstereo_eval::BenchmarkConfig;
 use dgstereo_loss::LossConfig;
 use dgstereo_model::ModelConfig;
 use dgstereo_prior::PriorConfig;
-use dgstereo_train::{TrainingConfig, TrainingDataConfig};
 use serde::{Deserialize, Serialize};
+
+use crate::training::{TrainingConfig, TrainingDataConfig};
 
 /// The complete configuration of one run.
 ///

@@ -12,7 +12,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use dgstereo_core::{Error, Result};
+use dgstereo_core::{Error, Problem, Result};
 use toml::{Table, Value};
 
 use crate::ExperimentConfig;
@@ -63,10 +63,11 @@ pub fn get<'a>(table: &'a Table, path: &[String]) -> Option<&'a Value> {
 /// Sets the value at `path`, creating missing tables on the way.
 ///
 /// # Errors
-/// The dotted prefix that holds a value other than a table.
-pub fn set(table: &mut Table, path: &[String], value: Value) -> std::result::Result<(), String> {
+/// A [`Problem`] keyed by the dotted prefix that holds a value other than a table (or by the
+/// empty key when `path` is empty).
+pub fn set(table: &mut Table, path: &[String], value: Value) -> std::result::Result<(), Problem> {
     let Some((first, rest)) = path.split_first() else {
-        return Err(String::new());
+        return Err(Problem::new("", "an empty key"));
     };
     if rest.is_empty() {
         table.insert(first.clone(), value);
@@ -74,10 +75,8 @@ pub fn set(table: &mut Table, path: &[String], value: Value) -> std::result::Res
     }
     let entry = table.entry(first.clone()).or_insert_with(|| Value::Table(Table::new()));
     match entry {
-        Value::Table(inner) => {
-            set(inner, rest, value).map_err(|e| if e.is_empty() { first.clone() } else { format!("{first}.{e}") })
-        }
-        _ => Err(first.clone()),
+        Value::Table(inner) => set(inner, rest, value).map_err(|p| p.within(first)),
+        _ => Err(Problem::new(first.clone(), "is a value, not a table")),
     }
 }
 

@@ -14,8 +14,8 @@
 //! kind = "simulated"
 //! [loss]                               # dgstereo_loss::LossConfig
 //! kind = "sequence-l1"
-//! [train]                              # dgstereo_train::TrainingConfig
-//! [data]                               # dgstereo_train::TrainingDataConfig
+//! [train]                              # TrainingConfig
+//! [data]                               # TrainingDataConfig
 //!
 //! [sweep]                              # optional: one run per combination
 //! "loss.tau" = [0.8, 0.9, 1.0]
@@ -52,6 +52,9 @@
 //!   inheriting from another folder finds its base's data.
 //! - A list (`[[benchmarks]]`, `[[data.sources]]`) is a value: a file that writes it replaces the
 //!   inherited list whole.
+//! - **The schema sits below what executes it.** The `[train]` and `[data]` tables
+//!   ([`mod@training`]) are defined here; the trainer depends on this crate, never the reverse,
+//!   so whoever reads an experiment (inference, the Python package) does not build the trainer.
 //! - [`smoke`] builds a run's model, counts its parameters and runs a tiny forward pass
 //!   (`dgstereo experiment check`).
 #![deny(missing_docs)]
@@ -63,12 +66,14 @@ pub mod launcher;
 pub mod paths;
 pub mod smoke;
 pub mod sweep;
+pub mod training;
 
 use std::path::{Path, PathBuf};
 
 pub use config::ExperimentConfig;
 pub use dgstereo_core::Problem;
 pub use smoke::{SmokeReport, smoke_test, trainable_parameters};
+pub use training::{DataSource, PhotoTextures, SyntheticScenes, TrainingConfig, TrainingDataConfig, ValidationConfig};
 
 /// One run of an experiment file: a sweep combination, or the file itself without a sweep.
 #[derive(Debug, Clone, PartialEq)]

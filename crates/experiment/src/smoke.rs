@@ -98,7 +98,7 @@ pub fn smoke_test(config: &ExperimentConfig, size: [usize; 2], iters: usize, dev
         let prior = config.model.needs_prior().then_some(prior);
         let prediction = model.predict(left, right, prior.as_ref(), iters, true, None)?;
         if prediction.disparities.len() != iters {
-            return Err(Error::Other(format!(
+            return Err(Error::Internal(format!(
                 "{} disparity maps for {iters} iterations",
                 prediction.disparities.len()
             )));
@@ -113,7 +113,7 @@ pub fn smoke_test(config: &ExperimentConfig, size: [usize; 2], iters: usize, dev
             }
             let values = to_vec(disparity.clone());
             if let Some(bad) = values.iter().find(|v| !v.is_finite()) {
-                return Err(Error::Other(format!("iteration {k}: non-finite disparity {bad}")));
+                return Err(Error::not_finite(format!("iteration {k}'s disparity ({bad})")));
             }
             max_abs_disparity = values.iter().fold(0.0, |m, v| m.max(v.abs()));
         }
@@ -127,6 +127,6 @@ pub fn smoke_test(config: &ExperimentConfig, size: [usize; 2], iters: usize, dev
             .cloned()
             .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
             .unwrap_or_else(|| "unknown panic".into());
-        Err(Error::Other(format!("the forward pass panicked: {message}")))
+        Err(Error::Internal(format!("the forward pass panicked: {message}")))
     })
 }

@@ -108,9 +108,8 @@ pub fn expand(document: &Document) -> Result<Vec<RunTable>> {
             let value = values[choice].clone();
             let path = split(key);
             // A swept table (or a kind) replaces what was there, like an inheriting file.
-            keys::set(&mut run, &path, value.clone()).map_err(|at| {
-                Error::format(file_of_sweep(key), format!("sweep.\"{key}\": {at} is a value, not a table"))
-            })?;
+            keys::set(&mut run, &path, value.clone())
+                .map_err(|problem| Error::format(file_of_sweep(key), format!("sweep.\"{key}\": {problem}")))?;
             let dotted = keys::dotted(&path);
             run_provenance.retain(|k, _| *k != dotted && !k.starts_with(&format!("{dotted}.")));
             run_provenance.insert(dotted, file_of_sweep(key));

@@ -216,7 +216,7 @@ fn round_trips(config: &ModelConfig, case: usize) -> Result<(), String> {
     if config.needs_prior() {
         return Ok(());
     }
-    let detected = config_from_keys(&model_official_keys(&saved), &device)?;
+    let detected = config_from_keys(&model_official_keys(&saved), &device).map_err(|p| p.to_string())?;
     let mut expected = config.clone();
     // What the tensors cannot show: the implementation, the schedule (from the preset), and a
     // parameterless norm (instance, as the official checkpoints).

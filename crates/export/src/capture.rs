@@ -27,7 +27,7 @@ fn id_of(t: &Tensor<4>) -> Result<TensorId> {
     t.clone()
         .try_into_primitive::<CaptureBackend>()
         .map(|p| p.id())
-        .map_err(|e| Error::Other(format!("a tensor is not on the capture device: {e:?}")))
+        .map_err(|e| Error::Internal(format!("a tensor is not on the capture device: {e:?}")))
 }
 
 /// The forward pass of `model` on one `[1, 3, height, width]` pair (and its prior maps, where
@@ -59,7 +59,7 @@ pub fn capture_disparity(model: &StereoModel, height: usize, width: usize, iters
                 ..ForwardOptions::default()
             };
             let out = padded_disparities(&network, &model.config, left, right, prior.as_ref(), iters, options)?;
-            let last = out.last().ok_or_else(|| Error::Other("the forward pass gave no disparity".into()))?;
+            let last = out.last().ok_or_else(|| Error::Internal("the forward pass gave no disparity".into()))?;
             Ok(Boundaries { inputs, outputs: vec![(id_of(last)?, "disparity".to_string())] })
         };
         match run() {
@@ -75,8 +75,8 @@ pub fn capture_disparity(model: &StereoModel, height: usize, width: usize, iters
             }
         }
     });
-    let boundaries = outcome.ok_or_else(|| Error::Other("the capture did not run".into()))??;
-    let graph = graph.map_err(|e| Error::Other(format!("recording the forward pass: {e}")))?;
+    let boundaries = outcome.ok_or_else(|| Error::Internal("the capture did not run".into()))??;
+    let graph = graph.map_err(|e| Error::Internal(format!("recording the forward pass: {e}")))?;
     let landmarks = trace.iter().map(|(name, t)| Ok((id_of(t)?, name.clone()))).collect::<Result<_>>()?;
     Ok(Captured { graph, boundaries, landmarks })
 }

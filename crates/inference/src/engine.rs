@@ -76,17 +76,13 @@ pub fn check_same_size(left: &RgbImage, right: &RgbImage) -> Result<()> {
     Ok(())
 }
 
-/// `e` with `context` written before its message, its kind kept (a file's error stays a file's
-/// error, so a caller that sorts errors by kind sorts it the same).
+/// `e` with `context` written before its message ([`Error::context`]: its kind stays reachable
+/// through [`Error::root`], so a caller that sorts errors by kind sorts it the same). A file that
+/// could not be read is named by its path already and stays as it is.
 fn within(e: Error, context: &str) -> Error {
     match e {
-        Error::Format { path, message } => Error::Format { path, message: format!("{context}: {message}") },
-        Error::Checkpoint { path, message } => Error::Checkpoint { path, message: format!("{context}: {message}") },
-        // The path already names the file that could not be read.
         io @ Error::Io { .. } => io,
-        Error::Shape(m) => Error::Shape(format!("{context}: {m}")),
-        Error::Other(m) => Error::Other(format!("{context}: {m}")),
-        other => Error::Other(format!("{context}: {other}")),
+        other => other.context(context),
     }
 }
 

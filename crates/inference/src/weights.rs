@@ -37,10 +37,11 @@ pub fn asset(relative: &str) -> Result<PathBuf> {
 fn asset_in(roots: &[PathBuf], relative: &str) -> Result<PathBuf> {
     roots.iter().map(|r| r.join(relative)).find(|p| p.exists()).ok_or_else(|| {
         let looked: Vec<String> = roots.iter().map(|r| r.display().to_string()).collect();
-        Error::Other(format!(
-            "bundled asset '{relative}' not found (looked in {}; set DGSTEREO_ASSETS to a folder holding it)",
+        let reason = format!(
+            "bundled asset not found (looked in {}; set DGSTEREO_ASSETS to a folder holding it)",
             looked.join(", ")
-        ))
+        );
+        Error::io(relative, std::io::Error::new(std::io::ErrorKind::NotFound, reason))
     })
 }
 
@@ -121,8 +122,8 @@ pub fn load_model(
                 "pth" | "pt" => checkpoint::load_pytorch(network, weights).map_err(|e| {
                     // Name what the file holds, when its tensors show it.
                     match checkpoint_config::detect(weights, device) {
-                        Ok(d) => Error::Other(format!(
-                            "{e}; the checkpoint's tensors show: {}",
+                        Ok(d) => e.context(format!(
+                            "the checkpoint's tensors show: {}; loading it as configured",
                             checkpoint_config::summary(&d.model)
                         )),
                         Err(_) => e,

@@ -29,7 +29,7 @@ fn sorted(value: Value) -> Value {
 /// # Errors
 /// `bytes` is not a safetensors file.
 pub fn canonical_header(bytes: &[u8]) -> Result<Vec<u8>> {
-    let bad = |m: &str| Error::Other(format!("not a safetensors file: {m}"));
+    let bad = |m: &str| Error::encode("a canonical safetensors header", format!("not a safetensors file: {m}"));
     let len_bytes: [u8; 8] =
         bytes.get(..8).and_then(|b| b.try_into().ok()).ok_or_else(|| bad("shorter than 8 bytes"))?;
     let len = usize::try_from(u64::from_le_bytes(len_bytes)).map_err(|_| bad("header length"))?;

@@ -27,7 +27,7 @@ use std::fmt;
 use std::path::Path;
 
 use burn::tensor::Device;
-use dgstereo_core::{Error, Result};
+use dgstereo_core::{Error, Problem, Result};
 use dgstereo_encoder::NormKind;
 
 use crate::official_keys::{KeyShape, model_official_keys, pth_keys, redundant};
@@ -285,7 +285,7 @@ fn listing(problems: &[String]) -> String {
 
 /// The configuration whose official state dict `keys` is (keys without `module.`), built on
 /// `device` to compare every key; the error lists the keys that disagree.
-pub fn config_from_keys(keys: &[KeyShape], device: &Device) -> std::result::Result<CheckpointConfig, String> {
+pub fn config_from_keys(keys: &[KeyShape], device: &Device) -> std::result::Result<CheckpointConfig, Problem> {
     config_and_model(keys, device).map(|(c, _)| c)
 }
 
@@ -295,14 +295,20 @@ pub fn config_from_keys(keys: &[KeyShape], device: &Device) -> std::result::Resu
 pub fn model_from_keys(
     keys: &[KeyShape],
     device: &Device,
-) -> std::result::Result<(CheckpointConfig, RaftStereo), String> {
+) -> std::result::Result<(CheckpointConfig, RaftStereo), Problem> {
     config_and_model(keys, device)
 }
 
-fn config_and_model(keys: &[KeyShape], device: &Device) -> std::result::Result<(CheckpointConfig, RaftStereo), String> {
+fn config_and_model(
+    keys: &[KeyShape],
+    device: &Device,
+) -> std::result::Result<(CheckpointConfig, RaftStereo), Problem> {
     let primary: BTreeMap<&str, &[usize]> = keys.iter().map(|(k, s)| (k.as_str(), s.as_slice())).collect();
+    // Keyed by the state dict as a whole: the listing names each key that disagrees.
     let fail = |p: &[String]| {
-        format!("the tensors match no consistent RAFT-Stereo (or DEFOM-Stereo) configuration: {}", listing(p))
+        let reason =
+            format!("the tensors match no consistent RAFT-Stereo (or DEFOM-Stereo) configuration: {}", listing(p));
+        Problem::new("", reason)
     };
     let mut model_config = architecture(&primary).map_err(|p| fail(&p))?;
     model_config.validate().map_err(|e| fail(&[e.to_string()]))?;
@@ -319,13 +325,13 @@ fn config_and_model(keys: &[KeyShape], device: &Device) -> std::result::Result<(
 /// The configuration of an official `.pth` checkpoint ([`config_from_keys`] on its keys).
 pub fn detect(path: &Path, device: &Device) -> Result<CheckpointConfig> {
     let keys = pth_keys(path)?;
-    config_from_keys(&keys, device).map_err(|message| Error::Checkpoint { path: path.into(), message })
+    config_from_keys(&keys, device).map_err(|p| Error::Checkpoint { path: path.into(), message: p.to_string() })
 }
 
 /// Loads an official `.pth` checkpoint into the model of its detected configuration.
 pub fn load_detected(path: &Path, device: &Device) -> Result<(RaftStereo, CheckpointConfig)> {
     let keys = pth_keys(path)?;
     let (config, model) =
-        config_and_model(&keys, device).map_err(|message| Error::Checkpoint { path: path.into(), message })?;
+        config_and_model(&keys, device).map_err(|p| Error::Checkpoint { path: path.into(), message: p.to_string() })?;
     Ok((checkpoint::load_pytorch(model, path)?, config))
 }

@@ -95,7 +95,7 @@ pub fn verify_defom(reference: &Path, device: &Device) -> Result<VerifyReport> {
     let (state, metadata) = golden_state_dict(reference)?;
     let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
     let (config, model) = checkpoint_config::model_from_keys(&keys, device)
-        .map_err(|message| Error::Checkpoint { path: reference.into(), message })?;
+        .map_err(|p| Error::Checkpoint { path: reference.into(), message: p.to_string() })?;
     let mut model = checkpoint::load_state_dict(model, &state, reference)?;
     let iters = metadata_count(&metadata, "iters", reference)?;
     let scale_iters = metadata_count(&metadata, "scale_iters", reference)?;

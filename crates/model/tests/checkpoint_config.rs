@@ -132,7 +132,7 @@ fn correlation_channels_split_as_the_official_levels_and_radius_where_possible()
 fn detection_error(keys: &[KeyShape]) -> String {
     match config_from_keys(keys, &default_device()) {
         Ok(c) => panic!("detected {c} from an inconsistent state dict"),
-        Err(e) => e,
+        Err(e) => e.to_string(),
     }
 }
 

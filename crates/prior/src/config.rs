@@ -214,7 +214,7 @@ impl PriorConfig {
     /// A string that changes whenever the provider's output may: the configuration as JSON, plus
     /// the size and modification time of a checkpoint.
     pub fn fingerprint(&self) -> Result<String> {
-        let mut fingerprint = serde_json::to_string(self).map_err(|e| Error::Other(format!("prior config: {e}")))?;
+        let mut fingerprint = serde_json::to_string(self).map_err(|e| Error::encode("the prior configuration", e))?;
         if let Self::DepthAnythingV2 { weights, .. } = self {
             let meta = std::fs::metadata(weights).map_err(|e| Error::io(weights, e))?;
             let modified = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok());

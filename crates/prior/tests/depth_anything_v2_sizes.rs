@@ -52,8 +52,9 @@ fn check_size(encoder: DepthAnythingV2Encoder, millions: f64) {
             shape[0] += 8;
         }
     }
-    let err = encoder_from_keys(&other_head).unwrap_err();
-    assert!(err.contains("'depth_head.projects.2.weight'") && err.contains(&encoder.to_string()), "{err}");
+    let problem = encoder_from_keys(&other_head).unwrap_err();
+    assert_eq!(problem.key, "depth_head.projects.2.weight", "{problem}");
+    assert!(problem.reason.contains(&encoder.to_string()), "{problem}");
 }
 
 #[test]

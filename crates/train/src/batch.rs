@@ -12,12 +12,11 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::{Error, Result};
 use dgstereo_data::datasets::{KittiVersion, SceneFlowPass, SceneFlowSubset};
 use dgstereo_data::{AugmentConfig, Dataset, DisparityMap, FileDataset, Mask, RgbImage, SyntheticConfig, synthetic};
+use dgstereo_experiment::{DataSource, TrainingConfig, TrainingDataConfig};
 use dgstereo_loss::LossTarget;
 use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-
-use crate::config::{DataSource, TrainingConfig, TrainingDataConfig};
 
 /// SplitMix64 finaliser: a well-mixed 64-bit hash of `x`.
 pub fn mix64(mut x: u64) -> u64 {
@@ -185,7 +184,8 @@ impl TrainingData {
                 let index = rng.gen_range(0..dataset.len());
                 let s = dataset.get(index)?;
                 let (Some(d), Some(v)) = (s.disparity, s.valid) else {
-                    return Err(Error::Other(format!("{name} pair '{}' has no ground truth", s.name)));
+                    let reason = format!("no ground truth; a training source of {name} needs disparity files");
+                    return Err(Error::sample(s.name, reason));
                 };
                 (format!("{name}/{}", s.name), s.left, s.right, d, v)
             }
@@ -196,7 +196,7 @@ impl TrainingData {
             Some(cfg) => {
                 let augment = if sparse { dgstereo_data::augment_sparse } else { dgstereo_data::augment };
                 let a = augment(cfg, &left, &right, &disparity, Some(&valid), aug_seed)
-                    .map_err(|e| Error::Other(format!("{name}: {e}")))?;
+                    .map_err(|e| e.context(name.clone()))?;
                 Ok(TrainingPair {
                     name,
                     left: a.left,
@@ -251,7 +251,7 @@ pub struct TensorBatch {
 
 /// Stacks pairs (all of one size) into tensors on `device`.
 pub fn to_tensors(pairs: &[TrainingPair], device: &Device) -> Result<TensorBatch> {
-    let first = pairs.first().ok_or_else(|| Error::Other("empty batch".into()))?;
+    let first = pairs.first().ok_or_else(|| Error::Shape("an empty batch: no pairs to stack".into()))?;
     let (w, h) = (first.left.width, first.left.height);
     if let Some(p) = pairs.iter().find(|p| (p.left.width, p.left.height) != (w, h)) {
         return Err(Error::Shape(format!(

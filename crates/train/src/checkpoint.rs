@@ -46,7 +46,9 @@ pub fn checkpoint_name(step: usize) -> String {
 /// (`fsync`, rename, folder `fsync`).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().ok_or_else(|| Error::Other(format!("{}: not a file path", path.display())))?;
+    let name = path
+        .file_name()
+        .ok_or_else(|| Error::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file path")))?;
     let tmp = dir.join(format!(".{}.tmp", name.to_string_lossy()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
@@ -91,7 +93,7 @@ pub fn prune_checkpoints(dir: &Path, keep: usize) -> Result<()> {
 
 /// The safetensors bytes of `model`'s tensors under their module paths.
 fn tensor_bytes(model: &RaftStereo) -> Result<Vec<u8>> {
-    let fail = |m: String| Error::Other(format!("cannot serialise the checkpoint: {m}"));
+    let fail = |m: String| Error::encode("the checkpoint", m);
     let (from, to) = dgstereo_model::file_keys::TO_FILE;
     let mut store = SafetensorsStore::from_bytes(None).with_key_remapping(from, to);
     model.save_into(&mut store).map_err(|e| fail(e.to_string()))?;
@@ -100,7 +102,7 @@ fn tensor_bytes(model: &RaftStereo) -> Result<Vec<u8>> {
 
 /// The bytes of a checkpoint of `trainer`.
 pub fn checkpoint_bytes(trainer: &Trainer) -> Result<Vec<u8>> {
-    let fail = |m: String| Error::Other(format!("cannot serialise the checkpoint: {m}"));
+    let fail = |m: String| Error::encode("the checkpoint", m);
     let model_bytes = tensor_bytes(&trainer.shipped_model())?;
     let parsed = SafeTensors::deserialize(&model_bytes).map_err(|e| fail(e.to_string()))?;
     // With EMA the model keys hold the average; the trained weights go under the prefix.

@@ -13,16 +13,17 @@ use std::time::Instant;
 
 use burn::module::Module;
 use burn::optim::GradientsParams;
+use dgstereo_collective::{Collective, agree};
 use dgstereo_core::{Error, Result};
 use dgstereo_eval::MetricSums;
-use dgstereo_loss::DisparityLoss;
+use dgstereo_loss::{DisparityLoss, LossTerms};
+use rayon::prelude::*;
 
 use crate::batch::{TensorBatch, to_tensors};
-use crate::collective::{Collective, agree};
 use crate::ema::Ema;
 use crate::gradient_exchange::{WeightCheck, share_weights, sum_gradients};
 use crate::step_timing::StepSeconds;
-use crate::trainer::{StepInternals, StepReport, Trainer, batch_metrics};
+use crate::trainer::{StepInternals, StepReport, Trainer, batch_metrics, stopping_at};
 
 /// The elements of a global batch of `batch_size` that rank `rank` of `size` computes.
 pub fn rank_elements(batch_size: usize, rank: usize, size: usize) -> Vec<usize> {
@@ -71,8 +72,8 @@ impl Trainer {
     /// Takes this rank's part of one step of a data-parallel run: its elements of the global
     /// batch, prior, forward, its loss terms; then the ranks exchange counts and gradients, and
     /// every rank clips and updates identically. `observe` sees the gradient summed over the
-    /// ranks (the whole batch's), before clipping. In a world of one, [`Trainer::step_on`] on
-    /// the whole batch.
+    /// ranks (the whole batch's), before clipping. With [`dgstereo_collective::SingleProcess`]
+    /// this is [`Trainer::step`]: the one process's elements are the whole batch.
     ///
     /// A rank that cannot read a sample or computes a non-finite loss fails the step on every
     /// rank, with an error naming it; the weights stay those of the completed steps.
@@ -81,11 +82,6 @@ impl Trainer {
         ranks: &dyn Collective,
         observe: Option<&mut dyn FnMut(StepInternals<'_>)>,
     ) -> Result<StepReport> {
-        if ranks.size() == 1 {
-            let pairs = self.data.batch(self.step, self.parts.train.batch_size)?;
-            let batch = to_tensors(&pairs, &self.autodiff)?;
-            return self.step_on(&batch, observe);
-        }
         let batch = agree(ranks, self.rank_batch(ranks))?;
         self.step_on_among(&batch, ranks, observe)
     }
@@ -93,13 +89,16 @@ impl Trainer {
     /// This rank's elements of the current step's global batch, on the autodiff device.
     fn rank_batch(&self, ranks: &dyn Collective) -> Result<TensorBatch> {
         let elements = rank_elements(self.parts.train.batch_size, ranks.rank(), ranks.size());
-        let pairs = elements.iter().map(|&e| self.data.pair(self.step, e)).collect::<Result<Vec<_>>>()?;
+        let (data, step) = (&self.data, self.step);
+        let pairs = elements.into_par_iter().map(|e| data.pair(step, e)).collect::<Result<Vec<_>>>()?;
         to_tensors(&pairs, &self.autodiff)
     }
 
-    /// Takes one data-parallel step on `batch`, this rank's part of the global batch, as
-    /// [`Trainer::step_among`] does after building it (`dgstereo bench --train` under
-    /// `mpirun` times steps on random parts).
+    /// Takes one step on `batch`, this rank's part of the global batch, as
+    /// [`Trainer::step_among`] does after building it: the one body of every training step
+    /// ([`Trainer::step_on`] is this with [`dgstereo_collective::SingleProcess`];
+    /// `dgstereo bench --train` under `mpirun` times steps on random parts). The non-finite
+    /// loss check, the metrics, the timing and the `observe` hook live here alone.
     pub fn step_on_among(
         &mut self,
         batch: &TensorBatch,
@@ -107,7 +106,7 @@ impl Trainer {
         observe: Option<&mut dyn FnMut(StepInternals<'_>)>,
     ) -> Result<StepReport> {
         let started = Instant::now();
-        let shard = agree(ranks, self.shard(batch))?;
+        let shard = agree(ranks, self.shard(batch, ranks))?;
         let gathered = ranks.all_gather(&shard.numbers);
         let mut total = [0.0; SHARD_NUMBERS];
         for numbers in gathered.chunks(SHARD_NUMBERS) {
@@ -137,17 +136,23 @@ impl Trainer {
     }
 
     /// This rank's part of the current step: forward, loss terms and metric sums.
-    fn shard(&self, batch: &TensorBatch) -> Result<Shard> {
+    ///
+    /// The loss is split into a sum and a count that add over the ranks ([`LossTerms`]). A world
+    /// of one takes the loss itself as its sum over a count of 1: the batch's mean as the loss
+    /// crate (and the official code) computes it, which the split form equals only up to
+    /// rounding, so a single process trains bit for bit as the recipe's loss says.
+    fn shard(&self, batch: &TensorBatch, ranks: &dyn Collective) -> Result<Shard> {
         let step = self.step;
         let predictions = self.predictions(batch)?;
-        let terms = self.parts.loss.terms(&predictions, &batch.target)?;
+        let terms = if ranks.size() == 1 {
+            LossTerms { sum: self.parts.loss.loss(&predictions, &batch.target)?, count: 1.0 }
+        } else {
+            self.parts.loss.terms(&predictions, &batch.target)?
+        };
         let loss_sum = f64::from(dgstereo_core::tensor::to_vec(terms.sum.clone().detach())[0]);
         if !loss_sum.is_finite() {
-            return Err(Error::Other(format!(
-                "step {}: the loss is {loss_sum} (pairs: {}); stopping with the weights after {step} completed steps",
-                step + 1,
-                batch.names.join(", "),
-            )));
+            let what = format!("the loss ({loss_sum}; pairs: {})", batch.names.join(", "));
+            return Err(Error::not_finite(what).context(stopping_at(step)));
         }
         let last = predictions.last().expect("at least one iteration").clone().detach();
         let sums = batch_metrics(last, batch.target.disparity_bilinear.clone(), batch.target.valid.clone())?;

@@ -11,9 +11,9 @@ use std::time::Instant;
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
 use burn::optim::GradientsParams;
 use burn::tensor::Tensor;
+use dgstereo_collective::Collective;
 use dgstereo_core::{Error, Result};
 
-use crate::collective::Collective;
 use crate::params::PathStack;
 
 /// The most values one exchange carries (64 MiB of f32).
@@ -82,12 +82,16 @@ fn all_reduce_in_buckets(ranks: &dyn Collective, values: &mut [f32]) {
 }
 
 /// `grads` summed over all ranks (every rank gets the sum), with what the exchange cost. The
-/// parameters are visited in `module`'s order, which is the same on every rank.
+/// parameters are visited in `module`'s order, which is the same on every rank. In a world of
+/// one the sum is `grads` itself, returned untouched at no cost.
 pub fn sum_gradients<M: Module>(
     module: &M,
     grads: GradientsParams,
     ranks: &dyn Collective,
 ) -> (GradientsParams, ExchangeCost) {
+    if ranks.size() == 1 {
+        return (grads, ExchangeCost::default());
+    }
     let started = Instant::now();
     let mut values = flat_gradients(module, &grads);
     all_reduce_in_buckets(ranks, &mut values);
@@ -152,12 +156,13 @@ pub fn share_weights<M: Module>(module: M, ranks: &dyn Collective) -> Result<(M,
     let mut shared = own.values.clone();
     let lengths = ranks.all_gather(&[shared.len() as f64]);
     if let Some(r) = lengths.iter().position(|&n| n != shared.len() as f64) {
-        return Err(Error::Other(format!(
-            "rank {r} holds a network of {} weights, rank {} one of {}: the ranks built different models",
+        let cause = format!(
+            "holds a network of {} weights, rank {} one of {}: the ranks built different models",
             lengths[r],
             ranks.rank(),
             shared.len()
-        )));
+        );
+        return Err(Error::Rank { rank: r, size: ranks.size(), cause });
     }
     for bucket in shared.chunks_mut(BUCKET_FLOATS) {
         ranks.broadcast(bucket, 0);

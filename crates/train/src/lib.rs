@@ -14,32 +14,29 @@
 //! (JSONL), [`progress`] events for the binary to draw, validation, plots and atomic checkpoints
 //! that keep the last N.
 //! `train.ema_decay` adds a moving average of the weights ([`ema`]) that validation, checkpoints'
-//! model weights and the final model use. [`ablation`] scores finished runs into the ablation
-//! table, and [`paper_report`] lays them out in the paper's tables beside its published figures
-//! ([`paper_tables`]), each column filled by the benchmark that scores its data set
-//! ([`paper_match`]). [`verify_step`] checks two steps against the official training loop.
+//! model weights and the final model use. [`verify_step`] checks two steps against the official
+//! training loop. A study of many runs (scores, tables, the paper's layout) is the
+//! `dgstereo-study` crate's, above this one.
 //!
-//! Data parallelism is one seam: a run is `N` ranks meeting through a [`Collective`] (the
-//! world of one is [`SingleProcess`]; MPI's lives in `dgstereo-distributed`).
+//! The configuration it executes (`[train]`, `[data]`) is the experiment crate's schema
+//! ([`dgstereo_experiment::TrainingConfig`], [`dgstereo_experiment::TrainingDataConfig`]): the
+//! trainer depends on the schema, never the reverse, so reading an experiment (inference, the
+//! Python package) does not pull in the trainer.
+//!
+//! Data parallelism is one seam: a run is `N` ranks meeting through a
+//! [`dgstereo_collective::Collective`] (the world of one is
+//! [`dgstereo_collective::SingleProcess`]; MPI's lives in `dgstereo-distributed`).
 //! [`Trainer::step_among`] splits the global batch among them and sums their gradients
 //! ([`data_parallel`], [`gradient_exchange`]); [`train_among`] is the loop in which rank 0 alone
 //! writes the run's files.
 #![deny(missing_docs)]
 
-pub mod ablation;
-pub mod ablation_plot;
-pub mod ablation_table;
 pub mod batch;
 pub mod checkpoint;
 pub mod clip;
-pub mod collective;
-mod config;
 pub mod data_parallel;
 pub mod ema;
 pub mod gradient_exchange;
-pub mod paper_match;
-pub mod paper_report;
-pub mod paper_tables;
 pub mod params;
 pub mod plot;
 pub mod preflight;
@@ -53,8 +50,6 @@ pub mod trainer;
 pub mod validate;
 pub mod verify_step;
 
-pub use collective::{Collective, SingleProcess};
-pub use config::{DataSource, PhotoTextures, SyntheticScenes, TrainingConfig, TrainingDataConfig, ValidationConfig};
 pub use progress::{Progress, ProgressObserver};
 pub use run::{RunOptions, RunSummary, train, train_among};
 pub use schedule::OneCycleLr;

@@ -4,7 +4,8 @@
 //! values are blue, validation values orange (drawn as a line with dots). The y axes start at 0
 //! and end at the largest value drawn; light grey lines mark quarters of both axes, labelled with
 //! their values in the data crate's bitmap font (no font dependency), and each panel has a title
-//! and a legend. The exact numbers are in `log.jsonl` beside the plot.
+//! and a legend. The exact numbers are in `log.jsonl` beside the plot. The drawing primitives
+//! are public: the study's `ablation.png` draws with them.
 
 use std::path::Path;
 
@@ -12,19 +13,25 @@ use dgstereo_core::{Error, Result};
 use dgstereo_data::text::{GLYPH_HEIGHT, draw_text, format_value, text_width};
 use image::{Rgb, RgbImage};
 
-pub(crate) const PANEL_W: u32 = 480;
-pub(crate) const HEIGHT: u32 = 320;
+/// The width of one panel, in pixels.
+pub const PANEL_W: u32 = 480;
+/// The height of a plot, in pixels.
+pub const HEIGHT: u32 = 320;
 /// Left margin (y tick labels), bottom (x tick labels), top (title and legend), right.
-pub(crate) const LEFT: u32 = 44;
-pub(crate) const BOTTOM: u32 = 22;
-pub(crate) const TOP: u32 = 22;
+pub const LEFT: u32 = 44;
+/// The bottom margin (x tick labels).
+pub const BOTTOM: u32 = 22;
+/// The top margin (title and legend).
+pub const TOP: u32 = 22;
 const RIGHT: u32 = 14;
 const SCALE: usize = 2;
 const TRAIN: Rgb<u8> = Rgb([31, 119, 180]);
 const VALID: Rgb<u8> = Rgb([255, 127, 14]);
 const AXIS: Rgb<u8> = Rgb([60, 60, 60]);
-pub(crate) const GRID: Rgb<u8> = Rgb([225, 225, 225]);
-pub(crate) const TEXT: Rgb<u8> = Rgb([40, 40, 40]);
+/// The grid lines' colour.
+pub const GRID: Rgb<u8> = Rgb([225, 225, 225]);
+/// The text's colour.
+pub const TEXT: Rgb<u8> = Rgb([40, 40, 40]);
 
 /// A series of `(step, value)` points.
 pub type Series = Vec<(f64, f64)>;
@@ -40,7 +47,8 @@ pub struct Curves {
     pub valid_epe: Series,
 }
 
-pub(crate) fn line(img: &mut RgbImage, (x0, y0): (f64, f64), (x1, y1): (f64, f64), colour: Rgb<u8>) {
+/// Draws a line from `(x0, y0)` to `(x1, y1)` (clipped to the image).
+pub fn line(img: &mut RgbImage, (x0, y0): (f64, f64), (x1, y1): (f64, f64), colour: Rgb<u8>) {
     let n = ((x1 - x0).abs().max((y1 - y0).abs()).ceil() as usize).max(1);
     for i in 0..=n {
         let t = i as f64 / n as f64;
@@ -52,7 +60,7 @@ pub(crate) fn line(img: &mut RgbImage, (x0, y0): (f64, f64), (x1, y1): (f64, f64
 }
 
 /// Writes `s` with its top-left corner at `(x, y)` (clipped to the image).
-pub(crate) fn text(img: &mut RgbImage, s: &str, x: f64, y: f64, colour: Rgb<u8>) {
+pub fn text(img: &mut RgbImage, s: &str, x: f64, y: f64, colour: Rgb<u8>) {
     let (w, h) = (img.width() as usize, img.height() as usize);
     draw_text(s, x.max(0.0) as usize, y.max(0.0) as usize, SCALE, |x, y| {
         if x < w && y < h {
@@ -62,13 +70,7 @@ pub(crate) fn text(img: &mut RgbImage, s: &str, x: f64, y: f64, colour: Rgb<u8>)
 }
 
 /// One panel: `title` at the top left, one legend entry per named series at the top right.
-pub(crate) fn panel(
-    img: &mut RgbImage,
-    left: u32,
-    title: &str,
-    series: &[(&Series, Rgb<u8>, bool, &str)],
-    max_step: f64,
-) {
+pub fn panel(img: &mut RgbImage, left: u32, title: &str, series: &[(&Series, Rgb<u8>, bool, &str)], max_step: f64) {
     let (x0, x1) = (f64::from(left + LEFT), f64::from(left + PANEL_W - RIGHT));
     let (y0, y1) = (f64::from(HEIGHT - BOTTOM), f64::from(TOP));
     let finite = |s: &Series| s.iter().filter(|(_, v)| v.is_finite()).map(|p| p.1).collect::<Vec<_>>();
@@ -136,10 +138,10 @@ pub fn write_plot(curves: &Curves, path: &Path) -> Result<()> {
 }
 
 /// Writes `img` to `path` (PNG), atomically.
-pub(crate) fn write_png(img: &RgbImage, path: &Path) -> Result<()> {
+pub fn write_png(img: &RgbImage, path: &Path) -> Result<()> {
     let mut bytes = Vec::new();
     img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
-        .map_err(|e| Error::Other(format!("{}: cannot encode the plot: {e}", path.display())))?;
+        .map_err(|e| Error::encode(format!("the plot {}", path.display()), e))?;
     crate::checkpoint::write_atomic(path, &bytes)
 }
 

@@ -23,11 +23,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use burn::tensor::Device;
+use dgstereo_collective::{Collective, SingleProcess, agree, writes_files};
 use dgstereo_core::{Error, Result};
 use serde_json::json;
 
 use crate::checkpoint::{list_checkpoints, load_checkpoint, save_checkpoint};
-use crate::collective::{Collective, SingleProcess, agree, writes_files};
 use crate::data_parallel::check_batch_divides;
 use crate::plot::write_plot;
 use crate::progress::{Progress, ProgressObserver};
@@ -206,7 +206,7 @@ pub fn train_among(
                 let _ =
                     append_line(&log_path, &json!({"kind": "error", "step": trainer.step, "message": e.to_string()}));
                 let kept = summary.checkpoint.as_ref().map_or("none yet".to_string(), |p| p.display().to_string());
-                return Err(Error::Other(format!("training stopped: {e}. Last good checkpoint: {kept}")));
+                return Err(e.context(format!("training stopped (last good checkpoint: {kept})")));
             }
         };
         interval_steps += 1;
@@ -270,7 +270,8 @@ pub fn train_among(
         if validation.is_empty() {
             write_plot(&curves, &plot_path)?;
         }
-        let model_config = serde_json::to_string(&trainer.parts.model).map_err(|e| Error::Other(e.to_string()))?;
+        let model_config =
+            serde_json::to_string(&trainer.parts.model).map_err(|e| Error::encode("the model configuration", e))?;
         let ema_decay = trainer.ema.as_ref().map(|e| e.decay().to_string());
         let mut metadata = vec![("model_config", model_config.as_str()), ("config", &trainer.parts.resolved_toml)];
         metadata.extend(ema_decay.as_deref().map(|d| ("ema_decay", d)));
@@ -324,11 +325,12 @@ fn finished_run(out: &Path, parts: &TrainParts) -> Result<RunSummary> {
 fn start_from_rank_zero(trainer: &mut Trainer, ranks: &dyn Collective, options: &RunOptions) -> Result<()> {
     let steps = ranks.all_gather(&[trainer.step as f64]);
     let differing_step = steps.iter().position(|&s| s != steps[0]).map(|r| {
-        Err(Error::Other(format!(
-            "rank {r} resumed at step {}, rank 0 at step {}: the ranks read different checkpoints \
+        let cause = format!(
+            "resumed at step {}, rank 0 at step {}: the ranks read different checkpoints \
              (the output folder must be one folder every rank sees)",
             steps[r], steps[0]
-        )))
+        );
+        Err(Error::Rank { rank: r, size: ranks.size(), cause })
     });
     if let Some(e) = differing_step {
         return e;
@@ -336,9 +338,10 @@ fn start_from_rank_zero(trainer: &mut Trainer, ranks: &dyn Collective, options: 
     let check = trainer.share_weights(ranks)?;
     let differs = match (&check.first_difference, options.resume) {
         (None, _) => Ok(()),
-        (Some(param), true) => Err(Error::Other(format!(
-            "resumed weights differ from rank 0's from '{param}' on: the ranks read different checkpoints"
-        ))),
+        (Some(param), true) => Err(Error::mismatch(
+            "resumed weights",
+            format!("they differ from rank 0's from '{param}' on: the ranks read different checkpoints"),
+        )),
         (Some(param), false) => {
             (options.notice)(&format!(
                 "rank {}: initial weights differed from rank 0's from '{param}' on; training from rank 0's",

@@ -3,9 +3,14 @@
 //! Design decision: a run folder belongs to one training. Its name, its description, the
 //! benchmarks it is scored on (their folders, iterations and sizes) and where a scheduler runs it
 //! do not change a single weight, so they may change between the run and a later `--resume` or `ablate`; every other
-//! key does, and a difference there means the folder holds another run.
+//! key does, and a difference there means the folder holds another run. A key added to the
+//! schema after a run was trained is absent from its folder's configuration; both sides are read
+//! through the schema ([`ExperimentConfig`]) first, so such a key counts as its default, and
+//! differs only where the configuration given now sets it otherwise.
 
 use dgstereo_core::{Error, Result};
+use dgstereo_experiment::ExperimentConfig;
+use serde::Deserialize;
 use toml::Value;
 
 /// Top-level keys that describe, score or place a run and do not change its training.
@@ -32,12 +37,23 @@ fn leaves(prefix: &str, value: &Value, out: &mut Vec<(String, Value)>) {
 
 fn training_leaves(text: &str, what: &str) -> Result<Vec<(String, Value)>> {
     let table: toml::Table =
-        toml::from_str(text).map_err(|e| Error::Other(format!("{what}: not a resolved configuration: {e}")))?;
+        toml::from_str(text).map_err(|e| Error::format(what, format!("not a resolved configuration: {e}")))?;
+    let table = with_defaults(table);
     let mut out = Vec::new();
     for (key, value) in table.iter().filter(|(k, _)| !SCORING_KEYS.contains(&k.as_str())) {
         leaves(key, value, &mut out);
     }
     Ok(out)
+}
+
+/// `table` with every key the schema defaults filled in (an old run's configuration lacks the
+/// keys added since), or `table` as it is where it is not a configuration the schema reads today
+/// (a key renamed or removed since): its keys are then compared as written.
+fn with_defaults(table: toml::Table) -> toml::Table {
+    let Ok(config) = ExperimentConfig::deserialize(Value::Table(table.clone())) else {
+        return table;
+    };
+    toml::from_str(&config.to_toml()).unwrap_or(table)
 }
 
 /// The training keys that differ between the configuration a run was trained with (`run`) and
@@ -136,5 +152,30 @@ root = "/x"
         );
         let e = another_run(std::path::Path::new("runs/x"), &d).to_string();
         assert!(e.contains("data.sources[0].width") && e.contains("runs/x") && e.contains("train.lr"), "{e}");
+    }
+
+    /// A complete configuration as a run folder keeps it, without the `[model]` keys that
+    /// `drop` names (keys added to the schema after the run was trained).
+    fn stored_without(config: &ExperimentConfig, drop: &[&str]) -> String {
+        let mut table: toml::Table = toml::from_str(&config.to_toml()).unwrap();
+        let model = table.get_mut("model").and_then(Value::as_table_mut).unwrap();
+        for key in drop {
+            assert!(model.remove(*key).is_some(), "the resolved configuration writes model.{key}");
+        }
+        toml::to_string(&table).unwrap()
+    }
+
+    #[test]
+    fn a_key_absent_in_an_old_run_is_its_default() {
+        let here: ExperimentConfig = toml::from_str("name = \"a\"").unwrap();
+        let old = stored_without(&here, &["initial_disparity", "monocular"]);
+        assert!(training_differences(&old, &here.to_toml()).unwrap().is_empty());
+        // Set otherwise now, it is a difference, shown against the default the run trained with.
+        let mut other = here.clone();
+        other.model.initial_disparity = dgstereo_model::InitialDisparity::scaled_inverse_depth();
+        let d = training_differences(&old, &other.to_toml()).unwrap();
+        assert!(d.iter().all(|k| k.starts_with("model.initial_disparity.")), "{d:?}");
+        let kind = "model.initial_disparity.kind: \"scaled-inverse-depth\" here, \"zero\" in the run";
+        assert!(d.iter().any(|k| k == kind), "{d:?}");
     }
 }

@@ -6,24 +6,24 @@ use std::time::Instant;
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
+use dgstereo_collective::SingleProcess;
 use dgstereo_core::{DepthPrior, Error, Result};
 use dgstereo_data::DisparityMap;
 use dgstereo_eval::{MetricSums, ValidOptions, accumulate};
-use dgstereo_loss::{DisparityLoss, LossConfig};
+use dgstereo_experiment::{ExperimentConfig, TrainingConfig, TrainingDataConfig};
+use dgstereo_loss::LossConfig;
 use dgstereo_model::{ModelConfig, RaftStereo};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
-use crate::batch::{TensorBatch, TrainingData, to_tensors};
+use crate::batch::{TensorBatch, TrainingData};
 use crate::clip::clip_global_norm;
-use crate::config::{TrainingConfig, TrainingDataConfig};
 use crate::ema::Ema;
 use crate::params::materialize;
 use crate::schedule::OneCycleLr;
 use crate::step_timing::StepSeconds;
 
-/// Everything a run is made of: the experiment's parts and its resolved text.
-///
-/// The experiment crate resolves files into these; the trainer does not depend on it.
+/// Everything a run is made of: the experiment's parts and its resolved text
+/// (`From<ExperimentConfig>` splits a resolved experiment into them).
 #[derive(Debug, Clone)]
 pub struct TrainParts {
     /// Name of the run.
@@ -40,6 +40,23 @@ pub struct TrainParts {
     pub data: TrainingDataConfig,
     /// The resolved experiment as TOML, stored in every checkpoint.
     pub resolved_toml: String,
+}
+
+impl From<ExperimentConfig> for TrainParts {
+    /// The parts of a resolved experiment; `resolved_toml` is its complete TOML
+    /// ([`ExperimentConfig::to_toml`]).
+    fn from(config: ExperimentConfig) -> Self {
+        let resolved_toml = config.to_toml();
+        Self {
+            name: config.name,
+            model: config.model,
+            prior: config.prior,
+            loss: config.loss,
+            train: config.train,
+            data: config.data,
+            resolved_toml,
+        }
+    }
 }
 
 impl TrainParts {
@@ -132,6 +149,12 @@ pub struct Trainer {
     pub(crate) last_exchange_bytes: usize,
     pub(crate) data: TrainingData,
     pub(crate) prior: Prior,
+}
+
+/// What a step that fails says before its cause: the step (1-based) and the weights the run
+/// keeps, those of the `step` completed ones.
+pub(crate) fn stopping_at(step: usize) -> String {
+    format!("step {}: stopping with the weights after {step} completed steps", step + 1)
 }
 
 /// The AdamW of a recipe (decoupled weight decay, PyTorch's update).
@@ -292,50 +315,25 @@ impl Trainer {
         })
     }
 
-    /// Takes one step on the run's batch of the current step ([`crate::batch`]). On NaN or inf
-    /// in the loss or the gradients, fails naming the step and what was not finite, and leaves
-    /// the weights and optimiser state untouched.
+    /// Takes one step on the run's batch of the current step ([`crate::batch`]): the
+    /// data-parallel step in a world of one ([`Trainer::step_among`] with [`SingleProcess`]).
+    /// On NaN or inf in the loss or the gradients, fails naming the step and what was not
+    /// finite, and leaves the weights and optimiser state untouched.
     pub fn step(&mut self) -> Result<StepReport> {
-        let pairs = self.data.batch(self.step, self.parts.train.batch_size)?;
-        let batch = to_tensors(&pairs, &self.autodiff)?;
-        self.step_on(&batch, None)
+        self.step_among(&SingleProcess, None)
     }
 
     /// Takes one step on `batch` (on the autodiff device): prior, forward over all training
-    /// iterations, loss, backward, clipping, AdamW at the schedule's rate of the current step.
-    /// `observe`, when given, sees the predictions and the gradients before clipping
-    /// ([`StepInternals`]); conformance checks read them there. Fails as [`Trainer::step`].
+    /// iterations, loss, backward, clipping, AdamW at the schedule's rate of the current step;
+    /// [`Trainer::step_on_among`] in a world of one. `observe`, when given, sees the predictions
+    /// and the gradients before clipping ([`StepInternals`]); conformance checks read them
+    /// there. Fails as [`Trainer::step`].
     pub fn step_on(
         &mut self,
         batch: &TensorBatch,
         observe: Option<&mut dyn FnMut(StepInternals<'_>)>,
     ) -> Result<StepReport> {
-        let step = self.step;
-        let started = Instant::now();
-        let predictions = self.predictions(batch)?;
-        let loss = self.parts.loss.loss(&predictions, &batch.target)?;
-        let loss_value = f64::from(dgstereo_core::tensor::to_vec(loss.clone().detach())[0]);
-        if !loss_value.is_finite() {
-            return Err(Error::Other(format!(
-                "step {}: the loss is {loss_value} (pairs: {}); stopping with the weights after {step} completed steps",
-                step + 1,
-                batch.names.join(", "),
-            )));
-        }
-        let last = predictions.last().expect("at least one iteration").clone().detach();
-        let sums = batch_metrics(last, batch.target.disparity_bilinear.clone(), batch.target.valid.clone())?;
-        let forward_done = Instant::now();
-        let grads = GradientsParams::from_grads(loss.backward(), &self.model);
-        let backward_done = Instant::now();
-        if let Some(observe) = observe {
-            observe(StepInternals { model: &self.model, predictions: &predictions, grads: &grads });
-        }
-        let seconds = StepSeconds {
-            forward: (forward_done - started).as_secs_f64(),
-            backward: (backward_done - forward_done).as_secs_f64(),
-            ..StepSeconds::default()
-        };
-        self.apply_gradients(grads, loss_value, &sums, seconds)
+        self.step_on_among(batch, &SingleProcess, observe)
     }
 
     /// The batch's prior and the network's disparity after every training iteration.
@@ -366,10 +364,8 @@ impl Trainer {
         let started = Instant::now();
         let (grads, clip) = clip_global_norm(&self.model, grads, self.parts.train.clip);
         if let Some(param) = clip.non_finite {
-            return Err(Error::Other(format!(
-                "step {}: the gradient of '{param}' is not finite (loss {loss_value}); stopping with the weights after {step} completed steps",
-                step + 1
-            )));
+            let what = format!("the gradient of '{param}' (loss {loss_value})");
+            return Err(Error::not_finite(what).context(stopping_at(step)));
         }
         let lr = self.schedule.lr(step);
         self.model = self.optimizer.step(lr, self.model.clone(), grads);

@@ -5,11 +5,11 @@ use dgstereo_core::Result;
 use dgstereo_data::DisparityMap;
 use dgstereo_data::synthetic::generate;
 use dgstereo_eval::{MetricSums, Metrics, ValidOptions, accumulate};
+use dgstereo_experiment::ValidationConfig;
 use dgstereo_model::{ModelConfig, RaftStereo};
 use dgstereo_prior::Prior;
 
 use crate::batch::{TrainingPair, to_tensors};
-use crate::config::ValidationConfig;
 use crate::trainer::{batch_prior, forward_disparities};
 
 /// The validation pairs, rendered once.
@@ -65,7 +65,7 @@ impl ValidationSet {
 
 /// The disparity of one pair at its own size, the prior given the pair's ground truth (which
 /// only a simulated prior reads).
-pub(crate) fn predict_pair(
+pub fn predict_pair(
     model: &RaftStereo,
     config: &ModelConfig,
     prior: &Prior,

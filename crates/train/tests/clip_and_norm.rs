@@ -7,7 +7,7 @@ use burn::tensor::Tensor;
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_encoder::norm::FrozenBatchNorm;
-use dgstereo_train::TrainingConfig;
+use dgstereo_experiment::TrainingConfig;
 use dgstereo_train::clip::{clip_global_norm, global_grad_norm};
 use dgstereo_train::trainer::adamw;
 

@@ -3,8 +3,8 @@
 mod common;
 
 use dgstereo_data::synthetic::TexturePreset;
+use dgstereo_experiment::{DataSource, SyntheticScenes, TrainingConfig, TrainingDataConfig};
 use dgstereo_train::batch::TrainingData;
-use dgstereo_train::{DataSource, SyntheticScenes, TrainingConfig, TrainingDataConfig};
 
 #[test]
 fn empty_tables_are_the_reference_recipe() {

@@ -6,12 +6,13 @@ mod common;
 use std::path::Path;
 
 use dgstereo_core::default_device;
+use dgstereo_experiment::{SyntheticScenes, TrainingConfig, ValidationConfig};
 use dgstereo_model::RaftStereo;
 use dgstereo_train::checkpoint::{list_checkpoints, load_checkpoint, read_metadata, save_checkpoint};
 use dgstereo_train::ema::{RAW_WEIGHTS_PREFIX, warmed_decay};
 use dgstereo_train::run::{RunOptions, checkpoint_dir, train};
 use dgstereo_train::trainer::init_model;
-use dgstereo_train::{SyntheticScenes, TrainParts, Trainer, TrainingConfig, ValidationConfig};
+use dgstereo_train::{TrainParts, Trainer};
 
 /// Every float tensor of `model` by module path, as `f64`.
 fn weights(model: &RaftStereo) -> Vec<(String, Vec<f64>)> {

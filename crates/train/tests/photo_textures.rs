@@ -1,7 +1,7 @@
 //! The `photos` key of a synthetic source and of the validation set: parsed, checked (the share
 //! and, where the data is opened, the folder, named by key) and handed to the generator.
 
-use dgstereo_train::{DataSource, SyntheticScenes, TrainingDataConfig};
+use dgstereo_experiment::{DataSource, SyntheticScenes, TrainingDataConfig};
 
 fn scratch(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("dgstereo-train-test-{}-{name}", std::process::id()));

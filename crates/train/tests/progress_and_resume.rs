@@ -8,8 +8,9 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 use dgstereo_core::default_device;
+use dgstereo_experiment::ValidationConfig;
 use dgstereo_train::run::{RunOptions, train};
-use dgstereo_train::{Progress, ProgressObserver, ValidationConfig};
+use dgstereo_train::{Progress, ProgressObserver};
 
 fn options(out: &Path, resume: bool, stop_after: Option<usize>, observer: Option<ProgressObserver>) -> RunOptions {
     RunOptions { out: out.to_path_buf(), resume, stop_after, progress: observer, notice: |_| {}, stop: None }

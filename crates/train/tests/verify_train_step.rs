@@ -10,11 +10,12 @@ use std::path::PathBuf;
 
 use dgstereo_core::default_device;
 use dgstereo_core::shared::shared_dir_for_test;
+use dgstereo_experiment::{TrainingConfig, TrainingDataConfig};
 use dgstereo_loss::LossConfig;
 use dgstereo_model::ModelConfig;
 use dgstereo_prior::PriorConfig;
+use dgstereo_train::TrainParts;
 use dgstereo_train::verify_step::{Alteration, CheckKind, TrainStepReport, verify_train_step};
-use dgstereo_train::{TrainParts, TrainingConfig, TrainingDataConfig};
 
 const REFERENCE: &str = "golden/raft_stereo_random.train_step.safetensors";
 

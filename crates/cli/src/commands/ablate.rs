@@ -7,31 +7,35 @@
 //! on each of its `[[benchmarks]]` (a real data set under its protocol: EPE and the protocol's
 //! headline rate); the table's columns are the union over the runs, NaN where a run lacks one.
 //! Runs that differ only in `train.seed` form one row (mean ± std over the seeds,
-//! [`dgstereo_train::ablation_table`]). Before any run trains, every run's data, initial weights
+//! [`dgstereo_study::ablation_table`]). Before any run trains, every run's data, initial weights
 //! and benchmark folders are checked ([`dgstereo_train::preflight`], every benchmark sample's
 //! headers included), and so are the run folders: two runs of one name, or a folder holding
 //! checkpoints or a finished run of another configuration, are refused before anything is written
 //! (`study.json` included), so a wrong benchmark path costs seconds, not a trained row. Where a row is one of
 //! the paper's, the rows' means also fill the paper's four ablation tables (`paper-tables.md`,
 //! `paper-table{2,3,4,5}.csv`): rows are matched by run name and columns to benchmarks by data set
-//! (kind and split or weather, [`dgstereo_train::paper_match`]), and `--paper` sets the published
+//! (kind and split or weather, [`dgstereo_study::paper_match`]), and `--paper` sets the published
 //! figures and our distance from them beside ours. A study stopped by a signal continues where it
-//! stopped when the same command runs again.
+//! stopped when the same command runs again. The study is the `dgstereo-study` library
+//! ([`dgstereo_study::task`] for one run, [`dgstereo_study::collect()`] for the tables,
+//! [`dgstereo_study::slurm`] for `--launcher slurm`); this command parses flags, trains with the
+//! binary's progress bar and signals, and prints.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use dgstereo_core::DeviceChoice;
 use dgstereo_experiment::ResolvedRun;
-use dgstereo_train::preflight::preflight;
-use dgstereo_train::run::{checkpoint_dir, is_finished};
+use dgstereo_study::paper_tables::PAPER_TABLES;
+use dgstereo_study::scores::SYNTHETIC;
+use dgstereo_study::slurm::{ArrayJob, Submission};
+use dgstereo_study::task::{Scoring, Training, check_run, score_into_folder, training};
+use dgstereo_study::{Collected, Study, check_distinct_folders, parts_of, run_folder};
 
-use super::ablate_collect::{Study, collect, collect_study};
-use super::ablate_scores::{cached_scores, save_scores, score};
-use super::train::{Session, check_distinct_folders, folder_name, parts_of, train_one};
 use crate::stop_signals::StopSignals;
+use crate::training::{Session, train_one};
 
 /// Where the runs of a study train.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -91,7 +95,8 @@ pub struct AblateArgs {
 
 pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
     if a.collect {
-        return collect_study(&a.out);
+        let (study, collected) = dgstereo_study::collect_study(&a.out)?;
+        return Ok(show_collected(&collected, &study, &a.out));
     }
     if a.launcher != Launcher::Slurm {
         for (given, flag) in [(a.wait, "--wait"), (a.sbatch.is_some(), "--sbatch")] {
@@ -111,13 +116,7 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
     for run in &runs {
         let context = || format!("{}: run '{}'", run.source.display(), run.name);
         let parts = crate::fetching::parts(parts_of(run.config.clone(), a.steps)).with_context(context)?;
-        preflight(&parts, &run.config.benchmarks).with_context(context)?;
-        // A folder holding training (checkpoints, a finished run) of another configuration is
-        // refused; one whose run never reached a checkpoint is started again.
-        let folder = a.out.join(folder_name(&run.name));
-        if is_finished(&folder) || has_checkpoints(&folder)? {
-            dgstereo_train::run_identity::check_folder(&folder, &parts.resolved_toml).with_context(context)?;
-        }
+        check_run(&parts, &run.config.benchmarks, &run_folder(&a.out, &run.name)).with_context(context)?;
     }
     if let Some(task) = a.task {
         let run = runs.get(task).with_context(|| format!("--task {task}: the study has {} runs", runs.len()))?;
@@ -128,19 +127,7 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
     let study = Study { files, steps: a.steps, paper: a.paper };
     study.write(&a.out)?;
     if a.launcher == Launcher::Slurm {
-        let device = match a.device {
-            DeviceChoice::Cpu => "cpu",
-            DeviceChoice::Gpu => "gpu",
-        };
-        let submission = super::ablate_slurm::Submission {
-            files: &a.files,
-            out: &a.out,
-            steps: a.steps,
-            device,
-            sbatch: a.sbatch.as_deref(),
-            wait: a.wait,
-        };
-        return super::ablate_slurm::submit(&runs, &submission);
+        return submit(&runs, &a);
     }
     for run in &runs {
         if stop.requested() {
@@ -152,7 +139,8 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
             return Ok(status);
         }
     }
-    collect(&runs, &study, &a.out)
+    let collected = dgstereo_study::collect(&runs, &study, &a.out)?;
+    Ok(show_collected(&collected, &study, &a.out))
 }
 
 /// Trains (or reuses, or resumes) one run into its folder and stores its scores there; a run
@@ -166,31 +154,111 @@ fn train_and_score(run: &ResolvedRun, a: &AblateArgs, stop: &StopSignals) -> any
         continue_with: "run the same command again to continue (ablate resumes its unfinished runs)",
     };
     let name = &run.name;
-    let out = a.out.join(folder_name(name));
+    let out = run_folder(&a.out, name);
     let benchmarks = &run.config.benchmarks;
     let parts =
         crate::fetching::parts(parts_of(run.config.clone(), a.steps)).with_context(|| format!("run '{name}'"))?;
-    if is_finished(&out) {
-        dgstereo_train::run_identity::check_folder(&out, &parts.resolved_toml)
-            .with_context(|| format!("run '{name}'"))?;
-        println!("{name}: finished run found in {}, reusing it", out.display());
-    } else if a.rescore {
-        println!("{name}: not finished in {}, left out (--rescore trains nothing)", out.display());
-        return Ok(ExitCode::SUCCESS);
-    } else if train_one(parts.clone(), &out, has_checkpoints(&out)?, &session)?.stopped {
-        return Ok(stop.exit_code());
+    match training(&parts, &out, a.rescore).with_context(|| format!("run '{name}'"))? {
+        Training::Finished => println!("{name}: finished run found in {}, reusing it", out.display()),
+        Training::LeftOut => {
+            println!("{name}: not finished in {}, left out (--rescore trains nothing)", out.display());
+            return Ok(ExitCode::SUCCESS);
+        }
+        Training::Train { resume } => {
+            if train_one(parts.clone(), &out, resume, &session)?.stopped {
+                return Ok(stop.exit_code());
+            }
+        }
     }
-    if cached_scores(&out, &parts, benchmarks).is_some() && !a.rescore {
+    let show = |label: &str, m: &dgstereo_eval::Metrics| {
+        if label == SYNTHETIC {
+            println!("{name}: synthetic EPE {:.3} px, bad-1 {:.2} %, bad-3 {:.2} %", m.epe, m.bad_1, m.bad_3);
+        } else if let Some(b) = benchmarks.iter().find(|b| b.label() == label) {
+            let shown: Vec<String> =
+                b.table_metrics().iter().map(|k| format!("{k} {:.3}", m.get(k).unwrap_or(f64::NAN))).collect();
+            println!("{name}: {label} ({} iterations) {}", b.iters, shown.join(", "));
+        }
+    };
+    if score_into_folder(&parts, benchmarks, &out, a.rescore, &device, show)? == Scoring::Reused {
         println!("{name}: scores reused (model and benchmarks unchanged)");
-    } else {
-        let scores = score(name, &parts, benchmarks, &out, &device)?;
-        save_scores(&out, &parts, benchmarks, &scores)?;
     }
     Ok(ExitCode::SUCCESS)
 }
 
-/// Whether run folder `out` holds checkpoints to resume from.
-fn has_checkpoints(out: &Path) -> anyhow::Result<bool> {
-    let dir = checkpoint_dir(out);
-    Ok(dir.is_dir() && !dgstereo_train::checkpoint::list_checkpoints(&dir)?.is_empty())
+/// Submits the study to Slurm ([`dgstereo_study::slurm`]) and says what was submitted; with
+/// `--wait`, the collecting job's status once the tables are written.
+fn submit(runs: &[ResolvedRun], a: &AblateArgs) -> anyhow::Result<ExitCode> {
+    let submission = Submission {
+        exe: std::env::current_exe().context("cannot find this dgstereo binary")?,
+        files: &a.files,
+        out: &a.out,
+        steps: a.steps,
+        device: match a.device {
+            DeviceChoice::Cpu => "cpu",
+            DeviceChoice::Gpu => "gpu",
+        },
+        sbatch: a.sbatch.as_deref(),
+        wait: a.wait,
+    };
+    let announce = |array: &ArrayJob| {
+        println!(
+            "submitted array job {} ({} tasks, logs in {}/task-<i>.out); the tables follow in {}",
+            array.id,
+            array.tasks,
+            array.dir.display(),
+            array.out.display()
+        );
+    };
+    let collecting = dgstereo_study::slurm::submit(runs, &submission, announce)?;
+    match &collecting.log {
+        None => {
+            let out = std::path::absolute(&a.out).unwrap_or_else(|_| a.out.clone());
+            println!(
+                "collecting job {} runs after the array (dgstereo ablate --collect --out {})",
+                collecting.id,
+                out.display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Some(log) => {
+            print!("{log}");
+            Ok(if collecting.success { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+        }
+    }
+}
+
+/// Prints the tables a study's collection wrote; the status is a failure when a run has no
+/// current scores.
+fn show_collected(collected: &Collected, study: &Study, out: &std::path::Path) -> ExitCode {
+    println!("\n{}", collected.table.to_markdown());
+    println!("tables written to {}/ablation.{{md,csv,json}}, curves to ablation.png", out.display());
+    if collected.fills_paper_tables() {
+        for paper_table in collected.comparisons.iter().filter(|t| t.has_runs()) {
+            println!("{}", paper_table.to_markdown(study.paper));
+        }
+        println!("the paper's columns, matched by data set:");
+        for m in &collected.matches {
+            println!("  {}", m.describe());
+        }
+        println!("the paper's tables written to {}/paper-tables.md and paper-table{{2,3,4,5}}.csv", out.display());
+    } else if study.paper {
+        let mut names: Vec<&str> = Vec::new();
+        for row in PAPER_TABLES.iter().flat_map(|t| t.rows) {
+            if !names.contains(&row.run) {
+                names.push(row.run);
+            }
+        }
+        println!(
+            "--paper: no row of this study is one of the paper's (its rows are the runs named {}), so there is \
+             nothing to set beside the published figures",
+            names.join(", ")
+        );
+    }
+    if collected.complete() {
+        ExitCode::SUCCESS
+    } else {
+        let missing = collected.table.missing.len();
+        eprintln!("{missing} of {} runs have no current scores (see the table)", collected.runs);
+        ExitCode::FAILURE
+    }
 }

@@ -16,14 +16,14 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
+use dgstereo_collective::Collective;
 use dgstereo_core::DeviceChoice;
 use dgstereo_kernels::{Op, Path, Settings, count_work, path};
 use dgstereo_train::batch::TensorBatch;
 use dgstereo_train::step_timing::{StageBackward, StepSeconds, random_batch};
-use dgstereo_train::{Collective, TrainParts, Trainer};
+use dgstereo_train::{TrainParts, Trainer};
 
-use super::bench::{BenchArgs, machine_line, median, model_config, parse_size, peak_memory_bytes};
-use super::train::parts_of;
+use crate::measurement::{BenchArgs, machine_line, median, model_config, parse_size, peak_memory_bytes};
 
 /// Times `a.runs` training steps after `a.warmup` (`dgstereo bench --train`).
 pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
@@ -52,7 +52,7 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         None => toml::from_str::<dgstereo_experiment::ExperimentConfig>("name = \"bench\"")
             .context("the default experiment")?,
     };
-    let mut parts: TrainParts = parts_of(config, None);
+    let mut parts = TrainParts::from(config);
     if let Some(p) = &a.config {
         parts.model = model_config(p)?;
     }

@@ -23,7 +23,7 @@ use dgstereo_data::Dataset;
 use dgstereo_data::datasets::{DrivingStereoWeather, FlyingThingsTestSubset, MiddleburySplit, middeval3_splits_in};
 use dgstereo_eval::{BenchmarkConfig, DatasetKind, evaluate_dataset};
 
-use crate::engine::{ModelArgs, describe, error_line, load_engine, with_flags};
+use crate::engine::{ModelArgs, describe, error_line, flag_names, load_engine};
 
 /// Options of `dgstereo eval`.
 #[derive(Args)]
@@ -154,12 +154,7 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
         Arc::new(dataset) as Arc<dyn Dataset>,
         indices,
         protocol,
-        |sample| {
-            engine
-                .predict(&sample.left, &sample.right, &sample.name, &options)
-                .map(|p| p.disparity)
-                .map_err(|e| dgstereo_core::Error::Other(error_line(&with_flags(e))))
-        },
+        |sample| engine.predict(&sample.left, &sample.right, &sample.name, &options).map(|p| p.disparity),
         |outcome| {
             k += 1;
             match outcome {
@@ -167,7 +162,7 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
                     let m = row.all.metrics();
                     eprintln!("[{k}/{n}] {}: epe {:.3}, bad-2 {:.2} %", row.name, m.epe, m.bad_2);
                 }
-                Err(f) => eprintln!("[{k}/{n}] error: {}: {}", f.name, f.message.replace('\n', " ")),
+                Err(f) => eprintln!("[{k}/{n}] error: {}: {}", f.name, sample_error(&f.message)),
             }
         },
     );
@@ -194,7 +189,12 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
     }
     eprintln!("failed:");
     for f in &result.failures {
-        eprintln!("  {}: {}", f.name, f.message.replace('\n', " "));
+        eprintln!("  {}: {}", f.name, sample_error(&f.message));
     }
     Ok(ExitCode::FAILURE)
+}
+
+/// A sample's error on one line, each option field it quotes written as the flag that sets it.
+fn sample_error(message: &str) -> String {
+    flag_names(message).replace(['\n', '\r'], " ")
 }

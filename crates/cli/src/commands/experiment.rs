@@ -88,12 +88,12 @@ fn validate(file: &Path, weights: Option<&Path>) -> anyhow::Result<ExitCode> {
         Some(w) => w,
         None => anyhow::bail!("{}: no --weights given and the experiment has no train.init", file.display()),
     };
-    let parts = crate::fetching::parts(crate::commands::train::parts_of(run.config, None))?;
+    let parts = crate::fetching::parts(dgstereo_train::TrainParts::from(run.config))?;
     let weights = crate::fetching::stereo(&weights, "weights")?;
     let device = dgstereo_core::default_device();
-    let model = dgstereo_train::ablation::FinishedRun::with_weights(&parts, &weights, &device)
+    let model = dgstereo_study::scoring::FinishedRun::with_weights(&parts, &weights, &device)
         .with_context(|| format!("{}: loading {}", file.display(), weights.display()))?;
-    let m = dgstereo_train::ablation::evaluate_finished_run(&parts, &model, &device)
+    let m = dgstereo_study::scoring::evaluate_finished_run(&parts, &model, &device)
         .with_context(|| format!("{}: validation", file.display()))?;
     let report = serde_json::json!({
         "experiment": parts.name, "weights": weights.display().to_string(),
@@ -144,7 +144,7 @@ fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool, config_o
             }
         };
         for run in runs {
-            let parts = super::train::parts_of(run.config.clone(), None);
+            let parts = dgstereo_train::TrainParts::from(run.config.clone());
             let on_disk = if config_only {
                 Ok(())
             } else {
@@ -166,7 +166,7 @@ fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool, config_o
             all_runs.push(run);
         }
     }
-    if let Err(e) = super::train::check_distinct_folders(&all_runs) {
+    if let Err(e) = dgstereo_study::check_distinct_folders(&all_runs) {
         failures += 1;
         println!("error: {e}");
     }

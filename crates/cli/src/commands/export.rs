@@ -9,8 +9,8 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use dgstereo_inference::{Engine, EngineConfig, experiment_configs};
 
-use crate::commands::bench::parse_size;
 use crate::engine::{DEFAULT_ITERS, with_flags};
+use crate::measurement::parse_size;
 
 /// The `export` subcommands.
 #[derive(Subcommand)]

@@ -1,9 +1,6 @@
 //! One module per subcommand.
 
 pub mod ablate;
-pub mod ablate_collect;
-pub mod ablate_scores;
-pub mod ablate_slurm;
 pub mod bench;
 pub mod bench_train;
 pub mod demo;

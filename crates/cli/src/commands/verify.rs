@@ -132,5 +132,5 @@ fn recipe(experiment: Option<&Path>) -> anyhow::Result<TrainParts> {
             launcher: Default::default(),
         },
     };
-    Ok(super::train::parts_of(config, None))
+    Ok(dgstereo_train::TrainParts::from(config))
 }

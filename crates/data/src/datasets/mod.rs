@@ -176,7 +176,10 @@ impl Dataset for FileDataset {
 
     fn get(&self, index: usize) -> Result<Sample> {
         let f = self.files.get(index).ok_or_else(|| {
-            dgstereo_core::Error::Other(format!("sample {index} out of range (dataset of {})", self.files.len()))
+            dgstereo_core::Error::sample(
+                format!("#{index}"),
+                format!("out of range (a data set of {})", self.files.len()),
+            )
         })?;
         Self::load(f, self.rule)
     }

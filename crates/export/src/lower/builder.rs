@@ -147,7 +147,7 @@ pub(crate) fn onnx_dtype(dtype: DType) -> Result<i32> {
         DType::U32 => 12,
         DType::U64 => 13,
         DType::BF16 => 16,
-        other => return Err(Error::Other(format!("ONNX has no element type for {other:?}"))),
+        other => return Err(Error::unsupported(format!("{other:?} tensors"), "ONNX has no element type for them")),
     })
 }
 
@@ -163,7 +163,7 @@ pub(crate) fn scalar_tensor(dtype: DType, value: ScalarIr) -> Result<TensorProto
         DType::I64 => value.elem::<i64>().to_le_bytes().to_vec(),
         DType::U8 => vec![value.elem::<u8>()],
         DType::Bool(_) => vec![value.elem::<bool>() as u8],
-        other => return Err(Error::Other(format!("no ONNX scalar of {other:?}"))),
+        other => return Err(Error::unsupported(format!("{other:?} scalars"), "ONNX has no scalar of that type")),
     };
     t.raw_data = bytes::Bytes::from(bytes);
     Ok(t)

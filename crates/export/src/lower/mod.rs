@@ -85,11 +85,11 @@ pub fn lower_graph(
         operations.iter().flat_map(OperationIr::nodes).map(|t| (t.id, t)).collect();
     let mut lowering = Lowering::new(producer, names);
     for (id, name) in &boundaries.inputs {
-        let t = tensors.get(id).ok_or_else(|| Error::Other(format!("input {name} is used by no operation")))?;
+        let t = tensors.get(id).ok_or_else(|| Error::Internal(format!("input {name} is used by no operation")))?;
         lowering.input(name.clone(), t)?;
     }
     for (id, name) in &boundaries.outputs {
-        let t = tensors.get(id).ok_or_else(|| Error::Other(format!("output {name} is made by no operation")))?;
+        let t = tensors.get(id).ok_or_else(|| Error::Internal(format!("output {name} is made by no operation")))?;
         lowering.output(name.clone(), t)?;
     }
     let runtime: HashSet<TensorId> = boundaries.inputs.iter().map(|(id, _)| *id).collect();
@@ -108,7 +108,7 @@ pub fn lower_graph(
     }
     for (index, operation) in operations.iter().enumerate().filter(|(i, _)| keep[*i]) {
         table::lower(&mut lowering, index, operation)
-            .map_err(|e| Error::Other(format!("{e}; the operation comes {}", place(operations, landmarks, index))))?;
+            .map_err(|e| e.context(format!("the operation {}", place(operations, landmarks, index))))?;
     }
     let mut model = ModelProto::new();
     model.ir_version = IR_VERSION;
@@ -121,5 +121,5 @@ pub fn lower_graph(
 
 /// The bytes of `model`, as an `.onnx` file holds them.
 pub fn to_bytes(model: &ModelProto) -> Result<Vec<u8>> {
-    model.write_to_bytes().map_err(|e| Error::Other(format!("serialising the ONNX model: {e}")))
+    model.write_to_bytes().map_err(|e| Error::encode("the ONNX model", e))
 }

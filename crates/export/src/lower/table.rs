@@ -67,11 +67,10 @@ fn unsupported(index: usize, operation: &OperationIr) -> Error {
     let text = format!("{operation:?}");
     let kind = text.split('{').next().unwrap_or_default().trim_end_matches(['(', ' ']);
     let shapes: Vec<String> = operation.inputs().map(|t| format!("{:?}", t.shape.as_slice())).collect();
-    Error::Other(format!(
-        "ONNX export: operation {index} ({kind}, inputs {}) has no lowering; the table covers {}",
-        shapes.join(", "),
-        LOWERED.join(", ")
-    ))
+    Error::unsupported(
+        format!("ONNX export of operation {index} ({kind}, inputs {})", shapes.join(", ")),
+        format!("it has no lowering; the table covers {}", LOWERED.join(", ")),
+    )
 }
 
 fn names(l: &Lowering, operation: &OperationIr) -> (Vec<String>, Vec<String>) {

@@ -11,7 +11,7 @@
 use std::path::Path;
 
 use burn::store::{ApplyError, BurnToPyTorchAdapter, ModuleSnapshot, ModuleStore, PytorchStore};
-use dgstereo_core::{Error, Result};
+use dgstereo_core::{Error, Problem, Result};
 
 use super::encoder::DepthAnythingV2Encoder;
 
@@ -132,46 +132,48 @@ pub fn model_keys<M: ModuleSnapshot>(model: &M) -> Vec<(String, Vec<usize>)> {
 /// The encoder size of a checkpoint, from the width of `pretrained.cls_token`, the number of
 /// blocks and the DPT head's widths ([`encoder_from_keys`]).
 pub fn detect_encoder(weights: &Path) -> Result<DepthAnythingV2Encoder> {
-    encoder_from_keys(&checkpoint_keys(weights)?).map_err(|m| checkpoint_error(weights, m))
+    encoder_from_keys(&checkpoint_keys(weights)?).map_err(|p| checkpoint_error(weights, p.to_string()))
 }
 
 /// The encoder size whose state dict `keys` (checkpoint keys with shapes) is: the token width
 /// (`pretrained.cls_token`) names the size; the block count (`pretrained.blocks.*`), the head's
 /// projections (`depth_head.projects.{i}.weight`: the four `out_channels`) and its fusion width
-/// (`depth_head.scratch.layer1_rn.weight`: `features`) must be that size's. The message names
-/// the first key that disagrees.
-pub fn encoder_from_keys(keys: &[(String, Vec<usize>)]) -> std::result::Result<DepthAnythingV2Encoder, String> {
+/// (`depth_head.scratch.layer1_rn.weight`: `features`) must be that size's.
+///
+/// # Errors
+/// A [`Problem`] keyed by the first checkpoint key that is missing or disagrees.
+pub fn encoder_from_keys(keys: &[(String, Vec<usize>)]) -> std::result::Result<DepthAnythingV2Encoder, Problem> {
     let shape = |key: &str| keys.iter().find(|(k, _)| k == key).map(|(_, s)| s.as_slice());
-    let cls = shape("pretrained.cls_token").ok_or("missing key 'pretrained.cls_token'")?;
+    let missing = |key: &str| Problem::new(key, "missing");
+    let cls = shape("pretrained.cls_token").ok_or_else(|| missing("pretrained.cls_token"))?;
     let width = *cls.last().unwrap_or(&0);
     let encoder = DepthAnythingV2Encoder::from_embed_dim(width)
-        .ok_or_else(|| format!("key 'pretrained.cls_token' has width {width}, not one of vits/vitb/vitl"))?;
+        .ok_or_else(|| Problem::new("pretrained.cls_token", format!("has width {width}, not one of vits/vitb/vitl")))?;
     let blocks =
         keys.iter().filter(|(k, _)| k.starts_with("pretrained.blocks.") && k.ends_with(".norm1.weight")).count();
     if blocks != encoder.vit().depth {
-        return Err(format!(
-            "{blocks} blocks 'pretrained.blocks.*', the {encoder} encoder has {}",
-            encoder.vit().depth
-        ));
+        let reason = format!("{blocks} blocks, the {encoder} encoder has {}", encoder.vit().depth);
+        return Err(Problem::new("pretrained.blocks.*", reason));
     }
     for (i, channels) in encoder.out_channels().into_iter().enumerate() {
         let key = format!("depth_head.projects.{i}.weight");
         match shape(&key) {
             Some(s) if s.first() == Some(&channels) => {}
             Some(s) => {
-                return Err(format!("key '{key}' has shape {s:?}, the {encoder} encoder projects to {channels}"));
+                let reason = format!("has shape {s:?}, the {encoder} encoder projects to {channels}");
+                return Err(Problem::new(key, reason));
             }
-            None => return Err(format!("missing key '{key}'")),
+            None => return Err(missing(&key)),
         }
     }
     let key = "depth_head.scratch.layer1_rn.weight";
     match shape(key) {
         Some(s) if s.first() == Some(&encoder.features()) => Ok(encoder),
-        Some(s) => Err(format!(
-            "key '{key}' has shape {s:?}, the {encoder} encoder's head has {} features",
-            encoder.features()
+        Some(s) => Err(Problem::new(
+            key,
+            format!("has shape {s:?}, the {encoder} encoder's head has {} features", encoder.features()),
         )),
-        None => Err(format!("missing key '{key}'")),
+        None => Err(missing(key)),
     }
 }
 

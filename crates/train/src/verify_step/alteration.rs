@@ -5,9 +5,9 @@
 
 use burn::optim::{AdamW, AdamWState, AdaptiveMomentumState, LearningRate, ModuleOptimizer, Optimizer};
 use burn::tensor::{Device, Tensor};
+use dgstereo_experiment::TrainingConfig;
 use dgstereo_loss::LossConfig;
 
-use crate::config::TrainingConfig;
 use crate::trainer::{TrainParts, adamw, adamw_config};
 
 /// One deliberate deviation of the verified run from the recipe.

@@ -2,10 +2,11 @@
 
 #![allow(dead_code)]
 
+use dgstereo_experiment::{DataSource, SyntheticScenes, TrainingConfig, TrainingDataConfig, ValidationConfig};
 use dgstereo_loss::LossConfig;
 use dgstereo_model::ModelConfig;
 use dgstereo_prior::PriorConfig;
-use dgstereo_train::{DataSource, SyntheticScenes, TrainParts, TrainingConfig, TrainingDataConfig, ValidationConfig};
+use dgstereo_train::TrainParts;
 
 /// Image size of the tests: `[height, width]`.
 pub const SIZE: [usize; 2] = [32, 64];

@@ -6,7 +6,10 @@
 //! MPI. An exchange blocks until every rank has called it, so every rank must make the same
 //! calls in the same order: where one rank can fail alone (a sample it cannot read, a loss that
 //! is not finite), [`agree`] turns its error into the same error on every rank, and all ranks
-//! stop together instead of waiting for each other.
+//! stop together instead of waiting for each other. The crate is small on purpose (as ripgrep's
+//! `grep-matcher` is to its searchers): the trainer and the launcher both depend on it, and
+//! neither on the other.
+#![deny(missing_docs)]
 
 use dgstereo_core::{Error, Result};
 
@@ -48,8 +51,8 @@ impl Collective for SingleProcess {
 }
 
 /// Every rank's outcome of a phase that can fail on some ranks only: `result` where all ranks
-/// succeeded, else on every rank the error of the lowest failing rank, naming it
-/// (`rank 1 of 2: ...`). In a world of one, `result` unchanged.
+/// succeeded, else on every rank [`Error::Rank`] with the lowest failing rank, the world's size
+/// and that rank's error as text (`rank 1 of 2: ...`). In a world of one, `result` unchanged.
 pub fn agree<T>(ranks: &dyn Collective, result: Result<T>) -> Result<T> {
     if ranks.size() == 1 {
         return result;
@@ -60,19 +63,8 @@ pub fn agree<T>(ranks: &dyn Collective, result: Result<T>) -> Result<T> {
     };
     let message = result.as_ref().err().map(ToString::to_string).unwrap_or_default();
     let messages = ranks.all_gather_bytes(message.as_bytes());
-    let text = String::from_utf8_lossy(&messages[first]);
-    Err(Error::Other(format!("rank {first} of {}: {text}", ranks.size())))
-}
-
-/// Whether `message` holds an error [`agree`] made, which every rank of a world of `size`
-/// returned at once (so no rank is left waiting for another).
-pub fn is_agreed(message: &str, size: usize) -> bool {
-    let marker = format!(" of {size}: ");
-    message.match_indices(&marker).any(|(at, _)| {
-        let before = &message[..at];
-        let digits = before.len() - before.trim_end_matches(|c: char| c.is_ascii_digit()).len();
-        digits > 0 && before[..before.len() - digits].ends_with("rank ")
-    })
+    let cause = String::from_utf8_lossy(&messages[first]).into_owned();
+    Err(Error::Rank { rank: first, size: ranks.size(), cause })
 }
 
 /// Rank 0 of the world: the one that writes a run's files.
@@ -99,10 +91,43 @@ mod tests {
         assert!(writes_files(&SingleProcess));
     }
 
+    /// Rank 0 of two, where rank 1 failed with "boom".
+    struct BesideAFailedRank;
+
+    impl Collective for BesideAFailedRank {
+        fn rank(&self) -> usize {
+            0
+        }
+        fn size(&self) -> usize {
+            2
+        }
+        fn all_reduce_sum(&self, _values: &mut [f32]) {}
+        fn all_gather(&self, values: &[f64]) -> Vec<f64> {
+            [values, &[1.0]].concat()
+        }
+        fn all_gather_bytes(&self, bytes: &[u8]) -> Vec<Vec<u8>> {
+            vec![bytes.to_vec(), b"boom".to_vec()]
+        }
+        fn broadcast(&self, _values: &mut [f32], _root: usize) {}
+    }
+
     #[test]
-    fn agreed_errors_are_recognised_inside_a_longer_message() {
-        assert!(is_agreed("run 'x': training stopped: rank 1 of 2: step 2: cannot read", 2));
-        assert!(!is_agreed("run 'x': rank 1 of 2: step 2", 4));
-        assert!(!is_agreed("cannot write /tmp/a of 2: full", 2));
+    fn another_ranks_failure_fails_this_rank_naming_it() {
+        let e = agree(&BesideAFailedRank, Ok(3)).unwrap_err();
+        assert!(matches!(&e, Error::Rank { rank: 1, size: 2, cause } if cause == "boom"), "{e:?}");
+        assert!(e.is_rank_failure());
+        // The lowest failing rank is named, this one's error included.
+        let own: Result<u8> = Err(Error::config("train.lr", "bad"));
+        let e = agree(&BesideAFailedRank, own).unwrap_err();
+        assert!(matches!(&e, Error::Rank { rank: 0, cause, .. } if cause.contains("train.lr")), "{e:?}");
+    }
+
+    #[test]
+    fn a_rank_failure_is_recognised_by_its_kind_under_context() {
+        let e = Error::Rank { rank: 1, size: 2, cause: "step 2: cannot read".into() };
+        assert_eq!(e.to_string(), "rank 1 of 2: step 2: cannot read");
+        assert!(e.context("training stopped").context("run 'x'").is_rank_failure());
+        // Text that reads like one is not one.
+        assert!(!Error::format("rank 1 of 2.txt", "cannot read").context("run 'x'").is_rank_failure());
     }
 }

@@ -5,9 +5,9 @@
 
 use dgstereo_data::datasets::{DrivingStereoWeather, MiddleburySplit};
 use dgstereo_eval::{BenchmarkConfig, DatasetKind, Metrics};
-use dgstereo_train::paper_match::{BenchmarkMatch, match_benchmarks};
-use dgstereo_train::paper_report::{RunScores, compare_with_paper, paper_tables_markdown, write_paper_tables};
-use dgstereo_train::paper_tables::{DRIVINGSTEREO_COLUMNS, GENERALISATION_COLUMNS, PAPER_TABLES, PaperBenchmark};
+use dgstereo_study::paper_match::{BenchmarkMatch, match_benchmarks};
+use dgstereo_study::paper_report::{RunScores, compare_with_paper, paper_tables_markdown, write_paper_tables};
+use dgstereo_study::paper_tables::{DRIVINGSTEREO_COLUMNS, GENERALISATION_COLUMNS, PAPER_TABLES, PaperBenchmark};
 
 /// The benchmarks of `experiments/paper.toml`: its names, data sets, splits and weathers.
 fn paper_benchmarks() -> Vec<BenchmarkConfig> {

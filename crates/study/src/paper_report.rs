@@ -16,8 +16,8 @@ use std::path::Path;
 
 use dgstereo_core::Result;
 use dgstereo_eval::Metrics;
+use dgstereo_train::checkpoint::write_atomic;
 
-use crate::checkpoint::write_atomic;
 use crate::paper_match::{BenchmarkMatch, label_for};
 use crate::paper_tables::{PAPER_SOURCE, PAPER_TABLES, PaperTable};
 

@@ -2,8 +2,8 @@
 //! best and second-best marks follow the rule of the legend; CSV and JSON agree.
 
 use dgstereo_eval::Metrics;
-use dgstereo_train::ablation::AblationTable;
-use dgstereo_train::ablation_table::{mean_metrics, row_name};
+use dgstereo_study::ablation_table::AblationTable;
+use dgstereo_study::ablation_table::{mean_metrics, row_name};
 
 fn metrics(epe: f64, bad_3: f64) -> Metrics {
     Metrics {

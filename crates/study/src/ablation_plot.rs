@@ -12,7 +12,7 @@ use std::path::Path;
 use dgstereo_core::Result;
 use image::{Rgb, RgbImage};
 
-use crate::plot::{GRID, HEIGHT, PANEL_W, Series, TEXT, line, panel, text, write_png};
+use dgstereo_train::plot::{BOTTOM, GRID, HEIGHT, LEFT, PANEL_W, Series, TEXT, TOP, line, panel, text, write_png};
 
 /// Line colours, one per row, in turn.
 const PALETTE: [Rgb<u8>; 8] = [
@@ -87,8 +87,8 @@ pub fn render(rows: &[RowCurves]) -> RgbImage {
     panel(&mut img, 0, "VALIDATION EPE PX / STEP", &series, max_step);
     let top = highs.iter().flatten().map(|p| p.1).filter(|v| v.is_finite()).fold(0.0f64, f64::max);
     let top = if top > 0.0 { top } else { 1.0 };
-    let (x0, x1) = (f64::from(crate::plot::LEFT), f64::from(PANEL_W - 14));
-    let (y0, y1) = (f64::from(HEIGHT - crate::plot::BOTTOM), f64::from(crate::plot::TOP));
+    let (x0, x1) = (f64::from(LEFT), f64::from(PANEL_W - 14));
+    let (y0, y1) = (f64::from(HEIGHT - BOTTOM), f64::from(TOP));
     let to_px = |s: f64, v: f64| (x0 + (x1 - x0) * s / max_step, y0 + (y1 - y0) * (v / top).clamp(0.0, 1.0));
     // Bands first, each row's beside the others' at a step, then every mean line over them.
     let several = rows.len() as f64;

@@ -53,7 +53,7 @@ pub struct TrainingConfig {
     /// with guidance, when the paper's model starts from RAFT-Stereo weights). Keys the model
     /// lacks are always an error.
     pub init_strict: bool,
-    /// Decay of an exponential moving average of the weights ([`crate::ema`]), in `[0, 1)`;
+    /// Decay of an exponential moving average of the weights (the trainer's `ema`), in `[0, 1)`;
     /// absent: no average. When set, validation, the checkpoints' model weights and the final
     /// `model.safetensors` are the average (e.g. 0.999: about the last thousand steps).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -5,27 +5,40 @@
 //! exactly, and tables built from stored scores must equal tables built from fresh ones (a Slurm
 //! study's collecting job reads what its tasks stored).
 
-use anyhow::Context;
-use dgstereo_train::ablation::{FinishedRun, evaluate_benchmark, evaluate_finished_run};
+use std::path::Path;
 
-/// Scores a finished run on its validation set (`synthetic`) and its benchmarks.
+use burn::tensor::Device;
+use dgstereo_core::Result;
+use dgstereo_eval::{BenchmarkConfig, Metrics};
+use dgstereo_train::TrainParts;
+
+use crate::scoring::{FinishedRun, evaluate_benchmark, evaluate_finished_run};
+
+/// The column of the run's held-out synthetic validation set.
+pub const SYNTHETIC: &str = "synthetic";
+
+/// Scores the finished run in folder `out` on its validation set ([`SYNTHETIC`]) and its
+/// benchmarks, in that order; `scored` sees each score as it is computed (a benchmark can take
+/// minutes), the caller shows it.
+///
+/// # Errors
+/// The final model does not load, or a set cannot be scored (the error names the run and the
+/// benchmark).
 pub fn score(
-    name: &str,
-    parts: &dgstereo_train::TrainParts,
-    benchmarks: &[dgstereo_eval::BenchmarkConfig],
-    out: &std::path::Path,
-    device: &burn::tensor::Device,
-) -> anyhow::Result<Vec<(String, dgstereo_eval::Metrics)>> {
+    parts: &TrainParts,
+    benchmarks: &[BenchmarkConfig],
+    out: &Path,
+    device: &Device,
+    mut scored: impl FnMut(&str, &Metrics),
+) -> Result<Vec<(String, Metrics)>> {
     let finished = FinishedRun::load(parts, out, device)?;
     let metrics = evaluate_finished_run(parts, &finished, device)?;
-    println!("{name}: synthetic EPE {:.3} px, bad-1 {:.2} %, bad-3 {:.2} %", metrics.epe, metrics.bad_1, metrics.bad_3);
-    let mut scores = vec![("synthetic".to_string(), metrics)];
+    scored(SYNTHETIC, &metrics);
+    let mut scores = vec![(SYNTHETIC.to_string(), metrics)];
     for b in benchmarks {
         let m = evaluate_benchmark(parts, &finished, b, device)
-            .with_context(|| format!("run '{name}': benchmark '{}'", b.label()))?;
-        let shown: Vec<String> =
-            b.table_metrics().iter().map(|k| format!("{k} {:.3}", m.get(k).unwrap_or(f64::NAN))).collect();
-        println!("{name}: {} ({} iterations) {}", b.label(), b.iters, shown.join(", "));
+            .map_err(|e| e.context(format!("run '{}': benchmark '{}'", parts.name, b.label())))?;
+        scored(b.label(), &m);
         scores.push((b.label().to_string(), m));
     }
     Ok(scores)
@@ -33,11 +46,7 @@ pub fn score(
 
 /// What a run's scores depend on besides its training: the final model file (size and time)
 /// and the scoring configuration (validation set and benchmarks).
-fn scoring_key(
-    out: &std::path::Path,
-    parts: &dgstereo_train::TrainParts,
-    benchmarks: &[dgstereo_eval::BenchmarkConfig],
-) -> Option<serde_json::Value> {
+fn scoring_key(out: &Path, parts: &TrainParts, benchmarks: &[BenchmarkConfig]) -> Option<serde_json::Value> {
     let model = std::fs::metadata(out.join("model.safetensors")).ok()?;
     let modified = model.modified().ok()?.duration_since(std::time::UNIX_EPOCH).ok()?.as_nanos().to_string();
     Some(serde_json::json!({
@@ -47,11 +56,7 @@ fn scoring_key(
 }
 
 /// The scores saved in `out/scores.json`, when their key is this run's now.
-pub fn cached_scores(
-    out: &std::path::Path,
-    parts: &dgstereo_train::TrainParts,
-    benchmarks: &[dgstereo_eval::BenchmarkConfig],
-) -> Option<Vec<(String, dgstereo_eval::Metrics)>> {
+pub fn cached_scores(out: &Path, parts: &TrainParts, benchmarks: &[BenchmarkConfig]) -> Option<Vec<(String, Metrics)>> {
     let saved: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("scores.json")).ok()?).ok()?;
     if saved["key"] != scoring_key(out, parts, benchmarks)? {
@@ -63,7 +68,7 @@ pub fn cached_scores(
 
 /// A metric's values as their bits (JSON's decimal text does not give every f64 back exactly,
 /// and reused scores must equal the computed ones), `valid_pixels` last.
-fn metrics_bits(m: &dgstereo_eval::Metrics) -> [u64; 8] {
+fn metrics_bits(m: &Metrics) -> [u64; 8] {
     let mut bits = [m.valid_pixels; 8];
     for (b, v) in bits.iter_mut().zip(m.values()) {
         *b = v.to_bits();
@@ -71,9 +76,9 @@ fn metrics_bits(m: &dgstereo_eval::Metrics) -> [u64; 8] {
     bits
 }
 
-fn metrics_from_bits(b: [u64; 8]) -> dgstereo_eval::Metrics {
+fn metrics_from_bits(b: [u64; 8]) -> Metrics {
     let f = |i: usize| f64::from_bits(b[i]);
-    dgstereo_eval::Metrics {
+    Metrics {
         epe: f(0),
         bad_0_5: f(1),
         bad_1: f(2),
@@ -85,16 +90,41 @@ fn metrics_from_bits(b: [u64; 8]) -> dgstereo_eval::Metrics {
     }
 }
 
-/// Saves `scores` with their key into `out/scores.json`.
+/// Saves `scores` with their key into `out/scores.json` (nothing where the folder holds no final
+/// model to key them by).
+///
+/// # Errors
+/// The file cannot be written.
 pub fn save_scores(
-    out: &std::path::Path,
-    parts: &dgstereo_train::TrainParts,
-    benchmarks: &[dgstereo_eval::BenchmarkConfig],
-    scores: &[(String, dgstereo_eval::Metrics)],
-) -> anyhow::Result<()> {
+    out: &Path,
+    parts: &TrainParts,
+    benchmarks: &[BenchmarkConfig],
+    scores: &[(String, Metrics)],
+) -> Result<()> {
     let Some(key) = scoring_key(out, parts, benchmarks) else { return Ok(()) };
     let bits: Vec<(&String, [u64; 8])> = scores.iter().map(|(b, m)| (b, metrics_bits(m))).collect();
     let text = serde_json::json!({"key": key, "scores": bits});
-    dgstereo_train::checkpoint::write_atomic(&out.join("scores.json"), format!("{text:#}\n").as_bytes())?;
-    Ok(())
+    dgstereo_train::checkpoint::write_atomic(&out.join("scores.json"), format!("{text:#}\n").as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metrics_round_trip_their_bits() {
+        let m = Metrics {
+            epe: 0.1,
+            bad_0_5: 1.0 / 3.0,
+            bad_1: f64::NAN,
+            bad_2: 2.5,
+            bad_3: 1e-300,
+            bad_4: 0.0,
+            d1_all: 7.0,
+            valid_pixels: 42,
+        };
+        let back = metrics_from_bits(metrics_bits(&m));
+        assert_eq!(back.values().map(f64::to_bits), m.values().map(f64::to_bits));
+        assert_eq!(back.valid_pixels, 42);
+    }
 }

@@ -1,7 +1,7 @@
 //! Scoring the runs of an ablation: [`evaluate_finished_run`] scores a finished run folder's
 //! final model on the run's held-out synthetic validation set, [`evaluate_benchmark`] on a
 //! configured benchmark through the eval crate's driver and the benchmark's protocol. The table
-//! they fill is [`crate::ablation_table`].
+//! they fill is [`crate::ablation_table`]; [`crate::scores`] stores them in the run's folder.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -14,11 +14,9 @@ use dgstereo_eval::{BenchmarkConfig, Metrics, evaluate_dataset};
 use dgstereo_model::RaftStereo;
 use dgstereo_prior::Prior;
 
-use crate::batch::TrainingPair;
-use crate::trainer::TrainParts;
-use crate::validate::{ValidationSet, predict_pair};
-
-pub use crate::ablation_table::{AblationRow, AblationTable, TABLE_METRICS};
+use dgstereo_train::batch::TrainingPair;
+use dgstereo_train::trainer::TrainParts;
+use dgstereo_train::validate::{ValidationSet, predict_pair};
 
 /// The final model of a finished run and its prior provider, loaded once for all its scores
 /// (a Depth Anything V2 provider alone is a ViT checkpoint to read).
@@ -36,7 +34,7 @@ impl FinishedRun {
     /// Loads `weights` (a dgstereo `.safetensors` of the run's model) and builds the run's prior.
     pub fn with_weights(parts: &TrainParts, weights: &Path, device: &Device) -> Result<Self> {
         let model = dgstereo_model::checkpoint::load_safetensors(
-            crate::trainer::init_model(&parts.model, device, None)?,
+            dgstereo_train::trainer::init_model(&parts.model, device, None)?,
             weights,
         )?;
         Ok(Self { model, prior: parts.prior.init(device)? })
@@ -76,14 +74,13 @@ pub fn evaluate_benchmark(
         |_| {},
     );
     if let Some(f) = result.failures.first() {
-        return Err(Error::Other(format!(
-            "benchmark '{}': {} of {} sample(s) failed; first: {}: {}",
+        let what = format!(
+            "benchmark '{}': {} of {} sample(s) failed; first",
             benchmark.label(),
             result.failures.len(),
             result.failures.len() + result.table.rows.len(),
-            f.name,
-            f.message
-        )));
+        );
+        return Err(Error::sample(&f.name, &f.message).context(what));
     }
     Ok(result.table.aggregates().remove(0).all)
 }

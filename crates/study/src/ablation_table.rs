@@ -334,7 +334,7 @@ impl AblationTable {
 
     /// Writes `ablation.md`, `ablation.csv` and `ablation.json` into `dir` (atomically).
     pub fn write(&self, dir: &Path) -> Result<()> {
-        use crate::checkpoint::write_atomic;
+        use dgstereo_train::checkpoint::write_atomic;
         write_atomic(&dir.join("ablation.md"), self.to_markdown().as_bytes())?;
         write_atomic(&dir.join("ablation.csv"), self.to_csv().as_bytes())?;
         write_atomic(&dir.join("ablation.json"), format!("{:#}\n", self.to_json()).as_bytes())

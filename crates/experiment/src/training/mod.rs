@@ -11,13 +11,13 @@
 //! validation set, so both read the same TOML keys.
 
 mod data;
+mod recipe;
 mod scenes;
 mod source;
-mod training;
 mod validation_set;
 
 pub use data::TrainingDataConfig;
+pub use recipe::TrainingConfig;
 pub use scenes::{PhotoTextures, SyntheticScenes};
 pub use source::DataSource;
-pub use training::TrainingConfig;
 pub use validation_set::ValidationConfig;
