@@ -210,15 +210,19 @@ fn a_rank_that_cannot_read_its_sample_ends_the_job_and_keeps_the_checkpoint() {
     assert!(last_train.contains("\"step\":3"), "{log}");
 }
 
-/// The pid of the process of rank `rank` running `binary`, from `/proc`.
-fn rank_pid(binary: &str, rank: usize) -> Option<u32> {
+/// The pid of the process of rank `rank` running `binary` into `out`, from `/proc`.
+fn rank_pid(binary: &str, rank: usize, out: &Path) -> Option<u32> {
     let wanted = format!("OMPI_COMM_WORLD_RANK={rank}");
+    let out = out.to_str()?;
     std::fs::read_dir("/proc").ok()?.flatten().find_map(|entry| {
         let pid: u32 = entry.file_name().to_str()?.parse().ok()?;
         let cmdline = std::fs::read(entry.path().join("cmdline")).ok()?;
         let environ = std::fs::read(entry.path().join("environ")).ok()?;
         let has = |bytes: &[u8], text: &str| bytes.split(|&b| b == 0).any(|part| part == text.as_bytes());
-        (cmdline.split(|&b| b == 0).next() == Some(binary.as_bytes()) && has(&environ, &wanted)).then_some(pid)
+        // The job's own rank: the tests of this file run their jobs side by side, each with its
+        // own `--out` folder.
+        let ours = cmdline.split(|&b| b == 0).next() == Some(binary.as_bytes()) && has(&cmdline, out);
+        (ours && has(&environ, &wanted)).then_some(pid)
     })
 }
 
@@ -249,7 +253,7 @@ fn a_killed_rank_ends_the_job_and_keeps_the_checkpoints() {
         assert!(started.elapsed() < Duration::from_secs(120), "no step logged in 120 s");
         std::thread::sleep(Duration::from_millis(20));
     }
-    let pid = rank_pid(binary, 1).expect("rank 1 is running");
+    let pid = rank_pid(binary, 1, &out).expect("rank 1 is running");
     assert!(Command::new("kill").args(["-KILL", &pid.to_string()]).status().unwrap().success());
     let killed = Instant::now();
     let status = loop {
