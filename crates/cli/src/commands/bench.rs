@@ -60,7 +60,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub config: Option<std::path::PathBuf>,
     /// Time these weights instead of freshly initialised ones: a dgstereo `.safetensors`, an
-    /// official RAFT-Stereo `.pth` or a checkpoint's name, loaded as `infer --weights` loads it
+    /// official RAFT-Stereo or DEFOM-Stereo `.pth` or a checkpoint's name, loaded as `infer --weights` loads it
     /// (the architecture it carries or shows, unless `--config` gives one).
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
@@ -181,8 +181,10 @@ fn bench_model(a: &BenchArgs, device: &burn::tensor::Device) -> anyhow::Result<(
         let config = config.unwrap_or_default();
         return Ok((StereoModel::new(config.init(device)?, config.clone(), device.clone()), config));
     };
+    // A checkpoint's name becomes its file (fetched on first use), as for `infer`.
+    let weights = crate::fetching::stereo(weights, "weights").map_err(with_flags)?;
     let engine = Engine::load_with_given_priors(&EngineConfig {
-        weights: Some(weights.clone()),
+        weights: Some(weights),
         model: config,
         device: a.device.parse()?,
         precision: a.precision,
