@@ -12,12 +12,15 @@ use std::path::PathBuf;
 
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, max_abs_diff};
-use dgstereo_model::checkpoint_config::{OfficialPreset, config_from_keys, model_from_keys};
+use dgstereo_model::checkpoint_config::{self, OfficialPreset, config_from_keys, model_from_keys};
 use dgstereo_model::official_keys::KeyShape;
 use dgstereo_model::seeded::golden_state_dict;
 use dgstereo_model::verify_defom::{DISPARITY_TOLERANCE, verify_defom};
 use dgstereo_model::{InitialDisparity, ModelConfig, checkpoint, verify};
 use dgstereo_suite::shared_dir_for_test;
+
+#[path = "support/official_pth.rs"]
+mod official_pth;
 
 const GOLDEN: &str = "golden/defom_stereo_vits_seeded.activations.safetensors";
 
@@ -101,4 +104,29 @@ fn the_reference_tells_the_scale_iterations_and_the_initialiser() {
     assert!(no_scale > 100.0 * DISPARITY_TOLERANCE, "without scale iterations within {no_scale}");
     let from_zero = run(&|m| m.initial_disparity = InitialDisparity::Zero {});
     assert!(from_zero > 100.0 * DISPARITY_TOLERANCE, "from zero within {from_zero}");
+}
+
+/// The seeded weights written as an official `.pth` (under `module.`, as the released
+/// checkpoints are saved) load through the file loader with the configuration detected from the
+/// file, and give the official code's disparity: the PyTorch reader's path (its key renames and
+/// layouts) is the in-memory loader's.
+#[test]
+fn an_official_pth_file_loads_and_gives_the_reference_disparity() {
+    let Some(reference) = golden("an_official_pth_file_loads_and_gives_the_reference_disparity") else { return };
+    let device = default_device();
+    let (state, _) = golden_state_dict(&reference).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let pth = dir.path().join("defomstereo_vits_seeded.pth");
+    official_pth::write_pth(&state, "module.", &pth);
+    let (mut model, detected) = checkpoint_config::load_detected(&pth, &device).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(detected.preset, OfficialPreset::Defom);
+    model.scale_iters = 3;
+    let refs = verify::read_reference(&reference).unwrap();
+    let f = |k: &str| {
+        let (s, v) = &refs[k];
+        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
+    };
+    let out = model.forward_flow(f("input.left"), f("input.right"), None, 6, Default::default()).unwrap();
+    let error = max_abs_diff(out.flow_up.last().unwrap().clone().neg(), f("disparity.iter5"));
+    assert!(error <= DISPARITY_TOLERANCE, "the .pth file's model is off by {error} px");
 }

@@ -33,9 +33,9 @@ pub const DEFAULT_ITERS: usize = 32;
 /// Model options shared by `infer` and `eval`.
 #[derive(Args, Clone, Debug)]
 pub struct ModelArgs {
-    /// Weights: a dgstereo `.safetensors`, an official RAFT-Stereo `.pth`, or the name of an
-    /// official checkpoint (`raftstereo-middlebury`; `dgstereo weights list`), fetched on first
-    /// use (default: the project's default model).
+    /// Weights: a dgstereo `.safetensors`, an official RAFT-Stereo or DEFOM-Stereo `.pth`, or
+    /// the name of an official checkpoint (`raftstereo-middlebury`, `defomstereo-vits-sceneflow`;
+    /// `dgstereo weights list`), fetched on first use (default: the project's default model).
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// Experiment file whose model (and prior) configuration the weights were trained with.

@@ -8,6 +8,8 @@
 //! JSON or text. [`files`] is the file-level entry point behind `dgstereo metrics`, and
 //! [`driver`] scores a predictor over a whole data set (behind `dgstereo eval`); [`benchmark`]
 //! names the data sets and their protocols for the eval command and experiment files.
+//! [`published`] holds the paper's Table 1 (zero-shot figures of the models trained on SceneFlow
+//! only), which `eval` of such a model prints beside ours.
 #![deny(missing_docs)]
 
 pub mod benchmark;
@@ -15,6 +17,7 @@ pub mod driver;
 pub mod files;
 pub mod metrics;
 pub mod protocol;
+pub mod published;
 pub mod shards;
 pub mod table;
 

@@ -10,10 +10,13 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use burn::backend::capture::CaptureBackend;
-use burn::tensor::module::{avg_pool2d, conv2d, deform_conv2d, interpolate, max_pool2d, unfold4d};
+use burn::tensor::module::{
+    attention, avg_pool2d, conv_transpose2d, conv2d, deform_conv2d, interpolate, layer_norm, linear, max_pool2d,
+    unfold4d,
+};
 use burn::tensor::ops::{
-    AvgPoolOptions, ConvOptions, DeformConvOptions, InterpolateMode, InterpolateOptions, MaxPoolOptions, PadMode,
-    UnfoldOptions,
+    AttentionModuleOptions, AvgPoolOptions, ConvOptions, ConvTransposeOptions, DeformConvOptions, InterpolateMode,
+    InterpolateOptions, MaxPoolOptions, PadMode, UnfoldOptions,
 };
 use burn::tensor::{Device, Distribution, Int, Tensor};
 use dgstereo_export::lower::{Boundaries, lower_graph, to_bytes};
@@ -98,6 +101,30 @@ fn cases() -> Vec<(&'static str, Vec<[usize; 4]>, Program)> {
                 None,
                 DeformConvOptions::new([1, 1], [1, 1], [1, 1], 1, 1),
             )
+        }),
+        // A monocular network's ViT and DPT head (DEFOM-Stereo's Depth Anything V2).
+        ("gelu", vec![s], |x| burn::tensor::activation::gelu(x[0].clone() * 3.0)),
+        ("linear", vec![[1, 2, 5, 4], [1, 1, 4, 3], [1, 1, 1, 3]], |x| {
+            let weight = x[1].clone().reshape([4, 3]);
+            linear(x[0].clone(), weight.clone(), Some(x[2].clone().reshape([3]))) + linear(x[0].clone(), weight, None)
+        }),
+        ("layer_norm", vec![[1, 2, 5, 6], [1, 1, 1, 6], [1, 1, 1, 6]], |x| {
+            let (gamma, beta) = (x[1].clone().reshape([6]), x[2].clone().reshape([6]));
+            layer_norm(x[0].clone(), gamma.clone(), Some(beta), 1e-6) + layer_norm(x[0].clone(), gamma, None, 1e-5)
+        }),
+        ("attention", vec![[1, 2, 5, 4], [1, 2, 7, 4], [1, 2, 7, 3]], |x| {
+            let scaled = AttentionModuleOptions { scale: Some(0.3), ..AttentionModuleOptions::default() };
+            let v = x[2].clone();
+            attention(x[0].clone(), x[1].clone(), v.clone(), None, None, AttentionModuleOptions::default())
+                + attention(x[0].clone(), x[1].clone(), v, None, None, scaled)
+        }),
+        ("conv_transpose2d", vec![[1, 4, 3, 5], [4, 3, 4, 4], [1, 1, 1, 6]], |x| {
+            let bias = x[2].clone().reshape([6]).narrow(0, 0, 3);
+            let four = ConvTransposeOptions::new([4, 4], [0, 0], [0, 0], [1, 1], 1);
+            let up = conv_transpose2d(x[0].clone(), x[1].clone(), Some(bias), four);
+            let grouped = ConvTransposeOptions::new([2, 2], [1, 1], [1, 1], [1, 1], 2);
+            let half = conv_transpose2d(x[0].clone(), x[1].clone().narrow(1, 0, 2), None, grouped);
+            up.slice([0..1, 0..3, 0..7, 0..11]) + half.slice([0..1, 0..3, 0..7, 0..11])
         }),
     ]
 }

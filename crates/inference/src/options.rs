@@ -20,7 +20,7 @@ use crate::working_size::{MIN_WORKING_SIZE, MinSize};
 /// What to load: the weights, the model and prior configurations, the device.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EngineConfig {
-    /// Weights: a dgstereo `.safetensors` or an official RAFT-Stereo `.pth`; `None` for the
+    /// Weights: a dgstereo `.safetensors` or an official RAFT-Stereo or DEFOM-Stereo `.pth`; `None` for the
     /// bundled default ([`crate::weights::default_weights`]). A name of an official checkpoint
     /// is resolved to its file first (`dgstereo_weights::Fetcher::resolve_stereo`).
     pub weights: Option<PathBuf>,

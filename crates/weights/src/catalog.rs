@@ -71,6 +71,22 @@ pub enum Architecture {
     IgevStereo,
 }
 
+impl Architecture {
+    /// Why no network of this architecture loads in dgstereo, `None` where one does (RAFT-Stereo,
+    /// DEFOM-Stereo, Depth Anything V2). A weights option refuses such a name before fetching it;
+    /// `weights fetch` still downloads it.
+    pub fn unloadable_reason(self) -> Option<&'static str> {
+        match self {
+            Self::RaftStereo(_) | Self::DepthAnythingV2(_) | Self::DefomStereo(_) => None,
+            Self::IgevStereo => Some(
+                "IGEV-Stereo has no network in dgstereo yet (its geometry encoding volume and \
+                 soft-argmin initialiser are not built): `dgstereo weights fetch` keeps the file, but no \
+                 command loads it",
+            ),
+        }
+    }
+}
+
 /// One checkpoint known by name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct NamedWeights {

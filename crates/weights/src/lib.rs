@@ -120,7 +120,8 @@ impl Fetcher {
 
     /// What a weights option names, as a file: an existing path as it is, a [`catalog`] name
     /// through [`Fetcher::get`]; `key` (`weights`, `prior`) names the option in errors, and
-    /// `role` is what it takes.
+    /// `role` is what it takes. A name of an architecture no network here loads
+    /// ([`Architecture::unloadable_reason`]) is refused before anything is fetched.
     pub fn resolve(&self, spec: &Path, role: Role, key: &str) -> Result<PathBuf> {
         if spec.exists() {
             return Ok(spec.to_path_buf());
@@ -145,6 +146,10 @@ impl Fetcher {
                 Role::Prior => "a Depth Anything V2 prior (give it to --prior-weights)",
             };
             return Err(Error::config(key, format!("{} is {other}", w.name)));
+        }
+        // Refused before any download: a file no network here loads is no use to the option.
+        if let Some(reason) = w.architecture.unloadable_reason() {
+            return Err(Error::config(key, format!("{} cannot be used here: {reason}", w.name)));
         }
         self.get(w)
     }
@@ -174,6 +179,17 @@ impl Fetcher {
 /// exists): what a library that takes files refuses, saying how to resolve it.
 pub fn unresolved(spec: &Path) -> Option<&'static NamedWeights> {
     if spec.exists() { None } else { spec.to_str().filter(|s| is_name(s)).and_then(find) }
+}
+
+/// The catalog entry a weights option is: a name, or a file kept under an entry's file name
+/// (`raftstereo-sceneflow.pth`, `defomstereo_vits_sceneflow.pth`, as the cache and the
+/// publishers' scripts name them).
+pub fn named_by(spec: &Path) -> Option<&'static NamedWeights> {
+    if let Some(w) = spec.to_str().filter(|s| is_name(s)).and_then(find) {
+        return Some(w);
+    }
+    let file = spec.file_name()?.to_str()?;
+    CATALOG.iter().find(|w| w.file_name() == file)
 }
 
 /// Checks that a weights option holds no unresolved name ([`unresolved`]); `key` names it.

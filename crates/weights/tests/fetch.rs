@@ -200,6 +200,31 @@ fn a_file_published_on_a_page_says_where_to_get_it_and_is_checked_where_placed()
 }
 
 #[test]
+fn a_weights_option_refuses_an_architecture_without_a_network_before_fetching() {
+    let server = Server::start();
+    let cache = tempfile::tempdir().unwrap();
+    let f = fetcher(&server, cache.path());
+    // A file placed in the cache is not even looked at: the refusal comes first.
+    let place = cache.path().join("igev-stereo-sceneflow/sceneflow.pth");
+    std::fs::create_dir_all(place.parent().unwrap()).unwrap();
+    std::fs::write(&place, b"not looked at").unwrap();
+    let e = f.resolve_stereo(Path::new("igev-stereo-sceneflow"), "weights").unwrap_err();
+    assert!(matches!(&e, Error::Config(p) if p.key == "weights"), "{e}");
+    let text = e.to_string();
+    assert!(text.contains("igev-stereo-sceneflow") && text.contains("IGEV-Stereo has no network"), "{text}");
+    assert_eq!(f.cache().recorded(find("igev-stereo-sceneflow").unwrap()).unwrap(), None);
+    // Every other stereo name has a network: a DEFOM-Stereo name goes on to the fetch (here a
+    // server that has no such file), never refused for its architecture.
+    for w in dgstereo_weights::CATALOG.iter().filter(|w| w.role == Role::Stereo) {
+        let loadable = w.architecture.unloadable_reason().is_none();
+        assert_eq!(loadable, w.name != "igev-stereo-sceneflow", "{}", w.name);
+    }
+    let e = f.resolve_stereo(Path::new("defomstereo-vits-sceneflow"), "weights").unwrap_err();
+    assert!(matches!(e.root(), Error::Fetch { .. }), "{e}");
+    assert!(!server.requests().is_empty());
+}
+
+#[test]
 fn names_go_to_their_option_and_unknown_names_list_the_known_ones() {
     let cache = tempfile::tempdir().unwrap();
     let f = Fetcher::new(Cache::at(cache.path().to_path_buf()), Sources::default()).offline(true);
@@ -216,6 +241,13 @@ fn names_go_to_their_option_and_unknown_names_list_the_known_ones() {
     assert!(dgstereo_weights::check_resolved(&missing, "weights").is_ok());
     let e = dgstereo_weights::check_resolved(Path::new("raftstereo-eth3d"), "weights").unwrap_err();
     assert!(matches!(&e, Error::Config(p) if p.key == "weights"), "{e}");
+    // Which entry an option is: a name in any spelling, or a file under an entry's file name.
+    let named = |spec: &str| dgstereo_weights::named_by(Path::new(spec)).map(|w| w.name);
+    assert_eq!(named("RAFTSTEREO_SCENEFLOW"), Some("raftstereo-sceneflow"));
+    assert_eq!(named("/cache/google-drive/defomstereo_vits_sceneflow.pth"), Some("defomstereo-vits-sceneflow"));
+    assert_eq!(named("models/raftstereo-middlebury.pth"), Some("raftstereo-middlebury"));
+    assert_eq!(named("mine.pth"), None);
+    assert_eq!(named("checkpoints/raftstereo-sceneflow"), None);
 }
 
 /// The official state dict's keys and shapes that a seeded golden file lists in its metadata.

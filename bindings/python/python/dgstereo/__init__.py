@@ -111,9 +111,10 @@ class Model:
     """A stereo model loaded once, predicting the disparity of rectified pairs.
 
     Args:
-        weights: a dgstereo ``.safetensors`` file, an official RAFT-Stereo ``.pth``
-            checkpoint (its architecture read from its tensors), or an official checkpoint's
-            name (``"raftstereo-middlebury"``; ``dgstereo weights list``), fetched into the
+        weights: a dgstereo ``.safetensors`` file, an official RAFT-Stereo or DEFOM-Stereo
+            ``.pth`` checkpoint (its architecture read from its tensors), or an official
+            checkpoint's name (``"raftstereo-middlebury"``, ``"defomstereo-vits-sceneflow"``;
+            ``dgstereo weights list``), fetched into the
             cache on first use unless ``DGSTEREO_OFFLINE=1``; ``None`` for the default weights
             this package carries (``dgstereo/assets/weights``).
         experiment: an experiment ``.toml`` whose model (and prior) configuration the weights

@@ -41,8 +41,10 @@ fn bench_model(a: &BenchArgs, device: &burn::tensor::Device) -> anyhow::Result<(
         let config = config.unwrap_or_default();
         return Ok((StereoModel::new(config.init(device)?, config.clone(), device.clone()), config));
     };
+    // A checkpoint's name becomes its file (fetched on first use), as for `infer`.
+    let weights = crate::fetching::stereo(weights, "weights").map_err(with_flags)?;
     let engine = Engine::load_with_given_priors(&EngineConfig {
-        weights: Some(weights.clone()),
+        weights: Some(weights),
         model: config,
         device: a.device.parse()?,
         precision: a.precision,

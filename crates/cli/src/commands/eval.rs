@@ -10,7 +10,10 @@
 //! FlyingThings3D pairs, as an experiment's `[[benchmarks]]` keys of the same names do. `--max-size` makes the
 //! numbers differ from the benchmark's (it is for quick looks and tests) and is reported in the
 //! output, as is the upscaling of small pairs that `--min-size` (default `auto`) applies to
-//! 1/8-resolution models: the predictions are scored at the data set's size either way.
+//! 1/8-resolution models: the predictions are scored at the data set's size either way. For
+//! a checkpoint that is a model of the paper's Table 1 (`raftstereo-sceneflow`,
+//! `defomstereo-vits-sceneflow`, ...) on one of its data sets, the published figures are printed
+//! beside ours ([`dgstereo_eval::published`]).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -21,7 +24,7 @@ use anyhow::bail;
 use clap::Args;
 use dgstereo_data::Dataset;
 use dgstereo_data::datasets::{DrivingStereoWeather, FlyingThingsTestSubset, MiddleburySplit, middeval3_splits_in};
-use dgstereo_eval::{BenchmarkConfig, DatasetKind, evaluate_dataset};
+use dgstereo_eval::{BenchmarkConfig, DatasetKind, evaluate_dataset, published};
 
 use crate::engine::{ModelArgs, describe, error_line, flag_names, load_engine};
 
@@ -90,6 +93,17 @@ fn merge(a: &EvalArgs) -> anyhow::Result<ExitCode> {
         json.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// The paper's Table 1 figures beside ours, where the weights are a checkpoint that is one of
+/// its rows' models (by name, or by the file name the catalog keeps it under) and `scored`
+/// (as the evaluation ran it) one of its data sets.
+fn published_lines(a: &EvalArgs, scored: &BenchmarkConfig, table: &dgstereo_eval::EvalTable) -> Vec<String> {
+    let Some(weights) = a.model.weights.as_deref().and_then(dgstereo_weights::named_by) else { return Vec::new() };
+    let Some(row) = published::table1_row(weights.name) else { return Vec::new() };
+    let mut differences = published::protocol_differences(scored);
+    differences.extend(a.shard.map(|s| format!("shard {}/{} of the samples", s.index, s.count)));
+    published::describe(row, weights.name, &published::compare(row, scored, table), &differences)
 }
 
 fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
@@ -167,6 +181,10 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
         },
     );
     println!("{}", result.table);
+    let scored = BenchmarkConfig { iters: options.iters, limit: a.limit, max_size: a.model.max_size, ..benchmark };
+    for line in published_lines(&a, &scored, &result.table) {
+        println!("{line}");
+    }
     let (csv, json) = (a.out.join("eval.csv"), a.out.join("eval.json"));
     result.table.write_csv(&csv)?;
     result.table.write_json(&json)?;

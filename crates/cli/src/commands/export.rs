@@ -22,7 +22,7 @@ pub enum ExportCommand {
 /// What `export onnx` exports.
 #[derive(Args)]
 pub struct OnnxArgs {
-    /// Weights: a dgstereo `.safetensors`, an official RAFT-Stereo `.pth`, or the name of an
+    /// Weights: a dgstereo `.safetensors`, an official RAFT-Stereo or DEFOM-Stereo `.pth`, or the name of an
     /// official checkpoint (`dgstereo weights list`) (default: the project's default model).
     #[arg(long)]
     weights: Option<PathBuf>,

@@ -1,5 +1,6 @@
 //! Lowering a captured burn-ir graph to an ONNX model: the graph's boundaries and values first,
-//! then one ONNX node pattern per burn-ir operation (`lower/table.rs`; [`LOWERED`] lists them).
+//! then one ONNX node pattern per burn-ir operation (`lower/table.rs`, and `lower/transformer.rs`
+//! for a monocular network's ViT and DPT head; [`LOWERED`] lists them).
 //! An operation the table lacks is an error naming it, never a file.
 //!
 //! The model is static: every shape is the captured one (reshape targets, expand shapes and
@@ -7,6 +8,7 @@
 
 mod builder;
 mod table;
+mod transformer;
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 

@@ -9,6 +9,7 @@ use burn::backend::ir::{
 use dgstereo_core::{Error, Result};
 
 use super::builder::{Lowering, onnx_dtype, scalar_tensor};
+use super::transformer;
 
 /// The burn-ir operations the table lowers, as their IR names them (for errors and docs).
 pub const LOWERED: &[&str] = &[
@@ -61,6 +62,11 @@ pub const LOWERED: &[&str] = &[
     "Interpolate",
     "Unfold4d",
     "DeformableConv2d",
+    "Gelu",
+    "Linear",
+    "LayerNorm",
+    "Attention",
+    "ConvTranspose2d",
 ];
 
 fn unsupported(index: usize, operation: &OperationIr) -> Error {
@@ -112,6 +118,7 @@ pub(super) fn lower(l: &mut Lowering, index: usize, operation: &OperationIr) -> 
     match operation {
         // Values and drops carry no computation: the values are the file's initializers.
         OperationIr::Init(_) | OperationIr::Drop(_) => {}
+        OperationIr::Activation(ActivationOperationIr::Gelu(op)) => transformer::gelu(l, index, op)?,
         OperationIr::Activation(ActivationOperationIr::Softmax(op)) => {
             l.node(node, "Softmax", vec![l.name(op.input.id)], vec![l.name(op.out.id)]).int("axis", op.axis as i64);
         }
@@ -383,6 +390,10 @@ fn lower_module(l: &mut Lowering, index: usize, operation: &OperationIr, op: &Mo
             let shape = l.i64s(format!("n{index}_shape"), &dims(&u.out.shape));
             l.node(node, "Reshape", vec![patches, shape], vec![l.name(u.out.id)]);
         }
+        ModuleOperationIr::Linear(op) => transformer::linear(l, index, op)?,
+        ModuleOperationIr::LayerNorm(op) => transformer::layer_norm(l, index, op)?,
+        ModuleOperationIr::Attention(op) => transformer::attention(l, index, op)?,
+        ModuleOperationIr::ConvTranspose2d(op) => transformer::conv_transpose2d(l, index, op)?,
         _ => return Err(unsupported(index, operation)),
     }
     Ok(())
