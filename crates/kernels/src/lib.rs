@@ -16,6 +16,7 @@
 mod algorithm;
 pub mod allocator;
 mod autodiff;
+mod bf16_product;
 pub mod dispatch;
 mod geometry;
 mod gpu;
