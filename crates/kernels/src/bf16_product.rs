@@ -67,6 +67,22 @@ impl PackedWeights {
         Self { rows, depth, depth_pad, values }
     }
 
+    /// The `rows x depth` operand whose element `(r, k)` is `columns[k · stride + r]` (stored
+    /// column by column: a feature map's `C x W` row read as `W x C`), rounded to bf16 and padded.
+    pub(crate) fn from_columns(columns: &[f32], stride: usize, [rows, depth]: [usize; 2]) -> Self {
+        assert!(rows <= stride || depth <= 1, "a column of {rows} values in a stride of {stride}");
+        assert!(depth == 0 || columns.len() >= (depth - 1) * stride + rows, "the columns end before column {depth}");
+        let depth_pad = depth.next_multiple_of(DEPTH_STEP).max(DEPTH_STEP);
+        let rows_pad = rows.next_multiple_of(ROW_STEP).max(ROW_STEP);
+        let mut values = vec![0u16; rows_pad * depth_pad];
+        for k in 0..depth {
+            for (r, &x) in columns[k * stride..][..rows].iter().enumerate() {
+                values[r * depth_pad + k] = to_bf16(x);
+            }
+        }
+        Self { rows, depth, depth_pad, values }
+    }
+
     /// Bytes held.
     pub(crate) fn bytes(&self) -> usize {
         self.values.len() * size_of::<u16>()
@@ -74,13 +90,33 @@ impl PackedWeights {
 }
 
 /// `dst (+)= lhs · rhs` in bf16 with f32 sums on `unit`: `dst` `lhs.rows x cols` (row stride
-/// `dst_stride`), `rhs` `lhs.depth x cols` f32 (row stride `rhs_stride`), converted into `pairs`
-/// (the calling thread's reusable buffer) first. `dst` is overwritten, or added to when
+/// `dst_stride`), `rhs` `lhs.depth x cols` f32 (row stride `rhs_stride`), converted into pairs
+/// (in the calling thread's reusable buffer) first. `dst` is overwritten, or added to when
 /// `accumulate`. Runs on the calling thread.
 ///
 /// Panics where `unit` is not [`Bf16Unit::available`] or an operand is shorter than its shape.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn matmul_bf16(
+    unit: Bf16Unit,
+    dst: &mut [f32],
+    dst_stride: usize,
+    lhs: &PackedWeights,
+    rhs: &[f32],
+    rhs_stride: usize,
+    cols: usize,
+    accumulate: bool,
+) {
+    PAIRS.with_borrow_mut(|pairs| product(unit, dst, dst_stride, lhs, rhs, rhs_stride, cols, accumulate, pairs));
+}
+
+thread_local! {
+    /// Each thread's pairs of the right operand, grown to the largest product it has run.
+    static PAIRS: std::cell::RefCell<Vec<u16>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// [`matmul_bf16`] with the pairs' buffer given.
+#[allow(clippy::too_many_arguments)]
+fn product(
     unit: Bf16Unit,
     dst: &mut [f32],
     dst_stride: usize,
@@ -154,6 +190,7 @@ pub(crate) fn to_bf16(x: f32) -> u16 {
 }
 
 /// The f32 value of the bf16 bit pattern `b`.
+#[cfg(test)]
 pub(crate) fn from_bf16(b: u16) -> f32 {
     f32::from_bits(u32::from(b) << 16)
 }
@@ -244,10 +281,9 @@ mod tests {
             for &unit in &units {
                 let dst_stride = cols + 3;
                 let mut dst = vec![-5.0f32; rows * dst_stride];
-                let mut pairs = Vec::new();
-                matmul_bf16(unit, &mut dst, dst_stride, &packed, &rhs, cols, cols, false, &mut pairs);
+                matmul_bf16(unit, &mut dst, dst_stride, &packed, &rhs, cols, cols, false);
                 let mut twice = dst.clone();
-                matmul_bf16(unit, &mut twice, dst_stride, &packed, &rhs, cols, cols, true, &mut pairs);
+                matmul_bf16(unit, &mut twice, dst_stride, &packed, &rhs, cols, cols, true);
                 for r in 0..rows {
                     for j in 0..dst_stride {
                         let (got, sum) = (dst[r * dst_stride + j], twice[r * dst_stride + j]);

@@ -25,8 +25,9 @@ use dgstereo_core::device::Precision;
 use dgstereo_core::timing::process_cpu_seconds;
 use dgstereo_core::{DepthPrior, DeviceChoice, InputPadder};
 use dgstereo_inference::cost_volume::{CorrChoice, DEFAULT_MEMORY_BUDGET, corr_for, corr_name};
+use dgstereo_inference::options::{precision_name, split_precision};
 use dgstereo_inference::{Engine, EngineConfig};
-use dgstereo_kernels::{Op, Path, Settings, count_work, path};
+use dgstereo_kernels::{Op, Path, Settings, count_work, path, with_products};
 use dgstereo_model::profile::profile_forward;
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig, PriorInput, PriorProvider};
@@ -74,11 +75,14 @@ pub struct BenchArgs {
     /// hand-written CPU kernels, the default), `stock` (burn's operations only, the reference), to
     /// measure what the kernels gain, `gpu-routes` (burn's operations arranged as GPU inference
     /// arranges them, to check the GPU's composition on a CPU), `no-winograd`,
-    /// `no-winograd-blocks`, `stock-route=NAME|all` (one GPU formulation off).
+    /// `no-winograd-blocks`, `stock-route=NAME|all` (one GPU formulation off), with
+    /// `--precision bf16` `bf16-winograd=off|f2|f4` (which Winograd tiles take bf16 products) and
+    /// `no-amx` (AVX512-BF16 where the processor has AMX too).
     #[arg(long, default_value = "host")]
     pub kernels: String,
-    /// Float precision of the whole forward pass: `f32`, `f16` or `bf16` (the host kernels are
-    /// f32-only, so a half precision on the CPU runs burn's operations).
+    /// Precision: `f32`; on the CPU `bf16`: f32 activations with the host kernels' products in
+    /// bf16 (f32 sums) on the processor's bf16 unit; on the GPU `f16` / `bf16` for the whole
+    /// pass (`f16` on the CPU runs burn's operations).
     #[arg(long, default_value = "f32")]
     pub precision: Precision,
     /// Depth Anything V2 weights (`depth_anything_v2_vit{s,b,l}.pth` or a name such as
@@ -148,10 +152,12 @@ fn vector_level() -> &'static str {
 }
 
 /// One line naming the machine, so that timings from different machines are not compared by
-/// mistake: the processor (Linux) and the vector level of the products.
+/// mistake: the processor (Linux), the vector level of the products and the unit of bf16
+/// products (AMX tiles or AVX512-BF16).
 pub fn machine_line() -> String {
     let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-    format!("machine: {}, {}", cpu_model_name(&cpuinfo).unwrap_or("processor not reported"), vector_level())
+    let bf16 = dgstereo_kernels::bf16_unit().map_or("no bf16 unit".into(), |unit| format!("bf16 on {unit}"));
+    format!("machine: {}, {}, {bf16}", cpu_model_name(&cpuinfo).unwrap_or("processor not reported"), vector_level())
 }
 
 pub fn median(v: &mut [f64]) -> f64 {
@@ -202,11 +208,12 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     if a.runs == 0 {
         bail!("--runs must be at least 1");
     }
-    let precision = a.precision;
     let settings: Settings = a.kernels.parse().with_context(|| format!("--kernels '{}'", a.kernels))?;
     dgstereo_kernels::configure(settings)?;
+    let device_choice = a.device.parse::<DeviceChoice>()?;
+    let (precision, products) = split_precision(device_choice, a.precision);
     // The precision is set before the device's first tensor: burn fixes it there.
-    let device = a.device.parse::<DeviceChoice>()?.device_with_precision(precision)?;
+    let device = device_choice.device_with_precision(precision)?;
     let (model, config) = bench_model(&a, &device)?;
     let implementation = corr_for(&config, a.corr, DEFAULT_MEMORY_BUDGET, w, h);
     let image = || Tensor::<4>::random([1, 3, h, w], Distribution::Uniform(0.0, 255.0), &device);
@@ -274,8 +281,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
             None => None,
         };
         let prior = computed.as_ref().or(prior.as_ref());
-        let (out, work) =
-            count_work(|| model.predict(left.clone(), right.clone(), prior, a.iters, false, Some(implementation)));
+        let (out, work) = with_products(products, || {
+            count_work(|| model.predict(left.clone(), right.clone(), prior, a.iters, false, Some(implementation)))
+        });
         let out = out?;
         macs = work.macs;
         let data = out.last().into_data(); // waits for asynchronous backends
@@ -306,12 +314,13 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let med = median(&mut times);
     let gflops = 2.0 * macs as f64 / median(&mut network) / 1e9;
     println!(
-        "size {h}x{w} (padded {}x{}), {} iterations, {} cost volume, device {}, {precision}, {kernels} kernels, {} threads",
+        "size {h}x{w} (padded {}x{}), {} iterations, {} cost volume, device {}, {}, {kernels} kernels, {} threads",
         padded[0],
         padded[1],
         a.iters,
         corr_name(implementation),
         a.device,
+        precision_name(precision, products),
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );
     println!("model: {}", dgstereo_model::checkpoint_config::summary(&config));
@@ -340,7 +349,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         net_config.correlation.implementation = implementation;
         let mut network = model.network.clone();
         network.correlation.implementation = implementation;
-        let profile = profile_forward(&network, &net_config, pl, pr, pp.as_ref(), a.iters)?;
+        let profile = with_products(products, || profile_forward(&network, &net_config, pl, pr, pp.as_ref(), a.iters))?;
         let total = profile.total_seconds();
         println!();
         println!("| stage | calls | time (s) | share of time | cores busy | GFLOP/s | share of peak |");

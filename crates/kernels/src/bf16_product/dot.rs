@@ -149,7 +149,8 @@ impl Block {
                 // SAFETY: the masks keep the accesses inside the row's `width` outputs.
                 unsafe {
                     let out = self.dst.add(r * self.dst_stride + 16 * half);
-                    let value = if self.accumulate { _mm512_add_ps(sum, _mm512_maskz_loadu_ps(mask, out)) } else { sum };
+                    let value =
+                        if self.accumulate { _mm512_add_ps(sum, _mm512_maskz_loadu_ps(mask, out)) } else { sum };
                     _mm512_mask_storeu_ps(out, mask, value);
                 }
             }

@@ -36,11 +36,6 @@ impl Bf16Unit {
             }
         }
     }
-
-    /// The fastest unit this process can run, if any.
-    pub(crate) fn best() -> Option<Self> {
-        Self::ALL.into_iter().find(|u| u.available())
-    }
 }
 
 /// AVX512-BF16 with the AVX-512 subsets the packing uses.
