@@ -215,6 +215,7 @@ impl Engine {
         info.set_item("network_size", (height, width))?;
         info.set_item("corr", format!("{:?}", prediction.info.corr).to_ascii_lowercase())?;
         info.set_item("prior_seconds", prediction.info.prior_seconds)?;
+        info.set_item("precision", prediction.info.precision)?;
         match prediction.info.rejected {
             Some(mask) => info.set_item("rejected", arrays::mask_to_array(py, mask)?)?,
             None => info.set_item("rejected", py.None())?,

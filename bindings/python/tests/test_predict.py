@@ -72,6 +72,16 @@ def test_options_and_info(small, model):
     assert info["corr"] == "alt"
     _, info = model.predict(left, right, iters=1, min_size=None, memory_budget="4GiB", return_info=True)
     assert info["corr"] == "reg" and info["rejected"] is None
+    assert info["precision"] == "f32"
+
+
+def test_bf16_products_on_the_cpu(small, model):
+    left, right = small
+    disp, info = dgstereo.Model(precision="bf16").predict(left, right, return_info=True, **QUICK)
+    # The processor's bf16 unit, or f32 where it has none.
+    assert info["precision"].startswith(("bf16 products (", "f32 (bf16 asked")), info["precision"]
+    ref = model.predict(left, right, **QUICK)
+    assert np.abs(disp - ref).mean() < 0.05 and np.abs(disp - ref).max() < 1.0
 
 
 def test_a_model_serves_several_threads(small, model):

@@ -64,9 +64,10 @@ pub struct ModelArgs {
     /// Device: `cpu` or `gpu` (the GPU needs a build with `--features gpu`).
     #[arg(long, default_value = "cpu")]
     pub device: String,
-    /// Float precision of the network: `f32`, or `f16` / `bf16` (weights cast after loading;
-    /// for GPUs, whose tensor cores multiply half precision; slower on the CPU, where the
-    /// hand-written f32 kernels stand aside). Not with a depth prior.
+    /// Float precision of the network: `f32`; on the CPU `bf16`: f32 activations with the
+    /// convolutions' products in bf16 (f32 sums) on the processor's AMX tiles or AVX512-BF16;
+    /// on the GPU `f16` / `bf16` (weights cast after loading, the whole pass in half precision,
+    /// not with a depth prior; `f16` on the CPU runs burn's operations, slowly).
     #[arg(long, default_value = "f32")]
     pub precision: Precision,
     /// Downscale pairs whose longer side exceeds this many pixels (disparity is rescaled back).

@@ -53,11 +53,14 @@ pub struct BenchArgs {
     /// hand-written CPU kernels, the default), `stock` (burn's operations only, the reference), to
     /// measure what the kernels gain, `gpu-routes` (burn's operations arranged as GPU inference
     /// arranges them, to check the GPU's composition on a CPU), `no-winograd`,
-    /// `no-winograd-blocks`, `stock-route=NAME|all` (one GPU formulation off).
+    /// `no-winograd-blocks`, `stock-route=NAME|all` (one GPU formulation off), with
+    /// `--precision bf16` `bf16-winograd=off|f2|f4` (which Winograd tiles take bf16 products) and
+    /// `no-amx` (AVX512-BF16 where the processor has AMX too).
     #[arg(long, default_value = "host")]
     pub kernels: String,
-    /// Float precision of the whole forward pass: `f32`, `f16` or `bf16` (the host kernels are
-    /// f32-only, so a half precision on the CPU runs burn's operations).
+    /// Precision: `f32`; on the CPU `bf16`: f32 activations with the host kernels' products in
+    /// bf16 (f32 sums) on the processor's bf16 unit; on the GPU `f16` / `bf16` for the whole
+    /// pass (`f16` on the CPU runs burn's operations).
     #[arg(long, default_value = "f32")]
     pub precision: Precision,
     /// Depth Anything V2 weights (`depth_anything_v2_vit{s,b,l}.pth` or a name such as
@@ -127,10 +130,12 @@ fn vector_level() -> &'static str {
 }
 
 /// One line naming the machine, so that timings from different machines are not compared by
-/// mistake: the processor (Linux) and the vector level of the products.
+/// mistake: the processor (Linux), the vector level of the products and the unit of bf16
+/// products (AMX tiles or AVX512-BF16).
 pub fn machine_line() -> String {
     let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-    format!("machine: {}, {}", cpu_model_name(&cpuinfo).unwrap_or("processor not reported"), vector_level())
+    let bf16 = dgstereo_kernels::bf16_unit().map_or("no bf16 unit".into(), |unit| format!("bf16 on {unit}"));
+    format!("machine: {}, {}, {bf16}", cpu_model_name(&cpuinfo).unwrap_or("processor not reported"), vector_level())
 }
 
 /// The median of `v` (sorted in place; the mean of the middle two for an even count).

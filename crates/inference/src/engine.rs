@@ -23,13 +23,14 @@ use dgstereo_core::{Error, Result};
 use dgstereo_costvolume::CorrelationImplementation;
 use dgstereo_data::resize::{disparity_to_size, resize_rgb};
 use dgstereo_data::{DisparityMap, Mask, RgbImage};
+use dgstereo_kernels::{ProductPrecision, with_products};
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
 use crate::consistency::{fill_rejected, mirror_disparity, mirror_rgb, rejected_pixels};
 use crate::convert::{disparity_map, image_tensor};
 use crate::cost_volume::corr_for;
-use crate::options::{EngineConfig, PredictOptions};
+use crate::options::{EngineConfig, PredictOptions, precision_name, split_precision};
 pub use crate::prior_maps::PriorMaps;
 use crate::weights::{default_weights_at, load_model};
 use crate::working_size::network_size;
@@ -47,6 +48,9 @@ pub struct RunInfo {
     /// Seconds spent computing the depth prior (both passes with `lr_check`); `None` without
     /// a prior.
     pub prior_seconds: Option<f64>,
+    /// The precision the network ran in ([`crate::options::precision_name`]): `f32`, `f16`,
+    /// `bf16` (the whole pass, on the GPU), or on the CPU `bf16 products (UNIT)`.
+    pub precision: String,
 }
 
 impl RunInfo {
@@ -103,6 +107,10 @@ pub struct Engine {
     source: String,
     /// Whether a model with a depth prior was loaded without one, its maps given with each call.
     prior_per_call: bool,
+    /// The device's float precision.
+    precision: Precision,
+    /// The precision of the host kernels' products (bf16 on the CPU with `precision` bf16).
+    products: ProductPrecision,
 }
 
 impl Engine {
@@ -118,8 +126,9 @@ impl Engine {
     }
 
     fn load_inner(config: &EngineConfig, priors_given: bool) -> Result<Self> {
-        let device = config.device.device_with_precision(config.precision)?;
-        if config.precision != Precision::F32 && config.prior.gives_prior() {
+        let (precision, products) = split_precision(config.device, config.precision);
+        let device = config.device.device_with_precision(precision)?;
+        if precision != Precision::F32 && config.prior.gives_prior() {
             return Err(Error::config(
                 "precision",
                 format!("{}: the depth prior runs in f32 only; leave out `precision` or the prior", config.precision),
@@ -184,7 +193,19 @@ impl Engine {
             ));
         }
         let file_prior = prior.is_some() && matches!(prior_config, PriorConfig::File { .. });
-        Ok(Self { model, prior, file_prior, weights, device, notes, preset_iters, source, prior_per_call })
+        Ok(Self {
+            model,
+            prior,
+            file_prior,
+            weights,
+            device,
+            notes,
+            preset_iters,
+            source,
+            prior_per_call,
+            precision,
+            products,
+        })
     }
 
     /// The weights file.
@@ -352,10 +373,13 @@ impl Engine {
             (None, None) => None,
         };
         let prior_seconds = prior.is_some().then(|| prior_start.elapsed().as_secs_f64());
-        let pred = self.model.predict(lt, rt, prior.as_ref(), options.iters, false, Some(corr))?;
+        let pred = with_products(self.products, || {
+            self.model.predict(lt, rt, prior.as_ref(), options.iters, false, Some(corr))
+        })?;
         let small = disparity_map(pred.last());
         drop(pred);
-        let info = RunInfo { network_size: (l.width, l.height), corr, rejected: None, prior_seconds };
+        let precision = precision_name(self.precision, self.products);
+        let info = RunInfo { network_size: (l.width, l.height), corr, rejected: None, prior_seconds, precision };
         Ok((disparity_to_size(&small, w, h)?, info))
     }
 }

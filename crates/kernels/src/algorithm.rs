@@ -3,6 +3,8 @@
 //! The dispatch (`crate::dispatch`) chooses them; the host kernels and the training nodes only
 //! read them. They live below both, so neither layer imports the other.
 
+pub(crate) use crate::bf16_product::Bf16Unit;
+
 /// Winograd's output tile.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub(crate) enum WinogradTile {
@@ -27,6 +29,16 @@ pub(crate) enum ConvAlgorithm {
     FewOutputs,
     /// im2col tiles and the `gemm` crate.
     Im2col,
+    /// im2col tiles and bf16 products with f32 sums on `unit` (inference in bf16).
+    Im2colBf16(Bf16Unit),
+    /// Winograd with `tile` in bands, its products in bf16 with f32 sums on `unit` (inference
+    /// in bf16).
+    WinogradBf16 {
+        /// The output tile.
+        tile: WinogradTile,
+        /// The unit of the products.
+        unit: Bf16Unit,
+    },
 }
 
 /// The training node's algorithms: its forward's, its input gradient's (a host convolution of
@@ -48,6 +60,8 @@ pub(crate) struct ConvTraining {
 pub(crate) enum GruAlgorithm {
     /// Both convolutions by Winograd with this tile, sharing the `x` channels' transforms.
     Shared(WinogradTile),
+    /// [`GruAlgorithm::Shared`] with the products in bf16 with f32 sums on the unit.
+    SharedBf16(WinogradTile, Bf16Unit),
     /// The gates' and the candidate's convolutions each by its own algorithm.
     Separate {
         /// `[convz, convr]` fused.

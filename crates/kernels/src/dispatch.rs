@@ -16,12 +16,13 @@ use std::cell::Cell;
 use burn::tensor::{Device, FloatDType};
 use dgstereo_core::device::float_dtype;
 
+use crate::bf16_product::Bf16Unit;
 use crate::settings::{GpuRoute, Settings, settings};
 
 mod calls;
 mod conv;
 
-pub(crate) use calls::{ADD_RELU, DeformCall, NodeCall, NormCall, NormKind, PlainCall, RECTIFY};
+pub(crate) use calls::{ADD_RELU, AllPairsCall, DeformCall, NodeCall, NormCall, NormKind, PlainCall, RECTIFY};
 pub(crate) use conv::{ConvCall, GruStepCall, host_algorithm};
 #[cfg(test)]
 pub(crate) use conv::{TRAINING_WINOGRAD_MIN_CHANNELS, training_algorithms, winograd_tile};
@@ -175,6 +176,56 @@ pub fn is_capture(device: &Device) -> bool {
 
 thread_local! {
     static PINNED: Cell<Option<Path>> = const { Cell::new(None) };
+    static PRODUCTS: Cell<ProductPrecision> = const { Cell::new(ProductPrecision::F32) };
+}
+
+/// The precision of the host kernels' matrix products in CPU inference on the calling thread
+/// ([`with_products`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum ProductPrecision {
+    /// f32 inputs and sums: the reference.
+    #[default]
+    F32,
+    /// bf16 inputs (weights converted once, activations at each product's input) with f32 sums,
+    /// on the processor's bf16 unit ([`bf16_unit`]); f32 where the processor has none. Norms,
+    /// activations, lookups, resizes and everything outside the products stay f32.
+    Bf16,
+}
+
+/// Runs `f` with the host kernels' products on this thread in `precision` (the plans made on
+/// this thread decide; a plan carries its precision to the threads that run it). The previous
+/// precision is restored afterwards, also on a panic.
+pub fn with_products<T>(precision: ProductPrecision, f: impl FnOnce() -> T) -> T {
+    struct Restore(ProductPrecision);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            PRODUCTS.with(|p| p.set(self.0));
+        }
+    }
+    let _restore = Restore(PRODUCTS.with(|p| p.replace(precision)));
+    f()
+}
+
+/// The precision of the products on this thread.
+pub fn product_precision() -> ProductPrecision {
+    PRODUCTS.with(Cell::get)
+}
+
+/// The name of the bf16 unit the products take in [`ProductPrecision::Bf16`] on this processor
+/// with the process's settings (`amx-bf16` or `avx512-bf16`), `None` where it has none.
+pub fn bf16_unit() -> Option<&'static str> {
+    best_bf16_unit(settings()).map(Bf16Unit::name)
+}
+
+/// The fastest bf16 unit the processor has and the settings allow.
+fn best_bf16_unit(settings: &Settings) -> Option<Bf16Unit> {
+    Bf16Unit::ALL.into_iter().filter(|&u| settings.amx || u != Bf16Unit::Tiles).find(|u| u.available())
+}
+
+/// The bf16 unit of the products planned on this thread: `None` in f32 or where the processor
+/// has none.
+fn products_unit(settings: &Settings) -> Option<Bf16Unit> {
+    (product_precision() == ProductPrecision::Bf16).then(|| best_bf16_unit(settings)).flatten()
 }
 
 /// Where `op` runs on `device`: the coarse half of `plan`.

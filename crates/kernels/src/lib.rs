@@ -16,6 +16,9 @@
 mod algorithm;
 pub mod allocator;
 mod autodiff;
+#[cfg(test)]
+mod bf16_paths;
+mod bf16_product;
 pub mod dispatch;
 mod geometry;
 mod gpu;
@@ -29,7 +32,9 @@ mod test_paths;
 pub mod testing;
 mod work;
 
-pub use dispatch::{Numerics, Op, Path, path, with_path};
+pub use dispatch::{
+    Numerics, Op, Path, ProductPrecision, bf16_unit, path, product_precision, with_path, with_products,
+};
 pub use host::winograd::UpdateLoop;
 pub use ops::conv::{
     conv_options, conv2d_affine, conv2d_forward, conv2d_forward_then, conv2d_op, conv2d_op_then, conv2d_relu_forward,

@@ -14,6 +14,11 @@
 //!   the CPU computes what GPU inference computes);
 //! - `no-winograd`, `no-winograd-blocks`: the host convolution without Winograd's algorithm, or
 //!   without its cache-resident blocks;
+//! - `bf16-winograd=off|f2|f4`: which Winograd tiles take bf16 products under
+//!   [`crate::ProductPrecision::Bf16`] (default `f2`: F(4x4) layers take F(2x2) with bf16
+//!   products; `f4`: each keeps its tile; `off`: Winograd's layers keep f32 products);
+//! - `no-amx`: bf16 products ([`crate::ProductPrecision::Bf16`]) on AVX512-BF16 even where the
+//!   processor has AMX tiles (to compare the two units);
 //! - `stock-route=NAME`: one GPU formulation off ([`GpuRoute::name`]; `all` for every one).
 
 use std::str::FromStr;
@@ -83,6 +88,18 @@ impl GpuRoute {
     }
 }
 
+/// Which Winograd tiles take bf16 products (`bf16-winograd=`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Bf16Winograd {
+    /// Winograd's layers keep f32 products (`off`).
+    Off,
+    /// Winograd's layers run F(2x2) with bf16 products, also where F(4x4) is chosen in f32
+    /// (`f2`): F(4x4)'s transforms grow the inputs' rounding about tenfold.
+    F2,
+    /// Each layer keeps its tile, with bf16 products (`f4`).
+    F4,
+}
+
 /// What the dispatch may choose ([`crate::dispatch::path`]); the default is every fast path on.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Settings {
@@ -97,6 +114,10 @@ pub struct Settings {
     pub winograd: bool,
     /// Winograd's F(4x4) may run in cache-resident blocks of tiles (off: `no-winograd-blocks`).
     pub winograd_blocks: bool,
+    /// bf16 products may run on AMX tiles (off: `no-amx`, AVX512-BF16 only).
+    pub amx: bool,
+    /// Which Winograd tiles take bf16 products (`bf16-winograd=`).
+    pub bf16_winograd: Bf16Winograd,
     /// GPU formulations switched off (`stock-route=NAME`).
     pub stock_routes: Vec<GpuRoute>,
 }
@@ -109,6 +130,8 @@ impl Default for Settings {
             gpu_routes_on_cpu: false,
             winograd: true,
             winograd_blocks: true,
+            amx: true,
+            bf16_winograd: Bf16Winograd::F2,
             stock_routes: Vec::new(),
         }
     }
@@ -153,6 +176,10 @@ impl FromStr for Settings {
                 }
                 "no-winograd" => settings.winograd = false,
                 "no-winograd-blocks" => settings.winograd_blocks = false,
+                "no-amx" => settings.amx = false,
+                "bf16-winograd=off" => settings.bf16_winograd = Bf16Winograd::Off,
+                "bf16-winograd=f2" => settings.bf16_winograd = Bf16Winograd::F2,
+                "bf16-winograd=f4" => settings.bf16_winograd = Bf16Winograd::F4,
                 other => match other.strip_prefix("stock-route=") {
                     Some("all") => settings.stock_routes = GpuRoute::ALL.to_vec(),
                     Some(name) => match GpuRoute::ALL.into_iter().find(|r| r.name() == name) {
@@ -171,7 +198,8 @@ impl FromStr for Settings {
                             "kernels",
                             format!(
                                 "unknown kernel setting '{word}' (expected host, stock, stock-training, gpu-routes, \
-                                 no-winograd, no-winograd-blocks or stock-route=NAME)"
+                                 no-winograd, no-winograd-blocks, bf16-winograd=off|f2|f4, no-amx or \
+                                 stock-route=NAME)"
                             ),
                         ));
                     }
@@ -252,6 +280,12 @@ mod tests {
         let g: Settings = "gpu-routes,stock-route=all".parse().unwrap();
         assert!(g.gpu_routes_on_cpu && !g.host_kernels);
         assert!(GpuRoute::ALL.iter().all(|&r| !g.route_enabled(r)));
+        let b: Settings = "bf16-winograd=f4,no-amx".parse().unwrap();
+        assert!(b.bf16_winograd == Bf16Winograd::F4 && !b.amx && b.host_kernels);
+        assert_eq!("bf16-winograd=off".parse::<Settings>().unwrap().bf16_winograd, Bf16Winograd::Off);
+        assert_eq!(Settings::default().bf16_winograd, Bf16Winograd::F2);
+        let e = "bf16-winograd=f8".parse::<Settings>().unwrap_err().to_string();
+        assert!(e.contains("'bf16-winograd=f8'") && e.contains("bf16-winograd=off|f2|f4"), "{e}");
         let e = "fast".parse::<Settings>().unwrap_err().to_string();
         assert!(e.contains("'fast'") && e.contains("gpu-routes"), "{e}");
         let e = "stock-route=warp".parse::<Settings>().unwrap_err().to_string();

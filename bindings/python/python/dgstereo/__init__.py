@@ -124,7 +124,10 @@ class Model:
             ``depth-anything-v2-small``). A model with a prior and none configured takes
             the prior maps with each :meth:`predict` call (``prior=(left, right)``).
         device: ``"cpu"`` or ``"gpu"`` (a build with the GPU backend).
-        precision: ``"f32"``, ``"f16"`` or ``"bf16"``.
+        precision: ``"f32"``; on the CPU ``"bf16"``: f32 activations with the
+            convolutions' products in bf16 (f32 sums) on the processor's AMX tiles or
+            AVX512-BF16 (f32 where it has neither); on the GPU ``"f16"`` or ``"bf16"`` for
+            the whole pass.
         slow_fast_gru: replaces the configuration's slow-fast GRU schedule.
 
     A model may be shared by threads: :meth:`predict` releases the GIL for the whole
@@ -238,7 +241,8 @@ class Model:
             name: the pair's name, by which a ``file:`` prior finds its maps.
             return_info: also return a dict: ``network_size`` (``(height, width)`` the network
                 saw, as NumPy orders shapes), ``corr``, ``rejected`` (mask of the pixels the
-                check replaced), ``prior_seconds``.
+                check replaced), ``prior_seconds``, ``precision`` (``"f32"``, or on the CPU
+                ``"bf16 products (avx512-bf16)"`` / ``"bf16 products (amx-bf16)"``).
             scale: multiply the images' values by this first, whatever their dtype (``255.0``
                 for images in 0..1; ``1.0`` to pass them as they are).
             channels: the order of the images' colour channels: ``"rgb"`` (the default, what

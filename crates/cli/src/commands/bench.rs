@@ -24,8 +24,9 @@ use dgstereo_core::device::Precision;
 use dgstereo_core::timing::process_cpu_seconds;
 use dgstereo_core::{DepthPrior, DeviceChoice, InputPadder};
 use dgstereo_inference::cost_volume::{DEFAULT_MEMORY_BUDGET, corr_for, corr_name};
+use dgstereo_inference::options::{precision_name, split_precision};
 use dgstereo_inference::{Engine, EngineConfig};
-use dgstereo_kernels::{Op, Path, Settings, count_work, path};
+use dgstereo_kernels::{Op, Path, Settings, count_work, path, with_products};
 use dgstereo_model::profile::profile_forward;
 use dgstereo_model::{ModelConfig, StereoModel};
 use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig, PriorInput, PriorProvider};
@@ -64,11 +65,12 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     if a.runs == 0 {
         bail!("--runs must be at least 1");
     }
-    let precision = a.precision;
     let settings: Settings = a.kernels.parse().with_context(|| format!("--kernels '{}'", a.kernels))?;
     dgstereo_kernels::configure(settings)?;
+    let device_choice = a.device.parse::<DeviceChoice>()?;
+    let (precision, products) = split_precision(device_choice, a.precision);
     // The precision is set before the device's first tensor: burn fixes it there.
-    let device = a.device.parse::<DeviceChoice>()?.device_with_precision(precision)?;
+    let device = device_choice.device_with_precision(precision)?;
     let (model, config) = bench_model(&a, &device)?;
     let implementation = corr_for(&config, a.corr, DEFAULT_MEMORY_BUDGET, w, h);
     let image = || Tensor::<4>::random([1, 3, h, w], Distribution::Uniform(0.0, 255.0), &device);
@@ -136,8 +138,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
             None => None,
         };
         let prior = computed.as_ref().or(prior.as_ref());
-        let (out, work) =
-            count_work(|| model.predict(left.clone(), right.clone(), prior, a.iters, false, Some(implementation)));
+        let (out, work) = with_products(products, || {
+            count_work(|| model.predict(left.clone(), right.clone(), prior, a.iters, false, Some(implementation)))
+        });
         let out = out?;
         macs = work.macs;
         let data = out.last().into_data(); // waits for asynchronous backends
@@ -168,12 +171,13 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
     let med = median(&mut times);
     let gflops = 2.0 * macs as f64 / median(&mut network) / 1e9;
     println!(
-        "size {h}x{w} (padded {}x{}), {} iterations, {} cost volume, device {}, {precision}, {kernels} kernels, {} threads",
+        "size {h}x{w} (padded {}x{}), {} iterations, {} cost volume, device {}, {}, {kernels} kernels, {} threads",
         padded[0],
         padded[1],
         a.iters,
         corr_name(implementation),
         a.device,
+        precision_name(precision, products),
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
     );
     println!("model: {}", dgstereo_model::checkpoint_config::summary(&config));
@@ -202,7 +206,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<ExitCode> {
         net_config.correlation.implementation = implementation;
         let mut network = model.network.clone();
         network.correlation.implementation = implementation;
-        let profile = profile_forward(&network, &net_config, pl, pr, pp.as_ref(), a.iters)?;
+        let profile = with_products(products, || profile_forward(&network, &net_config, pl, pr, pp.as_ref(), a.iters))?;
         let total = profile.total_seconds();
         println!();
         println!("| stage | calls | time (s) | share of time | cores busy | GFLOP/s | share of peak |");

@@ -3,7 +3,8 @@
 
 use burn::tensor::Device;
 
-use super::{Call, Op, Path, path};
+use super::{Call, Op, Path, path, products_unit};
+use crate::bf16_product::Bf16Unit;
 use crate::settings::Settings;
 
 /// An operation whose host kernel takes every shape, with our backward where [`path`] gives the
@@ -11,6 +12,12 @@ use crate::settings::Settings;
 /// pooling, the lookups, convex upsampling and `relu(a + b)` (as [`Op::Norm`]).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct PlainCall(pub(crate) Op);
+
+/// The correlation pyramid's all-pairs product: as [`PlainCall`]`(Op::Lookup)`, and in CPU
+/// inference with bf16 products where the calling thread asks for them and the processor has a
+/// unit.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct AllPairsCall;
 
 /// An element-wise step that has a training node of its own but no host pass for inference,
 /// where it runs inside a fused kernel or as burn's operation: the ReLU ([`RECTIFY`]) and the
@@ -64,6 +71,27 @@ impl Call for PlainCall {
 
     fn inference(&self, _: &Settings) -> Option<()> {
         Some(())
+    }
+
+    fn training(&self, _: &Settings) -> Option<()> {
+        Some(())
+    }
+
+    fn gpu(&self, _: &Settings, _: &Device) -> Option<()> {
+        Some(())
+    }
+}
+
+impl Call for AllPairsCall {
+    type Inference = Option<Bf16Unit>;
+    type Training = ();
+    type Gpu = ();
+    fn op(&self) -> Op {
+        Op::Lookup
+    }
+
+    fn inference(&self, settings: &Settings) -> Option<Option<Bf16Unit>> {
+        Some(products_unit(settings))
     }
 
     fn training(&self, _: &Settings) -> Option<()> {

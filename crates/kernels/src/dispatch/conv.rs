@@ -14,11 +14,11 @@ use burn::tensor::Device;
 use burn::tensor::ops::ConvOptions;
 
 use super::calls::conv_on_gpu;
-use super::{Call, Numerics, Op};
-use crate::algorithm::{ConvAlgorithm, ConvTraining, GruAlgorithm, WinogradTile};
+use super::{Call, Numerics, Op, products_unit};
+use crate::algorithm::{Bf16Unit, ConvAlgorithm, ConvTraining, GruAlgorithm, WinogradTile};
 use crate::geometry::{conv_options, conv_output_size};
 use crate::host::winograd::blocks_available;
-use crate::settings::{GpuRoute, Settings};
+use crate::settings::{Bf16Winograd, GpuRoute, Settings};
 
 /// Fewest input and output channels for which Winograd pays against im2col tiles.
 const WINOGRAD_MIN_CHANNELS: usize = 32;
@@ -110,6 +110,37 @@ pub(crate) fn host_algorithm(
     }
 }
 
+/// The inference algorithm of `algorithm`'s layer with its products in bf16 on `unit`: im2col
+/// tiles take bf16 products; Winograd (bands or blocks) takes them in bands with the tile the
+/// settings' `bf16-winograd` gives ([`bf16_tile`]; Winograd's transforms stay f32, only the
+/// products' inputs are rounded) or keeps f32; the few-output kernel, whose time goes to
+/// reading the input rather than to its products, stays f32.
+pub(crate) fn in_bf16(algorithm: ConvAlgorithm, unit: Bf16Unit, settings: &Settings) -> ConvAlgorithm {
+    match algorithm {
+        ConvAlgorithm::Winograd { tile, .. } | ConvAlgorithm::WinogradBf16 { tile, .. } => {
+            match bf16_tile(tile, settings) {
+                Some(tile) => ConvAlgorithm::WinogradBf16 { tile, unit },
+                None => algorithm,
+            }
+        }
+        ConvAlgorithm::Im2col | ConvAlgorithm::Im2colBf16(_) => ConvAlgorithm::Im2colBf16(unit),
+        ConvAlgorithm::FewOutputs => ConvAlgorithm::FewOutputs,
+    }
+}
+
+/// The Winograd tile of a layer that takes `tile` in f32, with bf16 products: `None` (f32
+/// products) under `bf16-winograd=off`, F(2x2) under `f2` (the default: with bf16 inputs
+/// F(4x4)'s transforms err by about 6e-3 of the largest sum of absolute products at the GRU's
+/// 384 channels and by several percent at few channels, F(2x2) by 4e-4, as a direct product),
+/// `tile` under `f4`.
+fn bf16_tile(tile: WinogradTile, settings: &Settings) -> Option<WinogradTile> {
+    match settings.bf16_winograd {
+        Bf16Winograd::Off => None,
+        Bf16Winograd::F2 => Some(WinogradTile::F2),
+        Bf16Winograd::F4 => Some(tile),
+    }
+}
+
 /// One convolution: the input's and the weight's dimensions, the options and the numerics its
 /// caller allows.
 #[derive(Debug, Clone, Copy)]
@@ -133,8 +164,15 @@ impl Call for ConvCall<'_> {
         Op::Conv
     }
 
+    /// The host algorithm of one group ([`host_algorithm`]), with bf16 products ([`in_bf16`])
+    /// where the calling thread asks for them and the processor has a unit.
     fn inference(&self, settings: &Settings) -> Option<ConvAlgorithm> {
-        (self.options.groups == 1).then(|| host_algorithm(self.x_dims, self.w_dims, self.options, true, settings))
+        let algorithm = host_algorithm(self.x_dims, self.w_dims, self.options, true, settings);
+        let algorithm = match products_unit(settings) {
+            Some(unit) => in_bf16(algorithm, unit, settings),
+            None => algorithm,
+        };
+        (self.options.groups == 1).then_some(algorithm)
     }
 
     /// From [`TRAINING_MIN_CHANNELS`] input channels, one group; the forward by Winograd only
@@ -257,11 +295,17 @@ impl Call for GruStepCall {
         let shared = (zr == q && [kh, kw, qh, qw] == [3; 4] && settings.winograd)
             .then(|| winograd_tile(dims, gates_w, zr).zip(winograd_tile(dims, candidate_w, q)))
             .flatten();
-        Some(match shared {
-            Some((tile, _)) => GruAlgorithm::Shared(tile),
-            None => GruAlgorithm::Separate {
-                gates: host_algorithm(dims, gates_w, zr, true, settings),
-                candidate: host_algorithm(dims, candidate_w, q, true, settings),
+        let unit = products_unit(settings);
+        let products = |algorithm| unit.map_or(algorithm, |unit| in_bf16(algorithm, unit, settings));
+        Some(match (shared, unit) {
+            (Some((tile, _)), None) => GruAlgorithm::Shared(tile),
+            (Some((tile, _)), Some(unit)) => match bf16_tile(tile, settings) {
+                Some(tile) => GruAlgorithm::SharedBf16(tile, unit),
+                None => GruAlgorithm::Shared(tile),
+            },
+            (None, _) => GruAlgorithm::Separate {
+                gates: products(host_algorithm(dims, gates_w, zr, true, settings)),
+                candidate: products(host_algorithm(dims, candidate_w, q, true, settings)),
             },
         })
     }

@@ -18,8 +18,9 @@ use rayon::prelude::*;
 
 use super::columns::image_columns;
 use super::few_outputs::few_outputs_conv;
-use super::winograd::{Conv3x3, Pending, split_first, split_second, variant, winograd_conv};
-use crate::algorithm::{ConvAlgorithm, WinogradTile};
+use super::winograd::{Conv3x3, Pending, split_first, split_second, variant, winograd_bf16_conv, winograd_conv};
+use crate::algorithm::{Bf16Unit, ConvAlgorithm, WinogradTile};
+use crate::bf16_product::{PackedWeights, matmul_bf16};
 use crate::geometry::{Epilogue, band_jobs, conv_output_size};
 use crate::product::matmul_into;
 
@@ -81,7 +82,15 @@ pub(crate) fn conv2d_host_slices(
             check_shapes(x, x_dims, wt, w_dims, options);
             few_outputs_conv(x, x_dims, wt, w_dims, bias, options.padding, options.dilation, epilogue)
         }
-        ConvAlgorithm::Im2col => im2col_conv_slices(x, x_dims, wt, w_dims, bias, options, epilogue),
+        ConvAlgorithm::WinogradBf16 { tile, unit } => {
+            check_shapes(x, x_dims, wt, w_dims, options);
+            let conv = Conv3x3 { x, x_dims, wt, o: w_dims[0], bias, padding: options.padding, epilogue };
+            winograd_bf16_conv(tile, unit, &conv)
+        }
+        ConvAlgorithm::Im2col => im2col_conv_slices(x, x_dims, wt, w_dims, bias, options, epilogue, None),
+        ConvAlgorithm::Im2colBf16(unit) => {
+            im2col_conv_slices(x, x_dims, wt, w_dims, bias, options, epilogue, Some(unit))
+        }
     }
 }
 
@@ -109,6 +118,7 @@ pub(crate) fn conv2d_host_shared_first(
     bias_first: Option<&[f32]>,
     options: &ConvOptions<2>,
     tile: WinogradTile,
+    unit: Option<Bf16Unit>,
 ) -> (Vec<f32>, PendingConv) {
     let c = x_dims[1];
     check_shapes(x, x_dims, wt_first, [o1, c, 3, 3], options);
@@ -123,6 +133,7 @@ pub(crate) fn conv2d_host_shared_first(
         bias_first,
         options.padding,
         Epilogue::Linear,
+        unit,
     );
     (out.0, PendingConv(pending))
 }
@@ -153,7 +164,9 @@ fn check_shapes(x: &[f32], x_dims: [usize; 4], wt: &[f32], w_dims: [usize; 4], o
     conv_output_size("conv2d_host", [h, w], [kh, kw], options)
 }
 
-/// [`conv2d_host_slices`] by im2col tiles and `gemm`, for any shape.
+/// [`conv2d_host_slices`] by im2col tiles and `gemm`, for any shape; the products in bf16 with
+/// f32 sums on `unit` where it is given (the weight converted once per call).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn im2col_conv_slices(
     x: &[f32],
     x_dims: [usize; 4],
@@ -162,6 +175,7 @@ pub(crate) fn im2col_conv_slices(
     bias: Option<&[f32]>,
     options: &ConvOptions<2>,
     epilogue: Epilogue,
+    unit: Option<Bf16Unit>,
 ) -> (Vec<f32>, [usize; 4]) {
     let [out_h, out_w] = check_shapes(x, x_dims, wt, w_dims, options);
     let [n, c, h, w] = x_dims;
@@ -171,6 +185,7 @@ pub(crate) fn im2col_conv_slices(
     let tile_pixels = (COLUMN_BUDGET / k.max(1)).max(TILE_PIXELS);
     let rows_per_tile = (tile_pixels / out_w.max(1)).clamp(1, out_h.max(1));
     let tiles_per_image = out_h.div_ceil(rows_per_tile);
+    let packed = unit.map(|unit| (unit, PackedWeights::new(wt, k, [o, k])));
 
     // One job per (image, tile of output rows) with its rows of every output plane; its O x P
     // product goes to the thread's block buffer, then into those rows with the bias and the
@@ -188,7 +203,10 @@ pub(crate) fn im2col_conv_slices(
         COLUMNS.with_borrow_mut(|[col, block]| {
             let (col, block) = (reuse_buffer(col, k * p), reuse_buffer(block, o * p));
             image_columns(col, &x[b * c * h * w..(b + 1) * c * h * w], [c, h, w], [kh, kw], options, out_w, oy0..oy1);
-            matmul_into(block, wt, k, col, [o, p, k]);
+            match &packed {
+                Some((unit, packed)) => matmul_bf16(*unit, block, p, packed, col, p, p, false),
+                None => matmul_into(block, wt, k, col, [o, p, k]),
+            }
             for (oc, dst) in planes.into_iter().enumerate() {
                 let (src, add) = (&block[oc * p..][..p], bias.map_or(0.0, |v| v[oc]));
                 match epilogue {

@@ -107,11 +107,25 @@ pub(crate) fn step(
     // With Winograd (the GRUs' sizes) the candidate's x channels are transformed once, by the
     // gates' convolution, which keeps the candidate's products over them.
     let (gates, candidate) = match algorithm {
-        GruAlgorithm::Shared(tile) => {
+        GruAlgorithm::Shared(tile) | GruAlgorithm::SharedBf16(tile, _) => {
+            let unit = match algorithm {
+                GruAlgorithm::SharedBf16(_, unit) => Some(unit),
+                _ => None,
+            };
             let weights = [&zr_weight[..], &q_weight[..]];
             let zr_bias = zr_bias.as_deref();
-            let (gates, pending) =
-                conv2d_host_shared_first(&hx, dims, weights, [2 * c, c], channels, cx, zr_bias, &zr_options, tile);
+            let (gates, pending) = conv2d_host_shared_first(
+                &hx,
+                dims,
+                weights,
+                [2 * c, c],
+                channels,
+                cx,
+                zr_bias,
+                &zr_options,
+                tile,
+                unit,
+            );
             (gates, Candidate::Pending(pending))
         }
         GruAlgorithm::Separate { gates, candidate } => {

@@ -2,6 +2,7 @@
 //! gradients of the training nodes (`crate::autodiff`). Each runs the algorithm the dispatch
 //! chose; none decides a path.
 
+pub(crate) mod all_pairs;
 pub(crate) mod columns;
 pub(crate) mod conv;
 pub(crate) mod conv_backward;

@@ -55,6 +55,7 @@
 //! the `gemm` crate's `unsafe` entry point.
 
 mod blocks;
+mod positions;
 mod simd;
 mod split;
 mod transforms;
@@ -63,14 +64,13 @@ mod weight_grad;
 
 use dgstereo_core::tensor::reuse_buffer;
 
-use crate::algorithm::WinogradTile;
-use crate::product::matmul_strided;
+use crate::algorithm::{Bf16Unit, WinogradTile};
 pub(crate) use blocks::available as blocks_available;
+use positions::Positions;
 pub(crate) use split::{Pending, first as split_first, second as split_second};
 pub(crate) use transforms::{Conv3x3, Variant, split_row, variant};
 use transforms::{Plan, transform_inputs, transform_outputs};
 pub use weight_cache::UpdateLoop;
-use weight_cache::transformed_weights;
 pub(crate) use weight_grad::{BAND_ELEMENTS as WEIGHT_GRAD_BAND_ELEMENTS, winograd_weight_grad};
 
 /// `conv` by Winograd with `tile`: F(4x4) in blocks of tiles ([`blocks`]) where the dispatch
@@ -79,16 +79,22 @@ pub(crate) use weight_grad::{BAND_ELEMENTS as WEIGHT_GRAD_BAND_ELEMENTS, winogra
 pub(crate) fn winograd_conv(tile: WinogradTile, blocks: bool, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
     match blocks::Isa::detect().filter(|_| blocks && tile == WinogradTile::F4) {
         Some(isa) => blocks::blocked_conv(isa, conv),
-        None => band_conv(variant(tile), conv),
+        None => band_conv(variant(tile), conv, None),
     }
 }
 
-/// [`winograd_conv`] in bands of whole tile rows (the module's doc).
-fn band_conv(variant: &Variant, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
+/// `conv` by Winograd with `tile` in bands, its products in bf16 with f32 sums on `unit`.
+pub(crate) fn winograd_bf16_conv(tile: WinogradTile, unit: Bf16Unit, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
+    band_conv(variant(tile), conv, Some(unit))
+}
+
+/// [`winograd_conv`] in bands of whole tile rows (the module's doc), the products in bf16 on
+/// `unit` where it is given.
+fn band_conv(variant: &Variant, conv: &Conv3x3, unit: Option<Bf16Unit>) -> (Vec<f32>, [usize; 4]) {
     let &Conv3x3 { x, x_dims, wt, o, bias, padding, epilogue } = conv;
     let c = conv.channels();
     let plan = Plan::new(variant, x_dims, padding);
-    let u = transformed_weights(variant, wt, o, c);
+    let u = Positions::new(variant, wt, [o, c], 0..c, unit);
     let k2 = plan.k2;
     plan.run(x, o, &mut vec![(); plan.jobs()], |job, image, planes, _, [v, mm, scratch]| {
         let (tile_rows, t) = (plan.tile_rows(job), plan.tiles(job));
@@ -97,7 +103,7 @@ fn band_conv(variant: &Variant, conv: &Conv3x3) -> (Vec<f32>, [usize; 4]) {
         let (v, mm) = (reuse_buffer(v, k2 * c * t), reuse_buffer(mm, k2 * o * t));
         transform_inputs(variant, v, image, plan.tiling, tile_rows.clone(), scratch);
         for k in 0..k2 {
-            matmul_strided(&mut mm[k * t..], k2 * t, &u[k * c..], k2 * c, &v[k * t..], k2 * t, [o, t, c]);
+            u.product([k, k2], &mut mm[k * t..], k2 * t, &v[k * t..], k2 * t, t, false);
         }
         transform_outputs(variant, mm, planes, bias, epilogue, plan.tiling, tile_rows.len(), scratch);
     })
@@ -115,11 +121,19 @@ mod tests {
     use crate::geometry::Epilogue;
     use dgstereo_core::tensor::to_vec;
 
+    /// The largest error of F(2x2) with bf16 products, relative to the largest sum of absolute
+    /// products: the inputs' rounding (2⁻⁹ each) grown by the transforms' coefficients (4e-4 at
+    /// the GRU's size, up to 2e-3 with few channels).
+    const BF16_F2_BOUND: f32 = 5e-3;
+    /// The same for F(4x4), whose transforms hold larger coefficients: 6e-3 at the GRU's size,
+    /// 5 % with 4 channels (why the dispatch gives bf16 products F(2x2) by default).
+    const BF16_F4_BOUND: f32 = 8e-2;
+
     /// Both variants in bands, and F(4x4) in blocks compiled for each instruction set the
     /// processor has, against burn's convolution (the reference) and the im2col path on one
     /// shape, without and with ReLU; returns each variant's largest error relative to the
     /// largest sum of absolute products (F(2x2) within 1e-5, F(4x4) within 4e-5).
-    fn case(n: usize, [c, o]: [usize; 2], [h, w]: [usize; 2], padding: [(usize, usize); 2], bias: bool) -> [f32; 2] {
+    fn case(n: usize, [c, o]: [usize; 2], [h, w]: [usize; 2], padding: [(usize, usize); 2], bias: bool) -> [f32; 4] {
         let device = Device::flex();
         let x = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
         let wt = Tensor::<4>::random([o, c, 3, 3], Distribution::Normal(0.0, 1.0 / (3.0 * c as f64).sqrt()), &device);
@@ -135,21 +149,34 @@ mod tests {
         let scale = to_vec(magnitude).iter().fold(1e-6f32, |m, v| m.max(*v));
         let (x, wt, b, expected) = (to_vec(x), to_vec(wt), b.map(to_vec), to_vec(reference));
         let shape = format!("n {n} c {c} o {o} {h}x{w} padding {padding:?} bias {bias}");
-        let mut worst = [0.0f32; 2];
+        let mut worst = [0.0f32; 4];
         for epilogue in [Epilogue::Linear, Epilogue::Relu] {
             let finish = |v: f32| if epilogue == Epilogue::Relu { v.max(0.0) } else { v };
             let conv = Conv3x3 { x: &x, x_dims: [n, c, h, w], wt: &wt, o, bias: b.as_deref(), padding, epilogue };
-            // F(2x2) and F(4x4) in bands, then F(4x4) in blocks for every instruction set here.
+            // F(2x2) and F(4x4) in bands, then F(4x4) in blocks for every instruction set here,
+            // then both in bands with bf16 products on every bf16 unit here.
             let bands = [&F2, &F4].map(|variant| {
-                let got = band_conv(variant, &conv);
-                (format!("F({}) bands", variant.m), variant.m, got)
+                let got = band_conv(variant, &conv, None);
+                (format!("F({}) bands", variant.m), variant.m, None, got)
             });
             let blocks = blocks::Isa::available().into_iter().map(|isa| {
                 let got = blocks::blocked_conv(isa, &conv);
-                (format!("F(4) blocks {isa:?}"), 4, got)
+                (format!("F(4) blocks {isa:?}"), 4, None, got)
             });
-            for (path, m, (got, got_dims)) in bands.into_iter().chain(blocks) {
-                let (worst, bound) = if m == 2 { (&mut worst[0], 1e-5) } else { (&mut worst[1], 4e-5) };
+            let units = Bf16Unit::ALL.into_iter().filter(|u| u.available());
+            let bf16 = units.flat_map(|unit| {
+                [&F2, &F4].map(|variant| {
+                    let got = band_conv(variant, &conv, Some(unit));
+                    (format!("F({}) bands {}", variant.m, unit.name()), variant.m, Some(unit), got)
+                })
+            });
+            for (path, m, unit, (got, got_dims)) in bands.into_iter().chain(blocks).chain(bf16) {
+                let (worst, bound) = match (m, unit) {
+                    (2, None) => (&mut worst[0], 1e-5),
+                    (_, None) => (&mut worst[1], 4e-5),
+                    (2, Some(_)) => (&mut worst[2], BF16_F2_BOUND),
+                    (_, Some(_)) => (&mut worst[3], BF16_F4_BOUND),
+                };
                 assert_eq!(got_dims, dims, "{shape} {path}");
                 for (g, e) in got.iter().zip(&expected) {
                     let (e, err) = (finish(*e), (g - finish(*e)).abs() / scale);
@@ -199,8 +226,9 @@ mod tests {
 
     #[test]
     fn winograd_error_at_the_gru_size_is_small() {
-        let [f2, f4] = case(1, [384, 128], [12, 14], [(1, 1), (1, 1)], true);
+        let [f2, f4, f2_bf16, f4_bf16] = case(1, [384, 128], [12, 14], [(1, 1), (1, 1)], true);
         println!("C=384, O=128, 12x14: max error F(2x2) {f2:e}, F(4x4) {f4:e} of the largest sum of |products|");
+        println!("with bf16 products: F(2x2) {f2_bf16:e}, F(4x4) {f4_bf16:e}");
         assert!(f2 <= 1e-5 && f4 <= 4e-5, "{f2} {f4}");
     }
 
@@ -255,7 +283,8 @@ mod tests {
             x2.extend_from_slice(&x1[(b * c1 + own1) * plane..][..shared * plane]);
         }
         let padding = [(1, 1), (1, 1)];
-        for variant in [&F2, &F4] {
+        let units = [None].into_iter().chain(Bf16Unit::ALL.into_iter().filter(|u| u.available()).map(Some));
+        for (variant, unit) in units.flat_map(|unit| [(&F2, unit), (&F4, unit)]) {
             let (got1, pending) = split_first(
                 variant,
                 &x1,
@@ -267,6 +296,7 @@ mod tests {
                 Some(&b1),
                 padding,
                 Epilogue::Relu,
+                unit,
             );
             let got2 = split_second(pending, &own2_values, [n, own2, h, w], Some(&b2), Epilogue::Linear);
             let conv1 = Conv3x3 {
@@ -278,7 +308,7 @@ mod tests {
                 padding,
                 epilogue: Epilogue::Relu,
             };
-            let want1 = band_conv(variant, &conv1);
+            let want1 = band_conv(variant, &conv1, unit);
             let conv2 = Conv3x3 {
                 x: &x2,
                 x_dims: [n, c2, h, w],
@@ -288,11 +318,11 @@ mod tests {
                 padding,
                 epilogue: Epilogue::Linear,
             };
-            let want2 = band_conv(variant, &conv2);
+            let want2 = band_conv(variant, &conv2, unit);
             for ((got, want), which) in [(got1, want1), (got2, want2)].into_iter().zip(["first", "second"]) {
-                assert_eq!(got.1, want.1, "F({}) {which}", variant.m);
+                assert_eq!(got.1, want.1, "F({}) {which} {unit:?}", variant.m);
                 let worst = got.0.iter().zip(&want.0).map(|(g, w)| (g - w).abs()).fold(0.0, f32::max);
-                assert!(worst < 1e-4, "F({}) {which}: {worst}", variant.m);
+                assert!(worst < 1e-4, "F({}) {which} {unit:?}: {worst}", variant.m);
             }
         }
     }

@@ -13,21 +13,22 @@
 
 use dgstereo_core::tensor::reuse_buffer;
 
+use super::positions::Positions;
 use super::transforms::*;
-use super::weight_cache::transformed_weights;
+use crate::bf16_product::Bf16Unit;
 use crate::geometry::Epilogue;
-use crate::product::{matmul_strided, matmul_strided_with};
 
 /// The second convolution's products over the shared channels, band by band, waiting for the
 /// rest of its input.
 pub(crate) struct Pending {
     variant: &'static Variant,
     plan: Plan,
-    /// The second convolution's transformed weights, `[O][α²][C]` over all its input channels.
-    u: std::sync::Arc<Vec<f32>>,
+    /// The second convolution's transformed weights over its own input channels (the first of
+    /// its input).
+    u: Positions,
     o: usize,
-    /// Input channels the second convolution has in all (its own ones first, then the shared).
-    c: usize,
+    /// The second convolution's own input channels.
+    own: usize,
     padding: [(usize, usize); 2],
     /// Per job: `[O][α²][T]`.
     sums: Vec<Vec<f32>>,
@@ -36,7 +37,7 @@ pub(crate) struct Pending {
 /// The first convolution (`wt_first`, all channels of `x`) with its bias and epilogue, and the
 /// second convolution's products over the shared channels, the last `shared` channels of `x`.
 /// The second convolution's weight `wt_second` covers `C2 = C2_own + shared` channels, its own
-/// channels first.
+/// channels first. The products are in bf16 with f32 sums on `unit` where it is given.
 ///
 /// # Shapes
 /// - `x`: `x_dims = [N, C, H, W]`; `wt_first`: `[O1, C, 3, 3]`; `wt_second`: `[O2, C2, 3, 3]`
@@ -53,13 +54,16 @@ pub(crate) fn first(
     bias: Option<&[f32]>,
     padding: [(usize, usize); 2],
     epilogue: Epilogue,
+    unit: Option<Bf16Unit>,
 ) -> ((Vec<f32>, [usize; 4]), Pending) {
     let c = x_dims[1];
     assert!(shared <= c && shared <= c2, "split winograd: {shared} shared channels of {c} and {c2}");
     assert_eq!(wt_first.len(), o1 * c * 9, "split winograd: the first weight is not [{o1}, {c}, 3, 3]");
     assert_eq!(wt_second.len(), o2 * c2 * 9, "split winograd: the second weight is not [{o2}, {c2}, 3, 3]");
     let plan = Plan::new(variant, x_dims, padding);
-    let (u1, u2) = (transformed_weights(variant, wt_first, o1, c), transformed_weights(variant, wt_second, o2, c2));
+    let own2 = c2 - shared;
+    let u1 = Positions::new(variant, wt_first, [o1, c], 0..c, unit);
+    let u2_shared = Positions::new(variant, wt_second, [o2, c2], own2..c2, unit);
     let k2 = plan.k2;
     // Every element of a job's sums is written by its first product (no accumulation), so the
     // buffers come from the calling thread's pool without being cleared.
@@ -76,16 +80,16 @@ pub(crate) fn first(
         let (tile_rows, t) = (plan.tile_rows(job), plan.tiles(job));
         let (v, mm) = (reuse_buffer(v, k2 * c * t), reuse_buffer(mm, k2 * o1 * t));
         transform_inputs(variant, v, image, plan.tiling, tile_rows.clone(), scratch);
-        let (own1, own2) = (c - shared, c2 - shared);
+        let own1 = c - shared;
         for k in 0..k2 {
-            matmul_strided(&mut mm[k * t..], k2 * t, &u1[k * c..], k2 * c, &v[k * t..], k2 * t, [o1, t, c]);
+            u1.product([k, k2], &mut mm[k * t..], k2 * t, &v[k * t..], k2 * t, t, false);
             // The shared channels are the last `shared` of both inputs.
-            let (lhs, rhs) = (&u2[k * c2 + own2..], &v[(own1 * k2 + k) * t..]);
-            matmul_strided(&mut sum[k * t..], k2 * t, lhs, k2 * c2, rhs, k2 * t, [o2, t, shared]);
+            u2_shared.product([k, k2], &mut sum[k * t..], k2 * t, &v[(own1 * k2 + k) * t..], k2 * t, t, false);
         }
         transform_outputs(variant, mm, planes, bias, epilogue, plan.tiling, tile_rows.len(), scratch);
     });
-    (out, Pending { variant, plan, u: u2, o: o2, c: c2, padding, sums })
+    let u = Positions::new(variant, wt_second, [o2, c2], 0..own2, unit);
+    (out, Pending { variant, plan, u, o: o2, own: own2, padding, sums })
 }
 
 /// The second convolution of [`first`]: its own input channels `x` (the first `C2 - shared` of
@@ -101,20 +105,19 @@ pub(crate) fn second(
     bias: Option<&[f32]>,
     epilogue: Epilogue,
 ) -> (Vec<f32>, [usize; 4]) {
-    let Pending { variant, plan: first_plan, u, o, c: c2, padding, mut sums } = pending;
+    let Pending { variant, plan: first_plan, u, o, own: c2_own, padding, mut sums } = pending;
     let own = x_dims[1];
     let plan = Plan::new(variant, x_dims, padding);
     let same = |p: &Plan| (p.n, p.out_h, p.tiling.out_w, p.tiling.h, p.tiling.w, p.bands, p.band_rows);
     assert!(same(&plan) == same(&first_plan), "split winograd: the second input's size differs from the first's");
-    assert!(own <= c2, "split winograd: {own} channels of the second convolution's {c2}");
+    assert!(own == c2_own, "split winograd: {own} channels where the second convolution has {c2_own} of its own");
     let k2 = plan.k2;
     let out = plan.run(x, o, &mut sums, |job, image, planes, sum, [v, _, scratch]| {
         let (tile_rows, t) = (plan.tile_rows(job), plan.tiles(job));
         let v = reuse_buffer(v, k2 * own * t);
         transform_inputs(variant, v, image, plan.tiling, tile_rows.clone(), scratch);
         for k in 0..k2 {
-            let (lhs, rhs) = (&u[k * c2..], &v[k * t..]);
-            matmul_strided_with(&mut sum[k * t..], k2 * t, lhs, k2 * c2, rhs, k2 * t, [o, t, own], true);
+            u.product([k, k2], &mut sum[k * t..], k2 * t, &v[k * t..], k2 * t, t, true);
         }
         transform_outputs(variant, sum, planes, bias, epilogue, plan.tiling, tile_rows.len(), scratch);
     });

@@ -16,16 +16,30 @@
 //! update loop) and empties when the last guard drops; outside the loop (the encoders, whose
 //! weights are used once per pass) nothing is kept. Within a scope the entries share a byte
 //! budget ([`BUDGET_BYTES`]), the least recently used evicted first.
+//!
+//! For products in bf16 an entry also keeps its transform packed per position of the tile
+//! ([`packed_positions`]: `α²` [`PackedWeights`] over a range of input channels, half the
+//! transform's bytes), so the weights are converted once per loop, not at every call.
 
+use std::ops::Range;
 use std::sync::{Arc, Mutex};
 
 use super::transforms::{Variant, transform_weights};
+use crate::bf16_product::{Bf16Unit, PackedWeights};
 
 /// Bytes of transformed and raw weights the process-wide cache keeps: the update loop of the
 /// default RAFT-Stereo needs ~65 MB (the GRU pairs at 1/4 and 1/8 with F(4x4) 20 MB each and
-/// their raw weights, the GRU at 1/16 and the motion encoder a few MB); with less, the loop's
-/// cyclic use of its weights would miss at every call under the LRU order.
-pub(crate) const BUDGET_BYTES: usize = 96 << 20;
+/// their raw weights, the GRU at 1/16 and the motion encoder a few MB), ~100 MB with the bf16
+/// packings beside; with less, the loop's cyclic use of its weights would miss at every call
+/// under the LRU order.
+pub(crate) const BUDGET_BYTES: usize = 160 << 20;
+
+/// The transformed weights over a range of input channels, packed in bf16 per position.
+struct Packing {
+    channels: Range<usize>,
+    unit: Bf16Unit,
+    positions: Arc<Vec<PackedWeights>>,
+}
 
 /// One transformed weight and the raw weight it came from.
 struct Entry {
@@ -33,12 +47,14 @@ struct Entry {
     o: usize,
     raw: Vec<f32>,
     u: Arc<Vec<f32>>,
+    packings: Vec<Packing>,
     last_used: u64,
 }
 
 impl Entry {
     fn bytes(&self) -> usize {
-        (self.raw.len() + self.u.len()) * size_of::<f32>()
+        let packed: usize = self.packings.iter().flat_map(|p| p.positions.iter()).map(PackedWeights::bytes).sum();
+        (self.raw.len() + self.u.len()) * size_of::<f32>() + packed
     }
 }
 
@@ -74,9 +90,44 @@ impl WeightCache {
         let u = Arc::new(transform_weights(variant, wt, o, c));
         let mut cache = cache.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         if cache.scopes > 0 {
-            cache.insert(Entry { m: variant.m, o, raw: wt.to_vec(), u: u.clone(), last_used: 0 });
+            cache.insert(Entry { m: variant.m, o, raw: wt.to_vec(), u: u.clone(), packings: Vec::new(), last_used: 0 });
         }
         u
+    }
+
+    /// [`packed_positions`] on `cache`: from the entry of these weights where it holds the
+    /// packing, else packed now from [`WeightCache::get`]'s transform and kept with its entry
+    /// where the budget allows.
+    fn get_packed(
+        cache: &Mutex<Self>,
+        variant: &Variant,
+        wt: &[f32],
+        [o, c]: [usize; 2],
+        channels: Range<usize>,
+        unit: Bf16Unit,
+    ) -> Arc<Vec<PackedWeights>> {
+        let same = |e: &Entry| e.m == variant.m && e.o == o && e.raw.len() == wt.len() && bits_equal(&e.raw, wt);
+        let kept = |e: &Entry| {
+            e.packings.iter().find(|p| p.channels == channels && p.unit == unit).map(|p| p.positions.clone())
+        };
+        if let Some(positions) =
+            cache.lock().unwrap_or_else(|p| p.into_inner()).entries.iter().find(|e| same(e)).and_then(kept)
+        {
+            return positions;
+        }
+        let u = Self::get(cache, variant, wt, o, c);
+        let k2 = (variant.m + 2) * (variant.m + 2);
+        let positions: Vec<PackedWeights> =
+            (0..k2).map(|k| PackedWeights::new(&u[k * c + channels.start..], k2 * c, [o, channels.len()])).collect();
+        let positions = Arc::new(positions);
+        let mut guard = cache.lock().unwrap_or_else(|p| p.into_inner());
+        let cache = &mut *guard;
+        let room = cache.budget.saturating_sub(cache.bytes());
+        let bytes: usize = positions.iter().map(PackedWeights::bytes).sum();
+        if let Some(entry) = cache.entries.iter_mut().find(|e| same(e)).filter(|_| bytes <= room) {
+            entry.packings.push(Packing { channels, unit, positions: positions.clone() });
+        }
+        positions
     }
 
     /// Opens a scope.
@@ -128,6 +179,21 @@ static CACHE: Mutex<WeightCache> = Mutex::new(WeightCache::new(BUDGET_BYTES));
 /// where these exact weights were transformed before in an open scope.
 pub(crate) fn transformed_weights(variant: &Variant, wt: &[f32], o: usize, c: usize) -> Arc<Vec<f32>> {
     WeightCache::get(&CACHE, variant, wt, o, c)
+}
+
+/// The transform of `wt` (`[O, C, 3, 3]`) for `variant` over input channels `channels`, packed in
+/// bf16 for `unit` per position of the tile (position `k`'s left operand `U_k`, `O x
+/// channels.len()`), from the process-wide cache where these exact weights were packed before in
+/// an open scope.
+pub(crate) fn packed_positions(
+    variant: &Variant,
+    wt: &[f32],
+    o: usize,
+    c: usize,
+    channels: Range<usize>,
+    unit: Bf16Unit,
+) -> Arc<Vec<PackedWeights>> {
+    WeightCache::get_packed(&CACHE, variant, wt, [o, c], channels, unit)
 }
 
 /// A running update loop, held by the model around its iterations: while alive, the host

@@ -2,8 +2,11 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::dispatch::{Op, Path, PlainCall, Plan, plan};
+use dgstereo_core::tensor::host_values;
+
+use crate::dispatch::{AllPairsCall, Path, Plan, plan};
 use crate::gpu::gathered_lookup::GatheredLevels;
+use crate::host::all_pairs::all_pairs_bf16;
 use crate::host::pyramid_lookup::{self, HostLevel};
 use crate::taps::{interpolate_taps, taps};
 
@@ -43,10 +46,10 @@ impl CorrelationPyramid {
         let [n, _, h, w1] = fmap1.dims();
         let [_, _, _, w2] = fmap2.dims();
         let device = fmap1.device();
-        let corr = all_pairs(fmap1, fmap2).reshape([n * h * w1, w2]);
         let rows = n * h * w1;
-        let pyramid = match plan(&device, &PlainCall(Op::Lookup)) {
+        let pyramid = match plan(&device, &AllPairsCall) {
             plan @ (Plan::Gpu(()) | Plan::HostTraining(()) | Plan::Stock) => {
+                let corr = all_pairs(fmap1, fmap2).reshape([n * h * w1, w2]);
                 let mut pyramid = vec![corr];
                 for _ in 0..levels {
                     let last = pyramid.last().expect("level 0").clone();
@@ -59,8 +62,18 @@ impl CorrelationPyramid {
                     Storage::Tensors(pyramid)
                 }
             }
-            Plan::HostInference(()) => {
-                let values = corr.into_data().convert::<f32>().try_into_vec::<f32>().expect("float correlation");
+            Plan::HostInference(unit) => {
+                let values = match unit {
+                    Some(unit) => {
+                        let _work = crate::work::operation(|| crate::work::all_pairs_macs(fmap1.dims(), fmap2.dims()));
+                        let dims = fmap1.dims();
+                        all_pairs_bf16(&host_values(fmap1), &host_values(fmap2), dims, w2, unit)
+                    }
+                    None => {
+                        let corr = all_pairs(fmap1, fmap2).reshape([n * h * w1, w2]);
+                        corr.into_data().convert::<f32>().try_into_vec::<f32>().expect("float correlation")
+                    }
+                };
                 let mut host = vec![HostLevel { values: values.into(), width: w2 }];
                 for _ in 0..levels {
                     let next = pyramid_lookup::pool_rows(host.last().expect("level 0"), rows);
