@@ -60,8 +60,8 @@ pub struct BenchArgs {
     #[arg(long)]
     pub config: Option<std::path::PathBuf>,
     /// Time these weights instead of freshly initialised ones: a dgstereo `.safetensors`, an
-    /// official RAFT-Stereo or DEFOM-Stereo `.pth` or a checkpoint's name, loaded as `infer --weights` loads it
-    /// (the architecture it carries or shows, unless `--config` gives one).
+    /// official RAFT-Stereo or DEFOM-Stereo `.pth` or a checkpoint's name, loaded as `infer
+    /// --weights` loads it (the architecture it carries or shows, unless `--config` gives one).
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
     /// Also time each stage of one forward pass (with `--train`: each stage's forward and backward, run alone).
