@@ -22,8 +22,9 @@ pub enum ExportCommand {
 /// What `export onnx` exports.
 #[derive(Args)]
 pub struct OnnxArgs {
-    /// Weights: a dgstereo `.safetensors`, an official RAFT-Stereo or DEFOM-Stereo `.pth`, or the name of an
-    /// official checkpoint (`dgstereo weights list`) (default: the project's default model).
+    /// Weights: a dgstereo `.safetensors`, an official RAFT-Stereo or DEFOM-Stereo `.pth`, or the
+    /// name of an official checkpoint (`dgstereo weights list`) (default: the project's default
+    /// model).
     #[arg(long)]
     weights: Option<PathBuf>,
     /// Experiment file whose model configuration the weights were trained with.
