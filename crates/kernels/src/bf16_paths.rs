@@ -45,23 +45,26 @@ fn conv_error(conv: &Conv2d, x: Tensor<4>) -> f32 {
 }
 
 /// Every host algorithm with bf16 products against burn's f32 convolution: Winograd F(4x4)
-/// (a shape of the blocks) and F(2x2), im2col at stride 1 and 2, 1x1 and the 7x7 stem; the
-/// few-output kernel stays f32. Asserts the dispatch chose the bf16 forms where a unit exists.
+/// and F(2x2) in bands, im2col at stride 1 and 2, 1x1 and the 7x7 stem; F(4x4) in blocks and
+/// the few-output kernel stay f32. Asserts the dispatch chose the bf16 forms where a unit exists.
 #[test]
 fn convolutions_with_bf16_products_meet_burns_f32() {
     let present = unit_present("convolutions");
     let device = Device::flex();
-    type Case = (&'static str, usize, usize, usize, [usize; 2], [usize; 2]);
-    let cases: [Case; 7] = [
-        ("winograd (F(4x4) in f32)", 3, 1, 1, [64, 64], [48, 52]),
-        ("winograd F(2x2)", 3, 1, 1, [48, 40], [16, 18]),
-        ("im2col 3x3, few channels", 3, 1, 1, [16, 24], [20, 22]),
-        ("im2col 3x3 stride 2", 3, 2, 1, [40, 48], [21, 30]),
-        ("im2col 1x1", 1, 1, 0, [36, 64], [18, 20]),
-        ("im2col 7x7 stem", 7, 2, 3, [3, 64], [40, 48]),
-        ("few outputs", 3, 1, 1, [64, 2], [20, 22]),
+    let blocks = crate::host::winograd::blocks_available();
+    // Name, kernel, stride, padding, [C, O], [H, W], whether the products take bf16.
+    type Case = (&'static str, usize, usize, usize, [usize; 2], [usize; 2], bool);
+    let cases: [Case; 8] = [
+        ("winograd F(4x4) bands", 3, 1, 1, [192, 192], [48, 52], true),
+        ("winograd F(4x4) blocks", 3, 1, 1, [64, 64], [48, 52], !blocks),
+        ("winograd F(2x2)", 3, 1, 1, [48, 40], [16, 18], true),
+        ("im2col 3x3, few channels", 3, 1, 1, [16, 24], [20, 22], true),
+        ("im2col 3x3 stride 2", 3, 2, 1, [40, 48], [21, 30], true),
+        ("im2col 1x1", 1, 1, 0, [36, 64], [18, 20], true),
+        ("im2col 7x7 stem", 7, 2, 3, [3, 64], [40, 48], true),
+        ("few outputs", 3, 1, 1, [64, 2], [20, 22], false),
     ];
-    for (name, k, stride, pad, [c, o], [h, w]) in cases {
+    for (name, k, stride, pad, [c, o], [h, w], takes_bf16) in cases {
         let conv = Conv2dConfig::new([c, o], [k, k])
             .with_stride([stride, stride])
             .with_padding(PaddingConfig2d::Explicit(pad, pad, pad, pad))
@@ -72,7 +75,7 @@ fn convolutions_with_bf16_products_meet_burns_f32() {
             ConvCall { x_dims: x.dims(), w_dims: conv.weight.dims(), options: &options, numerics: Numerics::Sensitive };
         let algorithm = with_products(ProductPrecision::Bf16, || call.inference(settings())).expect("a host algorithm");
         let bf16 = matches!(algorithm, ConvAlgorithm::Im2colBf16(_) | ConvAlgorithm::WinogradBf16 { .. });
-        assert_eq!(bf16, present && name != "few outputs", "{name}: {algorithm:?}");
+        assert_eq!(bf16, present && takes_bf16, "{name}: {algorithm:?}");
         let error = conv_error(&conv, x);
         eprintln!("{name}: {algorithm:?}, error {error:.2e} of the largest sum of |products|");
         assert!(error < BOUND, "{name}: {error}");

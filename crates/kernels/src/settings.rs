@@ -15,8 +15,9 @@
 //! - `no-winograd`, `no-winograd-blocks`: the host convolution without Winograd's algorithm, or
 //!   without its cache-resident blocks;
 //! - `bf16-winograd=off|f2|f4`: which Winograd tiles take bf16 products under
-//!   [`crate::ProductPrecision::Bf16`] (default `f2`: F(4x4) layers take F(2x2) with bf16
-//!   products; `f4`: each keeps its tile; `off`: Winograd's layers keep f32 products);
+//!   [`crate::ProductPrecision::Bf16`] (default `f4`: each layer in bands keeps its tile, the
+//!   blocks keep f32; `f2`: every Winograd layer takes F(2x2) in bands with bf16 products;
+//!   `off`: Winograd's layers keep f32 products);
 //! - `no-amx`: bf16 products ([`crate::ProductPrecision::Bf16`]) on AVX512-BF16 even where the
 //!   processor has AMX tiles (to compare the two units);
 //! - `stock-route=NAME`: one GPU formulation off ([`GpuRoute::name`]; `all` for every one).
@@ -93,10 +94,11 @@ impl GpuRoute {
 pub enum Bf16Winograd {
     /// Winograd's layers keep f32 products (`off`).
     Off,
-    /// Winograd's layers run F(2x2) with bf16 products, also where F(4x4) is chosen in f32
-    /// (`f2`): F(4x4)'s transforms grow the inputs' rounding about tenfold.
+    /// Winograd's layers run F(2x2) in bands with bf16 products, also where F(4x4) is chosen
+    /// in f32 (`f2`): F(4x4)'s transforms grow the inputs' rounding about tenfold.
     F2,
-    /// Each layer keeps its tile, with bf16 products (`f4`).
+    /// Each layer in bands keeps its tile, with bf16 products; F(4x4) in blocks keeps f32
+    /// (`f4`, the default).
     F4,
 }
 
@@ -131,7 +133,7 @@ impl Default for Settings {
             winograd: true,
             winograd_blocks: true,
             amx: true,
-            bf16_winograd: Bf16Winograd::F2,
+            bf16_winograd: Bf16Winograd::F4,
             stock_routes: Vec::new(),
         }
     }
@@ -280,10 +282,10 @@ mod tests {
         let g: Settings = "gpu-routes,stock-route=all".parse().unwrap();
         assert!(g.gpu_routes_on_cpu && !g.host_kernels);
         assert!(GpuRoute::ALL.iter().all(|&r| !g.route_enabled(r)));
-        let b: Settings = "bf16-winograd=f4,no-amx".parse().unwrap();
-        assert!(b.bf16_winograd == Bf16Winograd::F4 && !b.amx && b.host_kernels);
+        let b: Settings = "bf16-winograd=f2,no-amx".parse().unwrap();
+        assert!(b.bf16_winograd == Bf16Winograd::F2 && !b.amx && b.host_kernels);
         assert_eq!("bf16-winograd=off".parse::<Settings>().unwrap().bf16_winograd, Bf16Winograd::Off);
-        assert_eq!(Settings::default().bf16_winograd, Bf16Winograd::F2);
+        assert_eq!(Settings::default().bf16_winograd, Bf16Winograd::F4);
         let e = "bf16-winograd=f8".parse::<Settings>().unwrap_err().to_string();
         assert!(e.contains("'bf16-winograd=f8'") && e.contains("bf16-winograd=off|f2|f4"), "{e}");
         let e = "fast".parse::<Settings>().unwrap_err().to_string();

@@ -111,12 +111,19 @@ pub(crate) fn host_algorithm(
 }
 
 /// The inference algorithm of `algorithm`'s layer with its products in bf16 on `unit`: im2col
-/// tiles take bf16 products; Winograd (bands or blocks) takes them in bands with the tile the
-/// settings' `bf16-winograd` gives ([`bf16_tile`]; Winograd's transforms stay f32, only the
-/// products' inputs are rounded) or keeps f32; the few-output kernel, whose time goes to
-/// reading the input rather than to its products, stays f32.
+/// tiles take bf16 products; Winograd in bands takes them with the tile the settings'
+/// `bf16-winograd` gives ([`bf16_tile`]; Winograd's transforms stay f32, only the products'
+/// inputs are rounded) or keeps f32; F(4x4) in blocks (the layers with few channels) keeps its
+/// f32 kernel unless `bf16-winograd=f2`; the few-output kernel, whose time goes to reading the
+/// input rather than to its products, stays f32.
+///
+/// Measured on the 2-core AMD EPYC (Zen 4, AVX512-BF16, no AMX), CPU seconds of a 384x448 x 32
+/// pass on a loaded machine (docs/performance.md): f32 9.7-9.8 s; bf16 with `f4` (blocks
+/// kept f32) the least; `f2` 11.9-12.1 s (F(2x2) does 1.8x the products of F(4x4) and its
+/// transforms more, which bf16's 1.9x product rate does not repay); `off` 9.8-9.9 s.
 pub(crate) fn in_bf16(algorithm: ConvAlgorithm, unit: Bf16Unit, settings: &Settings) -> ConvAlgorithm {
     match algorithm {
+        ConvAlgorithm::Winograd { blocks: true, .. } if settings.bf16_winograd != Bf16Winograd::F2 => algorithm,
         ConvAlgorithm::Winograd { tile, .. } | ConvAlgorithm::WinogradBf16 { tile, .. } => {
             match bf16_tile(tile, settings) {
                 Some(tile) => ConvAlgorithm::WinogradBf16 { tile, unit },
@@ -129,10 +136,10 @@ pub(crate) fn in_bf16(algorithm: ConvAlgorithm, unit: Bf16Unit, settings: &Setti
 }
 
 /// The Winograd tile of a layer that takes `tile` in f32, with bf16 products: `None` (f32
-/// products) under `bf16-winograd=off`, F(2x2) under `f2` (the default: with bf16 inputs
-/// F(4x4)'s transforms err by about 6e-3 of the largest sum of absolute products at the GRU's
-/// 384 channels and by several percent at few channels, F(2x2) by 4e-4, as a direct product),
-/// `tile` under `f4`.
+/// products) under `bf16-winograd=off`, F(2x2) under `f2`, `tile` under `f4` (the default).
+/// With bf16 inputs F(4x4)'s transforms err by about 6e-3 of the largest sum of absolute
+/// products at the GRU's 384 channels (5 % at 4 channels), F(2x2) by 4e-4, as a direct product;
+/// on Cones with the bundled default every choice keeps the EPE within 0.002 px of f32's.
 fn bf16_tile(tile: WinogradTile, settings: &Settings) -> Option<WinogradTile> {
     match settings.bf16_winograd {
         Bf16Winograd::Off => None,
