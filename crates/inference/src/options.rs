@@ -122,6 +122,28 @@ impl PredictOptions {
     }
 }
 
+/// What `precision` on `device` computes in: the device's float precision and the host kernels'
+/// products. On the CPU, bf16 is f32 activations with bf16 products (f32 sums) on the
+/// processor's bf16 unit, where it has one (the products stay f32 where it has none); elsewhere
+/// the precision is the device's, with f32 products.
+pub fn split_precision(device: DeviceChoice, precision: Precision) -> (Precision, ProductPrecision) {
+    match (device, precision) {
+        (DeviceChoice::Cpu, Precision::Bf16) => (Precision::F32, ProductPrecision::Bf16),
+        _ => (precision, ProductPrecision::F32),
+    }
+}
+
+/// How the run of [`split_precision`]'s pair is named in reports: the device's precision, or
+/// `bf16 products (UNIT)` with the processor's bf16 unit (`f32 (no bf16 unit)` where it has
+/// none).
+pub fn precision_name(precision: Precision, products: ProductPrecision) -> String {
+    match (products, dgstereo_kernels::bf16_unit()) {
+        (ProductPrecision::F32, _) => precision.to_string(),
+        (ProductPrecision::Bf16, Some(unit)) => format!("bf16 products ({unit})"),
+        (ProductPrecision::Bf16, None) => "f32 (bf16 asked; the processor has no bf16 unit)".into(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -144,27 +166,5 @@ mod tests {
         }
         // An automatic lower bound does not conflict with a cap.
         assert!(PredictOptions { max_size: Some(100), ..Default::default() }.validate().is_ok());
-    }
-}
-
-/// What `precision` on `device` computes in: the device's float precision and the host kernels'
-/// products. On the CPU, bf16 is f32 activations with bf16 products (f32 sums) on the
-/// processor's bf16 unit, where it has one (the products stay f32 where it has none); elsewhere
-/// the precision is the device's, with f32 products.
-pub fn split_precision(device: DeviceChoice, precision: Precision) -> (Precision, ProductPrecision) {
-    match (device, precision) {
-        (DeviceChoice::Cpu, Precision::Bf16) => (Precision::F32, ProductPrecision::Bf16),
-        _ => (precision, ProductPrecision::F32),
-    }
-}
-
-/// How the run of [`split_precision`]'s pair is named in reports: the device's precision, or
-/// `bf16 products (UNIT)` with the processor's bf16 unit (`f32 (no bf16 unit)` where it has
-/// none).
-pub fn precision_name(precision: Precision, products: ProductPrecision) -> String {
-    match (products, dgstereo_kernels::bf16_unit()) {
-        (ProductPrecision::F32, _) => precision.to_string(),
-        (ProductPrecision::Bf16, Some(unit)) => format!("bf16 products ({unit})"),
-        (ProductPrecision::Bf16, None) => "f32 (bf16 asked; the processor has no bf16 unit)".into(),
     }
 }

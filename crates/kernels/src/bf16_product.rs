@@ -5,12 +5,12 @@
 //! path; oneDNN's bindings bring a C++ library and its build), so the two kernels are ours, each
 //! one loop over the products' depth. Both read the same two layouts:
 //! - the left operand (a layer's weight, `rows x depth`) is converted once into
-//!   [`PackedWeights`]: bf16, row-major, the depth padded to a multiple of [`DEPTH_STEP`] and the
-//!   rows to a multiple of [`ROW_STEP`] with zeros. An AMX tile loads 16 of its rows of 32 values
+//!   [`PackedWeights`]: bf16, row-major, the depth padded to a multiple of `DEPTH_STEP` and the
+//!   rows to a multiple of `ROW_STEP` with zeros. An AMX tile loads 16 of its rows of 32 values
 //!   at a time; the AVX512-BF16 kernel broadcasts one pair of a row to every lane.
 //! - the right operand (the activations' column matrix, `depth x cols` f32) is converted at each
 //!   product's input into pairs ([`pack_pairs`]): element `(k, j)` at
-//!   `((k / 2) · cols_pad + j) · 2 + k % 2`, `cols_pad` a multiple of [`COL_STEP`], padding zero.
+//!   `((k / 2) · cols_pad + j) · 2 + k % 2`, `cols_pad` a multiple of `COL_STEP`, padding zero.
 //!   A tile loads 16 pair rows of 16 columns with the row stride `cols_pad · 4` bytes; a vector
 //!   loads one pair row of 16 columns.
 //!
@@ -26,68 +26,13 @@
 #[cfg(target_arch = "x86_64")]
 mod dot;
 mod features;
+mod operands;
 #[cfg(target_arch = "x86_64")]
 mod tiles;
 
 pub(crate) use features::Bf16Unit;
-
-/// The weights' depth is padded to a multiple of this: one tile's 32 bf16 values a row.
-pub(crate) const DEPTH_STEP: usize = 32;
-/// The weights' rows are padded to a multiple of this: the tile kernel's two tiles of 16 rows.
-pub(crate) const ROW_STEP: usize = 32;
-/// The pairs' columns are padded to a multiple of this: two tiles (or vectors) of 16 columns.
-pub(crate) const COL_STEP: usize = 32;
-
-/// A `rows x depth` left operand in bf16, row-major with the padding of the module's doc.
-#[derive(Debug, Clone)]
-pub(crate) struct PackedWeights {
-    /// The operand's rows (without padding).
-    pub(crate) rows: usize,
-    /// The operand's depth (without padding).
-    pub(crate) depth: usize,
-    /// The padded depth: the row stride of `values`.
-    depth_pad: usize,
-    /// `rows_pad x depth_pad` bf16 bit patterns.
-    values: Vec<u16>,
-}
-
-impl PackedWeights {
-    /// `lhs` (`rows x depth`, row stride `stride`) rounded to bf16 and padded.
-    pub(crate) fn new(lhs: &[f32], stride: usize, [rows, depth]: [usize; 2]) -> Self {
-        assert!(depth <= stride || rows == 0, "a row of {depth} values in a stride of {stride}");
-        assert!(rows == 0 || lhs.len() >= (rows - 1) * stride + depth, "the weights end before row {rows}");
-        let depth_pad = depth.next_multiple_of(DEPTH_STEP).max(DEPTH_STEP);
-        let rows_pad = rows.next_multiple_of(ROW_STEP).max(ROW_STEP);
-        let mut values = vec![0u16; rows_pad * depth_pad];
-        for (r, row) in values.chunks_exact_mut(depth_pad).take(rows).enumerate() {
-            for (v, &x) in row.iter_mut().zip(&lhs[r * stride..][..depth]) {
-                *v = to_bf16(x);
-            }
-        }
-        Self { rows, depth, depth_pad, values }
-    }
-
-    /// The `rows x depth` operand whose element `(r, k)` is `columns[k · stride + r]` (stored
-    /// column by column: a feature map's `C x W` row read as `W x C`), rounded to bf16 and padded.
-    pub(crate) fn from_columns(columns: &[f32], stride: usize, [rows, depth]: [usize; 2]) -> Self {
-        assert!(rows <= stride || depth <= 1, "a column of {rows} values in a stride of {stride}");
-        assert!(depth == 0 || columns.len() >= (depth - 1) * stride + rows, "the columns end before column {depth}");
-        let depth_pad = depth.next_multiple_of(DEPTH_STEP).max(DEPTH_STEP);
-        let rows_pad = rows.next_multiple_of(ROW_STEP).max(ROW_STEP);
-        let mut values = vec![0u16; rows_pad * depth_pad];
-        for k in 0..depth {
-            for (r, &x) in columns[k * stride..][..rows].iter().enumerate() {
-                values[r * depth_pad + k] = to_bf16(x);
-            }
-        }
-        Self { rows, depth, depth_pad, values }
-    }
-
-    /// Bytes held.
-    pub(crate) fn bytes(&self) -> usize {
-        self.values.len() * size_of::<u16>()
-    }
-}
+use operands::Operands;
+pub(crate) use operands::{COL_STEP, PackedWeights, to_bf16};
 
 /// `dst (+)= lhs · rhs` in bf16 with f32 sums on `unit`: `dst` `lhs.rows x cols` (row stride
 /// `dst_stride`), `rhs` `lhs.depth x cols` f32 (row stride `rhs_stride`), converted into pairs
@@ -146,16 +91,6 @@ fn product(
     let _ = (operands, accumulate);
 }
 
-/// The two packed operands of one product, as the kernels read them.
-struct Operands<'a> {
-    lhs: &'a PackedWeights,
-    pairs: &'a [u16],
-    /// Columns of the product.
-    cols: usize,
-    /// The pairs' padded columns: their row stride in pairs.
-    cols_pad: usize,
-}
-
 /// Writes `rhs` (`depth x cols` f32, row stride `stride`) into `pairs` in the pair layout of the
 /// module's doc, `depth_pad / 2` pair rows of `cols_pad` columns, zeros in the padding.
 fn pack_pairs(
@@ -178,15 +113,6 @@ fn pack_pairs(
             pairs[((k / 2) * cols_pad + j) * 2 + k % 2] = to_bf16(x);
         }
     }
-}
-
-/// `x` rounded to the nearest bf16 (ties to even), as its bit pattern; NaN stays NaN.
-pub(crate) fn to_bf16(x: f32) -> u16 {
-    let bits = x.to_bits();
-    if x.is_nan() {
-        return ((bits >> 16) | 0x40) as u16;
-    }
-    ((bits + 0x7fff + ((bits >> 16) & 1)) >> 16) as u16
 }
 
 /// The f32 value of the bf16 bit pattern `b`.

@@ -9,7 +9,8 @@
 
 use std::arch::x86_64::*;
 
-use super::{COL_STEP, Operands};
+use super::features::Bf16Unit;
+use super::operands::{COL_STEP, Operands};
 
 /// Rows of sums the kernel keeps.
 const ROWS: usize = 12;
@@ -20,7 +21,7 @@ pub(super) fn pack_pairs(pairs: &mut [u16], rhs: &[f32], stride: usize, [depth, 
     assert!(cols <= cols_pad && cols_pad.is_multiple_of(COL_STEP));
     assert!(pairs.len() >= depth.div_ceil(2) * cols_pad * 2);
     assert!(depth == 0 || rhs.len() >= (depth - 1) * stride + cols);
-    assert!(super::Bf16Unit::DotProducts.available());
+    assert!(Bf16Unit::DotProducts.available());
     // SAFETY: the processor has the instructions (asserted); the asserts keep every load inside
     // `rhs` (row `k < depth`, columns below `cols` by the masks) and every store inside `pairs`.
     unsafe { pack_pairs_avx512(pairs, rhs, stride, [depth, cols], cols_pad) }
@@ -59,7 +60,7 @@ pub(super) fn product(dst: &mut [f32], dst_stride: usize, operands: &Operands, a
     let rows = lhs.rows;
     assert!(pairs.len() >= lhs.depth_pad * cols_pad && lhs.values.len() >= rows * lhs.depth_pad);
     assert!(rows == 0 || cols == 0 || dst.len() >= (rows - 1) * dst_stride + cols);
-    assert!(super::Bf16Unit::DotProducts.available());
+    assert!(Bf16Unit::DotProducts.available());
     for j in (0..cols).step_by(COL_STEP) {
         let width = (cols - j).min(COL_STEP);
         for r in (0..rows).step_by(ROWS) {

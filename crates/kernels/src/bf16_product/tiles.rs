@@ -11,7 +11,8 @@
 
 use std::arch::asm;
 
-use super::{COL_STEP, DEPTH_STEP, Operands, ROW_STEP};
+use super::features::Bf16Unit;
+use super::operands::{COL_STEP, DEPTH_STEP, Operands, ROW_STEP};
 
 /// The 64-byte tile configuration `ldtilecfg` reads (palette 1).
 #[repr(C, align(64))]
@@ -39,7 +40,7 @@ pub(super) fn product(dst: &mut [f32], dst_stride: usize, operands: &Operands, a
     assert!(pairs.len() >= lhs.depth_pad * cols_pad && lhs.values.len() >= rows_pad * lhs.depth_pad);
     assert!(lhs.depth_pad.is_multiple_of(DEPTH_STEP) && cols_pad.is_multiple_of(COL_STEP));
     assert!(rows == 0 || cols == 0 || dst.len() >= (rows - 1) * dst_stride + cols);
-    assert!(super::Bf16Unit::Tiles.available(), "the process may not use the AMX tiles");
+    assert!(Bf16Unit::Tiles.available(), "the process may not use the AMX tiles");
     let config = TileConfig {
         palette: 1,
         start_row: 0,

@@ -126,7 +126,7 @@ pub(crate) fn step(
                 tile,
                 unit,
             );
-            (gates, Candidate::Pending(pending))
+            (gates, Candidate::Pending(Box::new(pending)))
         }
         GruAlgorithm::Separate { gates, candidate } => {
             let zr_dims = [2 * c, channels, kh, kw];
@@ -157,7 +157,7 @@ pub(crate) fn step(
                 let ((g, k), h) = (reset(i), &hv[i * plane..][..plane]);
                 h.iter().zip(g).zip(k).map(|((h, g), k)| h * sigmoid(g + k))
             });
-            conv2d_host_shared_second(pending, &rh, [n, c, hh, ww], q_bias.as_deref()).0
+            conv2d_host_shared_second(*pending, &rh, [n, c, hh, ww], q_bias.as_deref()).0
         }
         Candidate::Own(algorithm) => {
             hx.par_chunks_mut(plane).enumerate().filter(|(i, _)| i % channels < c).for_each(|(i, dst)| {
@@ -185,7 +185,7 @@ pub(crate) fn step(
 /// The candidate's convolution: its products over the shared `x` channels already taken, or its
 /// own algorithm over the whole `[r·h, x]`.
 enum Candidate {
-    Pending(PendingConv),
+    Pending(Box<PendingConv>),
     Own(ConvAlgorithm),
 }
 
