@@ -167,4 +167,16 @@ mod tests {
         // An automatic lower bound does not conflict with a cap.
         assert!(PredictOptions { max_size: Some(100), ..Default::default() }.validate().is_ok());
     }
+
+    /// bf16 on the CPU is f32 activations with bf16 products; elsewhere the device's precision.
+    #[test]
+    fn bf16_on_the_cpu_means_bf16_products() {
+        use dgstereo_kernels::ProductPrecision::{Bf16, F32};
+        assert_eq!(split_precision(DeviceChoice::Cpu, Precision::Bf16), (Precision::F32, Bf16));
+        assert_eq!(split_precision(DeviceChoice::Cpu, Precision::F16), (Precision::F16, F32));
+        assert_eq!(split_precision(DeviceChoice::Gpu, Precision::Bf16), (Precision::Bf16, F32));
+        assert_eq!(precision_name(Precision::F32, F32), "f32");
+        let name = precision_name(Precision::F32, Bf16);
+        assert!(name.starts_with("bf16 products (") || name.starts_with("f32 (bf16 asked"), "{name}");
+    }
 }
