@@ -70,3 +70,28 @@ pub(crate) enum GruAlgorithm {
         candidate: ConvAlgorithm,
     },
 }
+
+/// How the GPU's matrix product builds its column matrix.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) enum GpuColumns {
+    /// One `select` of precomputed indices from the input with a zero column appended; rows
+    /// `(c, ky, kx)`; any stride.
+    Gathered,
+    /// The input padded, its `kh·kw` shifted windows sliced and concatenated; rows `(ky, kx, c)`;
+    /// stride 1 only.
+    Windows,
+}
+
+/// How the GPU's matrix product carries out one convolution (or the ConvGRU step's two, over
+/// shared columns): the column matrix, whether the product comes before the shift (few outputs
+/// from many inputs) and whether the bias and the element-wise work after the convolution are
+/// issued on the product's shape, so that burn's fusion takes them into its epilogue.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) struct GpuConvForm {
+    /// How the column matrix is built.
+    pub(crate) columns: GpuColumns,
+    /// The product of the weight with the input as it lies, then the shifted planes summed.
+    pub(crate) product_first: bool,
+    /// The bias reshaped before the product where work follows the convolution.
+    pub(crate) fused_epilogue: bool,
+}

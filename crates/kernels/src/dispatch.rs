@@ -21,6 +21,7 @@ use crate::settings::{GpuRoute, Settings, settings};
 
 mod calls;
 mod conv;
+mod product_forms;
 
 pub(crate) use calls::{ADD_RELU, AllPairsCall, DeformCall, NodeCall, NormCall, NormKind, PlainCall, RECTIFY};
 pub(crate) use conv::{ConvCall, GruStepCall, host_algorithm};

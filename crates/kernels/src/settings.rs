@@ -82,11 +82,6 @@ impl GpuRoute {
             Self::SharedColumns => "shared-columns",
         }
     }
-
-    /// Whether the process's settings leave the route on.
-    pub fn enabled(self) -> bool {
-        settings().route_enabled(self)
-    }
 }
 
 /// Which Winograd tiles take bf16 products (`bf16-winograd=`).

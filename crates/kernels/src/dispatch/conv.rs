@@ -14,11 +14,12 @@ use burn::tensor::Device;
 use burn::tensor::ops::ConvOptions;
 
 use super::calls::conv_on_gpu;
+use super::product_forms::{few_outputs, gpu_conv_form, shared_columns_form};
 use super::{Call, Numerics, Op, products_unit};
-use crate::algorithm::{Bf16Unit, ConvAlgorithm, ConvTraining, GruAlgorithm, WinogradTile};
+use crate::algorithm::{Bf16Unit, ConvAlgorithm, ConvTraining, GpuConvForm, GruAlgorithm, WinogradTile};
 use crate::geometry::{conv_options, conv_output_size};
 use crate::host::winograd::blocks_available;
-use crate::settings::{Bf16Winograd, GpuRoute, Settings};
+use crate::settings::{Bf16Winograd, Settings};
 
 /// Fewest input and output channels for which Winograd pays against im2col tiles.
 const WINOGRAD_MIN_CHANNELS: usize = 32;
@@ -36,12 +37,6 @@ pub(crate) const WINOGRAD_MIN_F4_TILES: usize = 128;
 /// GRUs' 384->128, where the `gemm` crate's products over hundreds of tiles per read of the
 /// weights win.
 const BLOCKS_MAX_CHANNEL_PRODUCT: usize = 128 * 256;
-
-/// Most output channels for the few-output kernel (with a 3x3 kernel its product has 9·O rows).
-const FEW_OUTPUTS_MAX: usize = 4;
-
-/// Fewest input channels for which the few-output kernel pays: below, the column matrix is small.
-const FEW_OUTPUTS_MIN_CHANNELS: usize = 32;
 
 /// Fewest input channels for which training takes the node with our backward. The stems (3
 /// input channels, a 7x7 kernel at stride 2, each followed by an instance or batch norm) keep
@@ -80,8 +75,8 @@ pub(crate) fn winograd_tile(x_dims: [usize; 4], w_dims: [usize; 4], options: &Co
 /// The host convolution's algorithm for one group: Winograd where `winograd` allows it, the
 /// settings leave it on and the shape suits it ([`winograd_tile`]; F(4x4) in blocks where the
 /// processor has AVX-512, the settings leave them on and `C·O` is at most
-/// [`BLOCKS_MAX_CHANNEL_PRODUCT`]); else the few-output kernel for stride 1 with at most
-/// [`FEW_OUTPUTS_MAX`] outputs from [`FEW_OUTPUTS_MIN_CHANNELS`] inputs; else im2col tiles.
+/// [`BLOCKS_MAX_CHANNEL_PRODUCT`]); else the few-output kernel where it suits ([`few_outputs`]);
+/// else im2col tiles.
 pub(crate) fn host_algorithm(
     x_dims: [usize; 4],
     w_dims: [usize; 4],
@@ -99,13 +94,7 @@ pub(crate) fn host_algorithm(
                 && blocks_available();
             ConvAlgorithm::Winograd { tile, blocks }
         }
-        None if options.stride == [1, 1]
-            && options.groups == 1
-            && o <= FEW_OUTPUTS_MAX
-            && c >= FEW_OUTPUTS_MIN_CHANNELS =>
-        {
-            ConvAlgorithm::FewOutputs
-        }
+        None if few_outputs(options, o, c) => ConvAlgorithm::FewOutputs,
         None => ConvAlgorithm::Im2col,
     }
 }
@@ -165,7 +154,7 @@ pub(crate) struct ConvCall<'a> {
 impl Call for ConvCall<'_> {
     type Inference = ConvAlgorithm;
     type Training = ConvTraining;
-    type Gpu = ();
+    type Gpu = GpuConvForm;
 
     fn op(&self) -> Op {
         Op::Conv
@@ -191,9 +180,9 @@ impl Call for ConvCall<'_> {
             .then(|| training_algorithms(self.x_dims, self.w_dims, self.options, self.numerics, settings))
     }
 
-    fn gpu(&self, settings: &Settings, _: &Device) -> Option<()> {
-        let [_, _, kh, kw] = self.w_dims;
-        suits_product(self.options, [kh, kw], settings).then_some(())
+    /// The GPU's product and its form ([`gpu_conv_form`]).
+    fn gpu(&self, settings: &Settings, _: &Device) -> Option<GpuConvForm> {
+        gpu_conv_form(self.x_dims, self.w_dims, self.options, settings)
     }
 }
 
@@ -219,23 +208,6 @@ pub(crate) fn training_algorithms(
     });
     let weight_grad = winograd_tile(x_dims, w_dims, options).filter(|_| settings.winograd);
     ConvTraining { forward, input_grad, weight_grad }
-}
-
-/// Whether a convolution with `options` and a `kh x kw` kernel takes the GPU's matrix product:
-/// groups 1, and either stride 1 with a kernel larger than 1x1, or, with the gathered columns,
-/// any stride ([`GpuRoute::StridedProducts`]), or an unpadded 1x1 at stride 1 when the
-/// element-wise work after it joins the product's kernel ([`GpuRoute::FusedEpilogue`]; burn runs
-/// those as a product already, with the bias in a kernel of its own).
-pub(crate) fn suits_product(options: &ConvOptions<2>, kernel: [usize; 2], settings: &Settings) -> bool {
-    let strided =
-        settings.route_enabled(GpuRoute::GatheredColumns) && settings.route_enabled(GpuRoute::StridedProducts);
-    let pointwise = kernel == [1, 1] && options.stride == [1, 1] && options.padding == [(0, 0), (0, 0)];
-    options.groups == 1
-        && if options.stride == [1, 1] {
-            kernel != [1, 1] || (settings.route_enabled(GpuRoute::FusedEpilogue) && pointwise)
-        } else {
-            strided
-        }
 }
 
 /// One ConvGRU step: its three convolutions, the state's dimensions and the inputs' channels.
@@ -280,7 +252,7 @@ impl GruStepCall {
 impl Call for GruStepCall {
     type Inference = GruAlgorithm;
     type Training = ();
-    type Gpu = ();
+    type Gpu = GpuConvForm;
 
     fn op(&self) -> Op {
         Op::GruStep
@@ -322,14 +294,11 @@ impl Call for GruStepCall {
         Some(())
     }
 
-    /// The shared columns where the convolutions take the GPU's product with gathered columns
-    /// and the candidate's convolution has the gates' geometry.
-    fn gpu(&self, settings: &Settings, device: &Device) -> Option<()> {
-        (settings.route_enabled(GpuRoute::GatheredColumns)
-            && conv_on_gpu(device)
-            && suits_product(&self.gates, self.kernels[0], settings)
-            && self.options[2].as_ref() == Some(&self.gates))
-        .then_some(())
+    /// The shared columns where the convolutions take the GPU's product
+    /// ([`shared_columns_form`]).
+    fn gpu(&self, settings: &Settings, device: &Device) -> Option<GpuConvForm> {
+        let candidate_fits = self.options[2].as_ref() == Some(&self.gates);
+        shared_columns_form(&self.gates, self.kernels[0], settings).filter(|_| conv_on_gpu(device) && candidate_fits)
     }
 }
 
@@ -477,19 +446,5 @@ mod tests {
         assert_eq!(call.inference(&off), Some(im2col));
         let grouped = Conv2dConfig::new([hidden + input, hidden], [3, 3]).with_groups(2).init(&device);
         assert_eq!(GruStepCall::new([&grouped, &r, &q], [1, hidden, 96, 112], input).inference(&s), None);
-    }
-
-    /// The GPU's product takes stride-1 kernels larger than 1x1, strided ones through the
-    /// gathered columns, and unpadded 1x1s only with the fused epilogue.
-    #[test]
-    fn gpu_products_take_their_shapes() {
-        let s = Settings::default();
-        assert!(suits_product(&options(1, 1, 1), [3, 3], &s));
-        assert!(suits_product(&options(2, 1, 1), [3, 3], &s));
-        assert!(suits_product(&options(1, 0, 1), [1, 1], &s));
-        assert!(!suits_product(&options(1, 1, 1), [1, 1], &s), "a padded 1x1");
-        let off: Settings = "stock-route=strided,stock-route=epilogue".parse().expect("settings");
-        assert!(!suits_product(&options(2, 1, 1), [3, 3], &off));
-        assert!(!suits_product(&options(1, 0, 1), [1, 1], &off));
     }
 }

@@ -16,7 +16,7 @@
 //! the tests check both agree, gradients included.
 //!
 //! The column matrix is gathered in one `select` from the input with a zero column appended
-//! (`Columns::Gathered`): the shifted windows sliced one by one (`Columns::Windows`) cost a
+//! (`GpuColumns::Gathered`): the shifted windows sliced one by one (`GpuColumns::Windows`) cost a
 //! copy kernel each on wgpu (a window that starts off the 64-byte alignment of a binding offset is
 //! no view), ten kernels a 3x3 convolution and fifty for the motion encoder's 7x7, every
 //! iteration. The gathered rows are ordered `(c, ky, kx)`, the weight's own layout, so the weight
@@ -42,29 +42,18 @@ use burn::tensor::ops::{ConvOptions, PadMode};
 use columns::window_indices;
 use columns::{EpilogueBias, WindowShape, epilogue_bias, finish, gathered_columns};
 
+use crate::algorithm::{GpuColumns, GpuConvForm};
 use crate::geometry::conv_output_size;
-use crate::settings::GpuRoute;
 
 /// An unpadded 1x1 convolution at stride 1: a product with the input as it lies.
 fn is_pointwise(options: &ConvOptions<2>, kernel: [usize; 2]) -> bool {
     kernel == [1, 1] && options.stride == [1, 1] && options.padding == [(0, 0), (0, 0)]
 }
 
-/// How the column matrix of [`conv2d_by_matmul`] is built.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Columns {
-    /// One `select` of precomputed indices from the input with a zero column appended; rows
-    /// `(c, ky, kx)`; any stride.
-    Gathered,
-    /// The input padded, its `kh·kw` shifted windows sliced and concatenated; rows `(ky, kx, c)`;
-    /// stride 1 only.
-    Windows,
-}
-
 /// `conv2d(x, weight, bias, options)` for groups 1 as one matrix product over the input's
-/// shifted windows (explicit im2col from burn's operations), the columns gathered unless
-/// the kernel settings name `stock-route=im2col`; with at most 4 outputs from at least 32 inputs
-/// the product comes first and the shift after (`few_outputs`) unless they name `few-outputs`.
+/// shifted windows (explicit im2col from burn's operations) in the `form` the dispatch chose:
+/// the columns gathered or from the windows, or the product first and the shift after
+/// (`few_outputs`).
 ///
 /// # Shapes
 /// - `x`: `[N, C, H, W]`; `weight`: `[O, C, kh, kw]`; `bias`: `[O]`
@@ -79,8 +68,10 @@ pub(crate) fn conv2d_by_matmul(
     weight: Tensor<4>,
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
+    form: GpuConvForm,
 ) -> Tensor<4> {
-    by_matmul(x, weight, bias, options, false, |out| out)
+    // Nothing follows the product, so there is no epilogue to fuse the bias into.
+    by_matmul(x, weight, bias, options, GpuConvForm { fused_epilogue: false, ..form }, |out| out)
 }
 
 /// [`conv2d_by_matmul`] followed by `then`, element-wise work on the output as the product
@@ -88,9 +79,10 @@ pub(crate) fn conv2d_by_matmul(
 /// every operand prepared before the product, so burn's fusion takes them into the product's
 /// epilogue (run inside the product's kernel or as one fused kernel after it, as its autotune
 /// picks): it takes element-wise operations of the product's shape and stops at the first
-/// operation of another shape (the bias reshaped after the product was one, which left
-/// every bias add and activation of the update loop in kernels of their own). With
-/// ``stock-route=epilogue`` the old order returns, for comparison.
+/// operation of another shape (the bias reshaped after the product is one, which leaves
+/// every bias add and activation of the update loop in kernels of their own). Where the form
+/// has no fused epilogue (``stock-route=epilogue``) the bias is added after the product, for
+/// comparison.
 ///
 /// # Shapes
 /// - as [`conv2d_by_matmul`]; `then` maps `[N, O, H_out·W_out]` to the same shape
@@ -99,27 +91,27 @@ pub(crate) fn conv2d_by_matmul_then(
     weight: Tensor<4>,
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
+    form: GpuConvForm,
     then: impl FnOnce(Tensor<3>) -> Tensor<3>,
 ) -> Tensor<4> {
-    by_matmul(x, weight, bias, options, GpuRoute::FusedEpilogue.enabled(), then)
+    by_matmul(x, weight, bias, options, form, then)
 }
 
-/// [`conv2d_by_matmul_then`] with the bias reshaped before the product where `fused` (see
-/// [`epilogue_bias`]).
+/// [`conv2d_by_matmul_then`] in `form`, the bias reshaped before the product where the form
+/// fuses the epilogue (see [`epilogue_bias`]).
 fn by_matmul(
     x: Tensor<4>,
     weight: Tensor<4>,
     bias: Option<Tensor<1>>,
     options: &ConvOptions<2>,
-    fused: bool,
+    form: GpuConvForm,
     then: impl FnOnce(Tensor<3>) -> Tensor<3>,
 ) -> Tensor<4> {
-    let ([o, c, ..], columns) = (weight.dims(), GpuRoute::GatheredColumns.enabled());
-    let bias = epilogue_bias(bias, o, fused);
-    if columns && GpuRoute::FewOutputs.enabled() && few_outputs::suits(options, o, c) {
+    let bias = epilogue_bias(bias, weight.dims()[0], form.fused_epilogue);
+    if form.product_first {
         return few_outputs::conv2d_product_first(x, weight, bias, options, then);
     }
-    conv2d_by_matmul_with(x, weight, bias, options, if columns { Columns::Gathered } else { Columns::Windows }, then)
+    conv2d_by_matmul_with(x, weight, bias, options, form.columns, then)
 }
 
 /// [`conv2d_by_matmul_then`] with the column matrix built as `columns` says (an unpadded 1x1 at
@@ -129,7 +121,7 @@ fn conv2d_by_matmul_with(
     weight: Tensor<4>,
     bias: Option<EpilogueBias>,
     options: &ConvOptions<2>,
-    columns: Columns,
+    columns: GpuColumns,
     then: impl FnOnce(Tensor<3>) -> Tensor<3>,
 ) -> Tensor<4> {
     assert!(options.groups == 1, "conv2d_by_matmul: groups 1 only");
@@ -141,10 +133,10 @@ fn conv2d_by_matmul_with(
     let k = kh * kw * c;
     let (columns, weight) = match columns {
         _ if is_pointwise(options, [kh, kw]) => (x.reshape([n, c, h * w]), weight.reshape([1, o, k])),
-        Columns::Gathered => {
+        GpuColumns::Gathered => {
             (gathered_columns(x, WindowShape::new([h, w], [kh, kw], options)), weight.reshape([1, o, k]))
         }
-        Columns::Windows => {
+        GpuColumns::Windows => {
             assert!(options.stride == [1, 1], "conv2d_by_matmul: the windows take stride 1 only");
             let [(top, bottom), (left, right)] = options.padding;
             let [dh, dw] = options.dilation;
@@ -190,7 +182,7 @@ mod tests {
         [h, w]: [usize; 2],
         k: [usize; 2],
         opts: ConvOptions<2>,
-        columns: Columns,
+        columns: GpuColumns,
     ) -> f32 {
         let device = Device::flex();
         let x = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
@@ -206,7 +198,7 @@ mod tests {
     #[test]
     fn the_matmul_convolution_agrees_with_burn() {
         let same = [(1, 1), (1, 1)];
-        for columns in [Columns::Gathered, Columns::Windows] {
+        for columns in [GpuColumns::Gathered, GpuColumns::Windows] {
             for (n, co, hw, k, opts) in [
                 (1, [16, 24], [9, 13], [3, 3], options(same, 1)),
                 (2, [5, 7], [6, 5], [3, 3], options(same, 1)),
@@ -236,7 +228,7 @@ mod tests {
             (1, [4, 3], [8, 11], [3, 3], strided([1, 3], [(2, 0), (1, 2)])),  // a stride per axis
             (1, [4, 3], [13, 11], [3, 3], ConvOptions::new_with_padding([2, 2], same, [2, 2], 1)),
         ] {
-            let err = relative_error(n, co, hw, k, opts, Columns::Gathered);
+            let err = relative_error(n, co, hw, k, opts, GpuColumns::Gathered);
             assert!(err < 1e-5, "n {n} {co:?} {hw:?} {k:?}: {err}");
         }
     }
@@ -259,7 +251,7 @@ mod tests {
     fn the_matmul_convolution_has_the_gradients_of_burns() {
         let device = Device::flex().autodiff();
         let opts = options([(1, 1), (1, 1)], 1);
-        for columns in [Columns::Gathered, Columns::Windows] {
+        for columns in [GpuColumns::Gathered, GpuColumns::Windows] {
             let x = Tensor::<4>::random([2, 4, 6, 7], Distribution::Normal(0.0, 1.0), &device).require_grad();
             let wt = Tensor::<4>::random([5, 4, 3, 3], Distribution::Normal(0.0, 0.3), &device).require_grad();
             let b = Tensor::<1>::random([5], Distribution::Normal(0.0, 1.0), &device).require_grad();
@@ -300,10 +292,10 @@ mod tests {
         let device = Device::flex();
         let same = options([(1, 1), (1, 1)], 1);
         for (n, [c, o], [kh, kw], opts, columns) in [
-            (1, [8, 6], [3, 3], same.clone(), Columns::Gathered),
-            (2, [8, 6], [3, 3], same.clone(), Columns::Windows),
-            (2, [8, 6], [1, 1], options([(0, 0), (0, 0)], 1), Columns::Gathered),
-            (1, [40, 2], [3, 3], same, Columns::Gathered), // few outputs
+            (1, [8, 6], [3, 3], same.clone(), GpuColumns::Gathered),
+            (2, [8, 6], [3, 3], same.clone(), GpuColumns::Windows),
+            (2, [8, 6], [1, 1], options([(0, 0), (0, 0)], 1), GpuColumns::Gathered),
+            (1, [40, 2], [3, 3], same, GpuColumns::Gathered), // few outputs
         ] {
             let [h, w] = [5, 7];
             let x = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);

@@ -49,10 +49,10 @@ fn convolve<F: FnOnce(Tensor<3>) -> Tensor<3>>(
             after => finish(conv2d_host(x, weight, bias, &options, algorithm, Epilogue::Linear), after),
         },
         Plan::HostTraining(algorithms) => finish(autodiff::conv::conv2d(x, weight, bias, options, algorithms), after),
-        Plan::Gpu(()) => match after {
-            After::Nothing => conv2d_by_matmul(x, weight, bias, &options),
-            After::Relu => conv2d_by_matmul_then(x, weight, bias, &options, rectify),
-            After::Then(then) => conv2d_by_matmul_then(x, weight, bias, &options, then),
+        Plan::Gpu(form) => match after {
+            After::Nothing => conv2d_by_matmul(x, weight, bias, &options, form),
+            After::Relu => conv2d_by_matmul_then(x, weight, bias, &options, form, rectify),
+            After::Then(then) => conv2d_by_matmul_then(x, weight, bias, &options, form, then),
         },
         Plan::Stock => finish(conv2d(x, weight, bias, options), after),
     }

@@ -15,6 +15,7 @@ use burn::nn::conv::Conv2d;
 use burn::tensor::Tensor;
 use burn::tensor::activation::{sigmoid, tanh};
 
+use crate::algorithm::GpuConvForm;
 use crate::autodiff;
 use crate::dispatch::{GruStepCall, NodeCall, Numerics, Op, Plan, plan};
 use crate::gpu::matmul_conv::SharedColumns;
@@ -41,22 +42,22 @@ pub fn conv_gru_step(
     match plan(&h.device(), &call) {
         Plan::HostInference(algorithm) => match gru::step(convs, h.clone(), contexts, inputs, algorithm) {
             Some(next) => next,
-            None => tensor_step(convs, h, contexts, inputs, numerics, false),
+            None => tensor_step(convs, h, contexts, inputs, numerics, None),
         },
-        Plan::Gpu(()) => tensor_step(convs, h, contexts, inputs, numerics, true),
-        Plan::HostTraining(()) | Plan::Stock => tensor_step(convs, h, contexts, inputs, numerics, false),
+        Plan::Gpu(form) => tensor_step(convs, h, contexts, inputs, numerics, Some(form)),
+        Plan::HostTraining(()) | Plan::Stock => tensor_step(convs, h, contexts, inputs, numerics, None),
     }
 }
 
 /// The step in tensor operations (the reference, and the training path); on the GPU with the
-/// inputs' columns gathered once for both convolutions where `shared_columns`.
+/// inputs' columns gathered once for both convolutions in the dispatch's `shared_columns` form.
 fn tensor_step(
     [convz, convr, convq]: [&Conv2d; 3],
     h: Tensor<4>,
     [zr_ctx, q_ctx]: [&Tensor<4>; 2],
     inputs: &[Tensor<4>],
     numerics: Numerics,
-    shared_columns: bool,
+    shared_columns: Option<GpuConvForm>,
 ) -> Tensor<4> {
     let hidden = h.dims()[1];
     // `[h, x]` and `[r·h, x]` each as one concatenation of all parts (no `x` of its own: one
@@ -66,10 +67,10 @@ fn tensor_step(
     // `[N, C, H·W]` with their operands flattened before it (GPU inference runs them in the
     // product's kernel).
     let gate_options = GruStepCall::gate_options(convz);
-    let shared = (shared_columns && !inputs.is_empty()).then(|| {
+    let shared = shared_columns.filter(|_| !inputs.is_empty()).map(|form| {
         let [_, _, kh, kw] = convz.weight.dims();
         let x = if inputs.len() == 1 { inputs[0].clone() } else { Tensor::cat(inputs.to_vec(), 1) };
-        SharedColumns::gather(x, [kh, kw], &gate_options)
+        SharedColumns::gather(x, [kh, kw], &gate_options, form)
     });
     let zr_context = flat_pixels(zr_ctx.clone());
     let gates = |zr: Tensor<3>| gru_gates(zr, zr_context);
@@ -161,4 +162,49 @@ mod tests {
             assert!(max_abs_diff(a, b) < 2e-6, "output or gradient {i}");
         }
     }
+
+    crate::test_paths!(
+        /// The step on every path against its definition in burn's operations: a state whose
+        /// convolutions take Winograd's shared transforms on the host (32 channels, 12x18), one
+        /// that takes im2col (4 channels), two inputs and a batch of two.
+        fn the_step_follows_its_definition(path) {
+            use burn::nn::PaddingConfig2d;
+            use burn::nn::conv::Conv2dConfig;
+            use burn::tensor::module::conv2d;
+
+            let device = Device::flex();
+            for (n, hidden, input_channels, [h, w]) in [(1, 32, [16, 24], [12, 18]), (2, 4, [3, 5], [5, 7])] {
+                let inputs_total: usize = input_channels.iter().sum();
+                // Each call initialises its own random weights and biases.
+                let conv = || {
+                    Conv2dConfig::new([hidden + inputs_total, hidden], [3, 3])
+                        .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+                        .init(&device)
+                };
+                let (convz, convr, convq) = (conv(), conv(), conv());
+                let normal = |shape: [usize; 4]| Tensor::<4>::random(shape, Distribution::Normal(0.0, 1.0), &device);
+                let state = normal([n, hidden, h, w]);
+                let inputs: Vec<Tensor<4>> = input_channels.iter().map(|&c| normal([n, c, h, w])).collect();
+                let (zr_ctx, q_ctx) = (normal([n, 2 * hidden, h, w]), normal([n, hidden, h, w]));
+                let got = conv_gru_step(
+                    [&convz, &convr, &convq],
+                    state.clone(),
+                    [&zr_ctx, &q_ctx],
+                    &inputs,
+                    Numerics::Sensitive,
+                );
+                let options = GruStepCall::gate_options(&convz);
+                let plain = |conv: &Conv2d, x: Tensor<4>| {
+                    conv2d(x, conv.weight.val(), conv.bias.as_ref().map(|b| b.val()), options.clone())
+                };
+                let with_inputs = |first: Tensor<4>| Tensor::cat([first].into_iter().chain(inputs.clone()).collect(), 1);
+                let z = sigmoid(plain(&convz, with_inputs(state.clone())) + zr_ctx.clone().narrow(1, 0, hidden));
+                let r = sigmoid(plain(&convr, with_inputs(state.clone())) + zr_ctx.narrow(1, hidden, hidden));
+                let q = tanh(plain(&convq, with_inputs(r * state.clone())) + q_ctx);
+                let want = (z.clone().neg().add_scalar(1.0)) * state + z * q;
+                let err = max_abs_diff(got, want);
+                assert!(err < 2e-5, "{path:?} n {n} hidden {hidden}: {err}");
+            }
+        }
+    );
 }

@@ -6,23 +6,14 @@
 //! `Z = W' X` with `W'` the `O·kh·kw x C` weight and `X` the input as it lies, gives `O·kh·kw`
 //! planes of the input's size; the output sums their `kh·kw` shifted copies, gathered by the same
 //! window indices as the columns (`H·W` pointing at an appended zero). The input is read once and
-//! nothing of its size is written: the CPU's `host_few_outputs` in burn's operations.
+//! nothing of its size is written: the CPU's `host_few_outputs` in burn's operations. The
+//! dispatch decides which convolutions take it (`crate::dispatch`'s few-output rule).
 
 use burn::tensor::Tensor;
 use burn::tensor::ops::ConvOptions;
 
 use super::columns::{EpilogueBias, WindowShape, finish, window_indices};
 use crate::geometry::conv_output_size;
-
-/// The most output channels that take the product first.
-const MAX_OUTPUTS: usize = 4;
-/// The fewest input channels that do (below, the column matrix is small anyway).
-const MIN_INPUTS: usize = 32;
-
-/// Whether a convolution with `o` outputs and `c` inputs takes [`conv2d_product_first`].
-pub(super) fn suits(options: &ConvOptions<2>, o: usize, c: usize) -> bool {
-    options.stride == [1, 1] && options.groups == 1 && o <= MAX_OUTPUTS && c >= MIN_INPUTS
-}
 
 /// `conv2d(x, weight, bias, options)` (stride 1, groups 1) as the product of the weight with
 /// the input, then the sum of the product's shifted planes, then `then` on `[N, O, H_out·W_out]`
@@ -83,7 +74,6 @@ mod tests {
             let x = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
             let wt = Tensor::<4>::random([o, c, kh, kw], Distribution::Normal(0.0, 0.3), &device);
             let b = Tensor::<1>::random([o], Distribution::Normal(0.0, 1.0), &device);
-            assert!(suits(&options, o, c));
             let reference = conv2d(x.clone(), wt.clone(), Some(b.clone()), options.clone());
             let scale = reference.clone().abs().max().into_scalar::<f32>();
             let bias = super::super::columns::epilogue_bias(Some(b), o, true);
@@ -92,15 +82,5 @@ mod tests {
             let err = max_abs_diff(got, reference) / scale;
             assert!(err < 1e-5, "n {n} c {c} o {o} {h}x{w} {kh}x{kw}: {err}");
         }
-    }
-
-    /// Only few outputs from many inputs at stride 1 take it.
-    #[test]
-    fn few_outputs_from_many_inputs_suit() {
-        let options = ConvOptions::new_with_padding([1, 1], [(1, 1), (1, 1)], [1, 1], 1);
-        assert!(suits(&options, 2, 256) && suits(&options, 4, 32));
-        assert!(!suits(&options, 5, 256) && !suits(&options, 2, 31));
-        let strided = ConvOptions::new_with_padding([2, 2], [(1, 1), (1, 1)], [1, 1], 1);
-        assert!(!suits(&strided, 2, 256));
     }
 }

@@ -15,8 +15,8 @@ use burn::tensor::Tensor;
 use burn::tensor::ops::ConvOptions;
 
 use super::columns::{WindowShape, epilogue_bias, finish, gathered_columns};
+use crate::algorithm::GpuConvForm;
 use crate::geometry::conv_output_size;
-use crate::settings::GpuRoute;
 
 /// The gathered column matrix of the part of a convolution's input that several convolutions
 /// share, with the geometry they all use.
@@ -28,18 +28,21 @@ pub struct SharedColumns {
     input: [usize; 2],
     kernel: [usize; 2],
     options: ConvOptions<2>,
+    /// The bias reshaped before the products (the dispatch's form).
+    fused_epilogue: bool,
 }
 
 impl SharedColumns {
-    /// The columns of `shared` for a `kh x kw` kernel with `options` (groups 1).
+    /// The columns of `shared` for a `kh x kw` kernel with `options` (groups 1), for
+    /// convolutions in the dispatch's `form` (its columns are gathered; its epilogue fused or not).
     ///
     /// # Shapes
     /// - `shared`: `[N, C_shared, H, W]`
-    pub fn gather(shared: Tensor<4>, kernel: [usize; 2], options: &ConvOptions<2>) -> Self {
+    pub(crate) fn gather(shared: Tensor<4>, kernel: [usize; 2], options: &ConvOptions<2>, form: GpuConvForm) -> Self {
         assert!(options.groups == 1, "SharedColumns: groups 1 only");
         let [_, channels, h, w] = shared.dims();
         let columns = gathered_columns(shared, WindowShape::new([h, w], kernel, options));
-        Self { columns, channels, input: [h, w], kernel, options: options.clone() }
+        Self { columns, channels, input: [h, w], kernel, options: options.clone(), fused_epilogue: form.fused_epilogue }
     }
 
     /// `then(conv2d(cat([first, shared], 1), weight, bias, options))` with the shared part's
@@ -66,7 +69,7 @@ impl SharedColumns {
         assert!(c == c_first + self.channels && [kh, kw] == self.kernel, "SharedColumns: the weight does not fit");
         let out_size = conv_output_size("SharedColumns", [h, w], self.kernel, &self.options);
         let taps = kh * kw;
-        let bias = epilogue_bias(bias, o, GpuRoute::FusedEpilogue.enabled());
+        let bias = epilogue_bias(bias, o, self.fused_epilogue);
         // Rows `(c, ky, kx)`: a part's input channels are one run of columns of the flattened
         // weight, a strided view (narrowing the 4-D weight first would make the reshape a copy).
         let flat = weight.reshape([1, o, c * taps]);
@@ -90,6 +93,7 @@ mod tests {
     use burn::tensor::{Device, Distribution};
 
     use super::*;
+    use crate::algorithm::GpuColumns;
     use dgstereo_core::tensor::max_abs_diff;
 
     /// Against burn's convolution of the concatenated input: two convolutions sharing one
@@ -106,7 +110,8 @@ mod tests {
         ] {
             let [h, w] = [6, 9];
             let shared = normal([n, c_shared, h, w], 1.0);
-            let columns = SharedColumns::gather(shared.clone(), [kh, kw], &options);
+            let form = GpuConvForm { columns: GpuColumns::Gathered, product_first: false, fused_epilogue: n == 1 };
+            let columns = SharedColumns::gather(shared.clone(), [kh, kw], &options, form);
             for _ in 0..2 {
                 let first = normal([n, c_first, h, w], 1.0);
                 let weight = normal([o, c_first + c_shared, kh, kw], 0.3);

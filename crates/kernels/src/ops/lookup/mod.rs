@@ -10,3 +10,6 @@ mod pyramid;
 
 pub use on_the_fly::OnTheFlyCorrelation;
 pub use pyramid::{CorrelationPyramid, all_pairs};
+
+#[cfg(test)]
+mod tests;
