@@ -25,6 +25,8 @@ import sys
 import time
 import warnings
 
+import peer_bench
+
 sys.path.insert(0, os.environ.get("RAFT_STEREO_DIR", os.path.dirname(os.path.abspath(__file__))))
 
 import torch  # noqa: E402
@@ -63,18 +65,7 @@ def main():
 
     torch.set_num_threads(a.threads)
     torch.manual_seed(a.seed)
-    margs = argparse.Namespace(
-        hidden_dims=[128, 128, 128],
-        corr_implementation="reg",
-        shared_backbone=False,
-        corr_levels=4,
-        corr_radius=4,
-        n_downsample=2,
-        context_norm="batch",
-        slow_fast_gru=False,
-        n_gru_layers=3,
-        mixed_precision=False,
-    )
+    margs = peer_bench.raft_stereo_arguments()
     model = torch.nn.DataParallel(RAFTStereo(margs))
     model.train()
     model.module.freeze_bn()
