@@ -71,7 +71,7 @@ pub(crate) fn conv2d_by_matmul(
     form: GpuConvForm,
 ) -> Tensor<4> {
     // Nothing follows the product, so there is no epilogue to fuse the bias into.
-    by_matmul(x, weight, bias, options, GpuConvForm { fused_epilogue: false, ..form }, |out| out)
+    conv2d_by_matmul_then(x, weight, bias, options, GpuConvForm { fused_epilogue: false, ..form }, |out| out)
 }
 
 /// [`conv2d_by_matmul`] followed by `then`, element-wise work on the output as the product
@@ -82,24 +82,11 @@ pub(crate) fn conv2d_by_matmul(
 /// operation of another shape (the bias reshaped after the product is one, which leaves
 /// every bias add and activation of the update loop in kernels of their own). Where the form
 /// has no fused epilogue (``stock-route=epilogue``) the bias is added after the product, for
-/// comparison.
+/// comparison (see [`epilogue_bias`]).
 ///
 /// # Shapes
 /// - as [`conv2d_by_matmul`]; `then` maps `[N, O, H_out·W_out]` to the same shape
 pub(crate) fn conv2d_by_matmul_then(
-    x: Tensor<4>,
-    weight: Tensor<4>,
-    bias: Option<Tensor<1>>,
-    options: &ConvOptions<2>,
-    form: GpuConvForm,
-    then: impl FnOnce(Tensor<3>) -> Tensor<3>,
-) -> Tensor<4> {
-    by_matmul(x, weight, bias, options, form, then)
-}
-
-/// [`conv2d_by_matmul_then`] in `form`, the bias reshaped before the product where the form
-/// fuses the epilogue (see [`epilogue_bias`]).
-fn by_matmul(
     x: Tensor<4>,
     weight: Tensor<4>,
     bias: Option<Tensor<1>>,
