@@ -8,12 +8,10 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use burn::store::ModuleSnapshot;
 use dgstereo_core::default_device;
 use dgstereo_core::shared::shared_dir_for_test;
 use dgstereo_experiment::{ExperimentConfig, load};
 use dgstereo_loss::{GammaAdjustment, LossConfig};
-use dgstereo_model::RaftStereo;
 use dgstereo_train::batch::{TrainingData, to_tensors};
 use dgstereo_train::checkpoint::{list_checkpoints, load_checkpoint};
 use dgstereo_train::run::{RunOptions, checkpoint_dir, train};
@@ -44,17 +42,6 @@ fn smoke_parts(weights: &Path, steps: usize) -> TrainParts {
     };
     config.data = tiny.data;
     TrainParts::from(config)
-}
-
-fn weights(model: &RaftStereo) -> Vec<(String, Vec<f32>)> {
-    model
-        .collect(None, None, true)
-        .into_iter()
-        .map(|t| {
-            let data = burn::store::bridge::to_data(&t).unwrap();
-            (t.name.clone(), data.convert::<f32>().try_to_vec::<f32>().unwrap())
-        })
-        .collect()
 }
 
 /// Whether every tensor under `prefix` is bit-identical in `a` and `b` (and there is one).
@@ -95,7 +82,7 @@ fn a_step_leaves_the_frozen_network_bit_identical_while_the_rest_moves() {
     let parts = smoke_parts(&shared.join(DEPTH_ANYTHING), 4);
     let mut trainer = Trainer::new(parts.clone(), &device).unwrap();
     assert!(trainer.notices().iter().any(|n| n.starts_with("train.monocular_init:")), "{:?}", trainer.notices());
-    let before = weights(&trainer.inference_model());
+    let before = common::weights(&trainer.inference_model());
     let pairs = TrainingData::new(&parts.data, &parts.train).unwrap().batch(0, 1).unwrap();
     let batch = to_tensors(&pairs, trainer.autodiff_device()).unwrap();
     let mut predictions = 0;
@@ -103,7 +90,7 @@ fn a_step_leaves_the_frozen_network_bit_identical_while_the_rest_moves() {
     trainer.step_on(&batch, Some(&mut observe)).unwrap();
     // Every iteration is supervised, the two scale iterations included.
     assert_eq!(predictions, 3);
-    let after = weights(&trainer.inference_model());
+    let after = common::weights(&trainer.inference_model());
     assert!(identical_under(&before, &after, "monocular.pretrained."));
     assert!(identical_under(&before, &after, "monocular.depth_head."));
     for trains in ["monocular.depth_feat.", "encoder.fnet.", "encoder.cnet.", "update_block.", "scale_update_block."] {
@@ -115,7 +102,7 @@ fn a_step_leaves_the_frozen_network_bit_identical_while_the_rest_moves() {
     let mut trainer = Trainer::new(unfrozen, &device).unwrap();
     let batch = to_tensors(&pairs, trainer.autodiff_device()).unwrap();
     trainer.step_on(&batch, None).unwrap();
-    assert!(!identical_under(&before, &weights(&trainer.inference_model()), "monocular.pretrained."));
+    assert!(!identical_under(&before, &common::weights(&trainer.inference_model()), "monocular.pretrained."));
 }
 
 #[test]
@@ -127,7 +114,7 @@ fn monocular_init_loads_the_vit_and_head_and_keeps_the_feature_trunk() {
         let mut parts = smoke_parts(&file, 1);
         parts.train.seed = seed;
         parts.train.monocular_init = init.map(Path::to_path_buf);
-        weights(&Trainer::new(parts, &device).unwrap().inference_model())
+        common::weights(&Trainer::new(parts, &device).unwrap().inference_model())
     };
     let (a, b, random) = (seeded(1, Some(&file)), seeded(2, Some(&file)), seeded(1, None));
     // The file decides the ViT and the depth head whatever the seed; the trunk keeps the seed's.
@@ -205,10 +192,11 @@ fn a_smoke_run_checkpoints_and_resumes_bit_exactly() {
         assert_eq!(step, 3);
         load_checkpoint(parts.clone(), &path, &device).unwrap()
     };
-    let (a, b) = (weights(&newest(&full).inference_model()), weights(&newest(&split).inference_model()));
+    let (a, b) =
+        (common::weights(&newest(&full).inference_model()), common::weights(&newest(&split).inference_model()));
     assert!(identical_under(&a, &b, ""), "the resumed run differs from the uninterrupted one");
     // The frozen network is still the file's after three steps and a resume.
-    let fresh = weights(&Trainer::new(parts, &device).unwrap().inference_model());
+    let fresh = common::weights(&Trainer::new(parts, &device).unwrap().inference_model());
     assert!(identical_under(&a, &fresh, "monocular.pretrained."));
     assert!(!identical_under(&a, &fresh, "encoder.fnet."));
 }
