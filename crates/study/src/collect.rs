@@ -104,7 +104,8 @@ fn empty_table(runs: &[ResolvedRun], benchmarks: &[BenchmarkConfig]) -> Ablation
 /// Builds and writes the tables of `runs` from their folders under `out`: `ablation.{md,csv,json}`,
 /// `ablation.png` and, where a row is one of the paper's, its tables (`paper-tables.md`,
 /// `paper-table{N}.csv`, with the published figures where `study.paper`): Tables 2 to 5 by run
-/// name, Table 1 where a run's network is one of its models ([`table1_model`]).
+/// name and, with `study.paper`, Table 1 where a run's network is one of its models
+/// ([`table1_model`]).
 ///
 /// # Errors
 /// A run folder's configuration cannot be read, or a table cannot be written.
@@ -139,8 +140,10 @@ pub fn collect(runs: &[ResolvedRun], study: &Study, out: &Path) -> Result<Collec
     write_ablation_plot(&row_curves(&table, out), &out.join("ablation.png"))?;
     let matches = match_benchmarks(&benchmarks);
     let rows = rows_of(&table, &scored);
-    let mut comparisons: Vec<PaperComparison> =
-        table1_comparison(&table1_models(&table, runs), &rows, &matches).into_iter().collect();
+    // Table 1 compares models with the published ones: only where the study asks for the
+    // paper's figures (`--paper`), since any RAFT-Stereo run is one of its models.
+    let table1 = if study.paper { table1_comparison(&table1_models(&table, runs), &rows, &matches) } else { None };
+    let mut comparisons: Vec<PaperComparison> = table1.into_iter().collect();
     comparisons.extend(compare_with_paper(&rows, &matches));
     let collected = Collected { table, comparisons, matches, runs: runs.len() };
     if collected.fills_paper_tables() {

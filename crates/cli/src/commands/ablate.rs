@@ -13,11 +13,11 @@
 //! checkpoints or a finished run of another configuration, are refused before anything is written
 //! (`study.json` included), so a wrong benchmark path costs seconds, not a trained row. Where a row is one of
 //! the paper's, the rows' means also fill the paper's four ablation tables (`paper-tables.md`,
-//! `paper-table{2,3,4,5}.csv`), matched by run name, and a row whose network is a model of its
-//! Table 1 (RAFT-Stereo, DEFOM-Stereo, the paper's model) fills Table 1 (`paper-table1.csv`,
-//! [`dgstereo_study::paper_table1`]); columns are matched to benchmarks by data set
+//! `paper-table{2,3,4,5}.csv`), matched by run name; columns are matched to benchmarks by data set
 //! (kind and split or weather, [`dgstereo_study::paper_match`]), and `--paper` sets the published
-//! figures and our distance from them beside ours. A study stopped by a signal continues where it
+//! figures and our distance from them beside ours and lays every row whose network is a model of
+//! the paper's Table 1 (RAFT-Stereo, DEFOM-Stereo, the paper's model) out as Table 1
+//! (`paper-table1.csv`, [`dgstereo_study::paper_table1`]). A study stopped by a signal continues where it
 //! stopped when the same command runs again. The study is the `dgstereo-study` library
 //! ([`dgstereo_study::task`] for one run, [`dgstereo_study::collect()`] for the tables,
 //! [`dgstereo_study::slurm`] for `--launcher slurm`); this command parses flags, trains with the
