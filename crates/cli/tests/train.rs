@@ -184,17 +184,6 @@ fn ablate_scores_benchmarks_reuses_finished_runs_and_rescores_new_benchmarks() {
     assert!(o.status.success() && !text(&o).contains("scores reused"), "{}", text(&o));
     assert_eq!(modified(&model), before);
 
-    // --paper lays the run, a RAFT-Stereo network, out as the paper's Table 1 beside RAFT-Stereo's
-    // published figures; the folder benchmark is none of its data sets.
-    let o = dgstereo(&[&args[..], &["--paper"]].concat());
-    let said = text(&o);
-    assert!(o.status.success() && said.contains("### Table 1: zero-shot generalisation"), "{said}");
-    let table1 = std::fs::read_to_string(out.join("paper-table1.csv")).unwrap();
-    let paper = table1.lines().find(|l| l.starts_with("RAFT-Stereo,tiny,paper,")).expect("a RAFT-Stereo row");
-    assert!(paper.starts_with("RAFT-Stereo,tiny,paper,1.43,11.21,1.89,9.87,"), "{table1}");
-    assert!(table1.contains(&format!("RAFT-Stereo,tiny,ours{}\n", ",".repeat(14))), "{table1}");
-    assert_eq!(modified(&model), before);
-
     // --collect builds the same tables from the run folders; a run without its model is a row
     // saying so, with its log, and the status is a failure.
     let csv = std::fs::read_to_string(out.join("ablation.csv")).unwrap();

@@ -85,7 +85,7 @@ impl PaperBenchmark {
     }
 
     /// Its heading in the paper (`Midd-H`, `DS-Sunny`, ...).
-    pub fn heading(self) -> &'static str {
+    pub const fn heading(self) -> &'static str {
         match self {
             Self::MiddleburyH => "Midd-H",
             Self::DrivingStereo(DrivingStereoWeather::Sunny) => "DS-Sunny",
@@ -98,7 +98,7 @@ impl PaperBenchmark {
     }
 
     /// The bad-pixel rate the table reports beside EPE: our metric's name and the paper's heading.
-    pub fn rate(self) -> (&'static str, &'static str) {
+    pub const fn rate(self) -> (&'static str, &'static str) {
         match self {
             Self::MiddleburyH => ("bad-2", "D2"),
             Self::DrivingStereo(_) | Self::Kitti2015 => ("bad-3", "D3"),

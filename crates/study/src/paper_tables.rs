@@ -58,13 +58,15 @@ pub struct PaperTable {
     pub rows: &'static [PaperRow],
 }
 
-const fn column(
-    benchmark: PaperBenchmark,
-    heading: &'static str,
-    metric: &'static str,
-    metric_heading: &'static str,
-) -> PaperColumn {
-    PaperColumn { benchmark, metric, heading, metric_heading }
+/// The EPE column of `benchmark` (headings from [`PaperBenchmark::heading`]).
+const fn epe(benchmark: PaperBenchmark) -> PaperColumn {
+    PaperColumn { benchmark, metric: "epe", heading: benchmark.heading(), metric_heading: "EPE" }
+}
+
+/// The column of the bad-pixel rate the paper reports for `benchmark` ([`PaperBenchmark::rate`]).
+const fn rate(benchmark: PaperBenchmark) -> PaperColumn {
+    let (metric, metric_heading) = benchmark.rate();
+    PaperColumn { benchmark, metric, heading: benchmark.heading(), metric_heading }
 }
 
 const fn row(label: &'static str, run: &'static str, values: &'static [f64]) -> PaperRow {
@@ -78,20 +80,20 @@ const DS_RAINY: PaperBenchmark = PaperBenchmark::DrivingStereo(DrivingStereoWeat
 
 /// Table 2's columns: the four DrivingStereo weathers, EPE and D3 each.
 pub const DRIVINGSTEREO_COLUMNS: [PaperColumn; 8] = [
-    column(DS_SUNNY, "DS-Sunny", "epe", "EPE"),
-    column(DS_SUNNY, "DS-Sunny", "bad-3", "D3"),
-    column(DS_CLOUDY, "DS-Cloudy", "epe", "EPE"),
-    column(DS_CLOUDY, "DS-Cloudy", "bad-3", "D3"),
-    column(DS_FOGGY, "DS-Foggy", "epe", "EPE"),
-    column(DS_FOGGY, "DS-Foggy", "bad-3", "D3"),
-    column(DS_RAINY, "DS-Rainy", "epe", "EPE"),
-    column(DS_RAINY, "DS-Rainy", "bad-3", "D3"),
+    epe(DS_SUNNY),
+    rate(DS_SUNNY),
+    epe(DS_CLOUDY),
+    rate(DS_CLOUDY),
+    epe(DS_FOGGY),
+    rate(DS_FOGGY),
+    epe(DS_RAINY),
+    rate(DS_RAINY),
 ];
 
 /// The seven benchmarks of Tables 1, 3, 4 and 5, EPE and the benchmark's rate each.
 pub const GENERALISATION_COLUMNS: [PaperColumn; 14] = [
-    column(PaperBenchmark::MiddleburyH, "Midd-H", "epe", "EPE"),
-    column(PaperBenchmark::MiddleburyH, "Midd-H", "bad-2", "D2"),
+    epe(PaperBenchmark::MiddleburyH),
+    rate(PaperBenchmark::MiddleburyH),
     DRIVINGSTEREO_COLUMNS[0],
     DRIVINGSTEREO_COLUMNS[1],
     DRIVINGSTEREO_COLUMNS[2],
@@ -100,10 +102,10 @@ pub const GENERALISATION_COLUMNS: [PaperColumn; 14] = [
     DRIVINGSTEREO_COLUMNS[5],
     DRIVINGSTEREO_COLUMNS[6],
     DRIVINGSTEREO_COLUMNS[7],
-    column(PaperBenchmark::Kitti2015, "KITTI15", "epe", "EPE"),
-    column(PaperBenchmark::Kitti2015, "KITTI15", "bad-3", "D3"),
-    column(PaperBenchmark::Eth3d, "ETH3D", "epe", "EPE"),
-    column(PaperBenchmark::Eth3d, "ETH3D", "bad-1", "D1"),
+    epe(PaperBenchmark::Kitti2015),
+    rate(PaperBenchmark::Kitti2015),
+    epe(PaperBenchmark::Eth3d),
+    rate(PaperBenchmark::Eth3d),
 ];
 
 /// The paper's four ablation tables, in its order.
