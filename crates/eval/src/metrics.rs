@@ -110,6 +110,13 @@ impl Metrics {
         [self.epe, self.bad_0_5, self.bad_1, self.bad_2, self.bad_3, self.bad_4, self.d1_all]
     }
 
+    /// The metrics of `values` in the order of [`METRIC_NAMES`] (the inverse of
+    /// [`values`](Self::values)) over `valid_pixels` pixels.
+    pub fn from_values(values: [f64; 7], valid_pixels: u64) -> Self {
+        let [epe, bad_0_5, bad_1, bad_2, bad_3, bad_4, d1_all] = values;
+        Self { epe, bad_0_5, bad_1, bad_2, bad_3, bad_4, d1_all, valid_pixels }
+    }
+
     /// A metric by its name in [`METRIC_NAMES`].
     pub fn get(&self, name: &str) -> Option<f64> {
         METRIC_NAMES.iter().position(|n| *n == name).map(|i| self.values()[i])

@@ -65,8 +65,27 @@ impl PaperBenchmark {
         }
     }
 
+    /// Whether `benchmark` scores this data set and nothing else, so that its aggregate is this
+    /// data set's figure: as [`matches`](Self::matches), but a DrivingStereo benchmark must name
+    /// this weather (a study keeps one aggregate per benchmark, which for all weathers together
+    /// is none of the table's columns).
+    pub fn matches_alone(self, benchmark: &BenchmarkConfig) -> bool {
+        let whole_set = !matches!(self, Self::DrivingStereo(_)) || benchmark.weather.is_some();
+        whole_set && self.matches(benchmark)
+    }
+
+    /// The `[[benchmarks]]` keys that select it alone (`dataset = "middlebury", split = "H"`).
+    pub fn keys(self) -> String {
+        match self {
+            Self::MiddleburyH => "dataset = \"middlebury\", split = \"H\"".to_string(),
+            Self::DrivingStereo(weather) => format!("dataset = \"drivingstereo\", weather = \"{weather}\""),
+            Self::Kitti2015 => "dataset = \"kitti2015\"".to_string(),
+            Self::Eth3d => "dataset = \"eth3d\"".to_string(),
+        }
+    }
+
     /// Its heading in the paper (`Midd-H`, `DS-Sunny`, ...).
-    pub fn heading(self) -> &'static str {
+    pub const fn heading(self) -> &'static str {
         match self {
             Self::MiddleburyH => "Midd-H",
             Self::DrivingStereo(DrivingStereoWeather::Sunny) => "DS-Sunny",
@@ -79,7 +98,7 @@ impl PaperBenchmark {
     }
 
     /// The bad-pixel rate the table reports beside EPE: our metric's name and the paper's heading.
-    pub fn rate(self) -> (&'static str, &'static str) {
+    pub const fn rate(self) -> (&'static str, &'static str) {
         match self {
             Self::MiddleburyH => ("bad-2", "D2"),
             Self::DrivingStereo(_) | Self::Kitti2015 => ("bad-3", "D3"),
@@ -306,6 +325,22 @@ mod tests {
         assert_eq!(lines[1], "  Midd-H: EPE 0.84 (ours 0.900), D2 6.03 % (ours 20.000 %)");
         assert_eq!(lines[2], "  not the paper's protocol: 2 iterations (the paper: 32)");
         assert!(protocol_differences(&h).is_empty());
+    }
+
+    #[test]
+    fn a_benchmark_scores_a_weather_alone_only_when_it_names_it() {
+        let sunny = PaperBenchmark::DrivingStereo(DrivingStereoWeather::Sunny);
+        let all = BenchmarkConfig::new(DatasetKind::Drivingstereo, "ds");
+        let one = BenchmarkConfig { weather: Some(DrivingStereoWeather::Sunny), ..all.clone() };
+        let other = BenchmarkConfig { weather: Some(DrivingStereoWeather::Rainy), ..all.clone() };
+        assert_eq!((sunny.matches(&all), sunny.matches(&one), sunny.matches(&other)), (true, true, false));
+        assert_eq!(
+            (sunny.matches_alone(&all), sunny.matches_alone(&one), sunny.matches_alone(&other)),
+            (false, true, false)
+        );
+        let kitti = BenchmarkConfig::new(DatasetKind::Kitti2015, "k");
+        assert!(PaperBenchmark::Kitti2015.matches_alone(&kitti) && !sunny.matches_alone(&kitti));
+        assert_eq!(sunny.keys(), "dataset = \"drivingstereo\", weather = \"sunny\"");
     }
 
     #[test]

@@ -108,6 +108,11 @@ impl ExperimentConfig {
                 problems.push(Problem::new("train.crop", reason));
             }
         }
+        if self.train.monocular_init.is_some() && self.model.monocular.feature_channels().is_none() {
+            let reason =
+                "the model has no monocular network to load into: set model.monocular (kind = \"depth-anything-v2\")";
+            problems.push(Problem::new("train.monocular_init", reason));
+        }
         let gives = self.prior.gives_prior();
         if let Err(Error::Config(problem)) = self.model.check_prior(gives) {
             problems.push(problem.within("model"));

@@ -53,7 +53,11 @@ fn combination() -> impl Strategy<Value = Combination> {
     let guidance = prop::sample::select(GuidanceKind::ALL.to_vec());
     let implementation = prop_oneof![Just(CorrelationImplementation::Reg), Just(CorrelationImplementation::Alt)];
     let loss = prop_oneof![
-        (0.8f64..0.95).prop_map(|gamma| LossConfig::SequenceL1 { gamma, max_disparity: 700.0 }),
+        (0.8f64..0.95).prop_map(|gamma| LossConfig::SequenceL1 {
+            gamma,
+            max_disparity: 700.0,
+            gamma_adjustment: Default::default()
+        }),
         (0.1f64..3.0).prop_map(|tau| LossConfig::EdgeAware { tau, gamma: 0.9, max_disparity: 700.0 }),
     ];
     let norm =

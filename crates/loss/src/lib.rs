@@ -5,7 +5,9 @@
 //! differ in which pixels are supervised and how the per-iteration terms are normalised:
 //!
 //! - `sequence-l1` ([`SequenceL1Loss`]): RAFT-Stereo's loss, mean L1 over the valid pixels,
-//!   weights `gamma'^(N-k)` with `gamma' = gamma^(15/(N-1))`;
+//!   weights `gamma'^(N-k)` with `gamma' = gamma^(15/(N-1))`, or with `gamma_adjustment =
+//!   "defom-stereo"` DEFOM-Stereo's `gamma'^(N-k+1)` with `gamma' = gamma^(15/N)`
+//!   ([`GammaAdjustment`]);
 //! - `edge-aware` ([`EdgeAwareLoss`]): the paper's EALS, which additionally drops pixels where the
 //!   bilinearly and nearest-resized ground truths disagree by more than `tau` ([`edge_mask`]),
 //!   normalises each term by the full pixel count and weights it `gamma^(N-k)`.
@@ -18,6 +20,7 @@
 //! [loss]
 //! kind = "edge-aware"      # or "sequence-l1" (default)
 //! tau = 0.9                # edge-aware only
+//! # gamma_adjustment = "defom-stereo"   # sequence-l1 only; "raft-stereo" by default
 //! gamma = 0.9
 //! max_disparity = 700.0
 //! ```
@@ -29,7 +32,7 @@ pub mod sequence;
 
 pub use edge_aware::EdgeAwareLoss;
 pub use mask::{edge_mask, supervised_mask};
-pub use sequence::{SequenceL1Loss, check_inputs, sequence_weights};
+pub use sequence::{GammaAdjustment, SequenceL1Loss, check_inputs, sequence_weights};
 
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
@@ -88,6 +91,10 @@ pub enum LossConfig {
         /// Pixels with |disparity| at or above this are excluded.
         #[serde(default = "default_max_disparity")]
         max_disparity: f64,
+        /// How `gamma` follows the number of predictions: RAFT-Stereo's (default) or
+        /// DEFOM-Stereo's.
+        #[serde(default)]
+        gamma_adjustment: GammaAdjustment,
     },
     /// Edge-aware loss suppression ([`EdgeAwareLoss`]).
     EdgeAware {
@@ -122,7 +129,11 @@ fn default_tau() -> f64 {
 
 impl Default for LossConfig {
     fn default() -> Self {
-        Self::SequenceL1 { gamma: DEFAULT_GAMMA, max_disparity: DEFAULT_MAX_DISPARITY }
+        Self::SequenceL1 {
+            gamma: DEFAULT_GAMMA,
+            max_disparity: DEFAULT_MAX_DISPARITY,
+            gamma_adjustment: GammaAdjustment::RaftStereo,
+        }
     }
 }
 
@@ -158,7 +169,7 @@ impl LossConfig {
         let mut problems = Vec::new();
         let mut add = |key: &str, reason: String| problems.push(dgstereo_core::Problem::new(key, reason));
         let (gamma, max_disparity) = match *self {
-            Self::SequenceL1 { gamma, max_disparity } => (gamma, max_disparity),
+            Self::SequenceL1 { gamma, max_disparity, .. } => (gamma, max_disparity),
             Self::EdgeAware { tau, gamma, max_disparity } => {
                 if !(tau.is_finite() && tau >= 0.0) {
                     add("tau", format!("{tau} must be a finite value >= 0"));
@@ -187,8 +198,8 @@ impl LossConfig {
 impl DisparityLoss for LossConfig {
     fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> dgstereo_core::Result<Tensor<1>> {
         match *self {
-            Self::SequenceL1 { gamma, max_disparity } => {
-                SequenceL1Loss { gamma, max_disparity }.loss(predictions, target)
+            Self::SequenceL1 { gamma, max_disparity, gamma_adjustment } => {
+                SequenceL1Loss { gamma, max_disparity, adjustment: gamma_adjustment }.loss(predictions, target)
             }
             Self::EdgeAware { tau, gamma, max_disparity } => {
                 EdgeAwareLoss { tau, gamma, max_disparity }.loss(predictions, target)
@@ -198,8 +209,8 @@ impl DisparityLoss for LossConfig {
 
     fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> dgstereo_core::Result<LossTerms> {
         match *self {
-            Self::SequenceL1 { gamma, max_disparity } => {
-                SequenceL1Loss { gamma, max_disparity }.terms(predictions, target)
+            Self::SequenceL1 { gamma, max_disparity, gamma_adjustment } => {
+                SequenceL1Loss { gamma, max_disparity, adjustment: gamma_adjustment }.terms(predictions, target)
             }
             Self::EdgeAware { tau, gamma, max_disparity } => {
                 EdgeAwareLoss { tau, gamma, max_disparity }.terms(predictions, target)

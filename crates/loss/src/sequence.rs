@@ -2,6 +2,7 @@
 
 use burn::tensor::Tensor;
 use dgstereo_core::{Error, Result};
+use serde::{Deserialize, Serialize};
 
 use crate::mask::{sanitized, supervised_mask};
 use crate::{DisparityLoss, LossTarget, LossTerms};
@@ -13,6 +14,48 @@ use crate::{DisparityLoss, LossTarget, LossTerms};
 pub fn sequence_weights(count: usize, gamma: f64, adjust: bool) -> Vec<f64> {
     let gamma = if adjust && count > 1 { gamma.powf(15.0 / (count as f64 - 1.0)) } else { gamma };
     (1..=count).map(|k| gamma.powi((count - k) as i32)).collect()
+}
+
+/// How the sequence loss's decay follows the number of predictions `N` (`gamma_adjustment`).
+///
+/// The two official training scripts write the "adjusted gamma" differently; each weighting is
+/// its script's `sequence_loss` term by term.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum GammaAdjustment {
+    /// RAFT-Stereo's `train_stereo.py`: `gamma' = gamma^(15/(N-1))`, weights `gamma'^(N-k)`
+    /// for `k = 1..N`, the last prediction 1 and the first `gamma^15` ([`sequence_weights`]).
+    #[default]
+    RaftStereo,
+    /// DEFOM-Stereo's `utils/utils.py`: `gamma' = gamma^(15/N)`, weights `gamma'^(N-k+1)`, so
+    /// the last prediction weighs `gamma'` and the first `gamma^15`; every prediction of the
+    /// loop counts, the scale iterations first.
+    DefomStereo,
+}
+
+impl GammaAdjustment {
+    /// Both adjustments, in the order of the enum.
+    pub const ALL: [Self; 2] = [Self::RaftStereo, Self::DefomStereo];
+
+    /// The name the TOML key `gamma_adjustment` writes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::RaftStereo => "raft-stereo",
+            Self::DefomStereo => "defom-stereo",
+        }
+    }
+
+    /// The per-prediction weights of `count` predictions with base decay `gamma`, first
+    /// prediction first.
+    pub fn weights(self, count: usize, gamma: f64) -> Vec<f64> {
+        match self {
+            Self::RaftStereo => sequence_weights(count, gamma, true),
+            Self::DefomStereo => {
+                let adjusted = gamma.powf(15.0 / count as f64);
+                (1..=count).map(|k| adjusted.powi((count - k + 1) as i32)).collect()
+            }
+        }
+    }
 }
 
 /// Checks what a loss reads: at least one prediction, each of the target's `[N, 1, H, W]`
@@ -55,8 +98,9 @@ pub(crate) fn weighted_sum(
         .ok_or_else(|| Error::Shape("a disparity loss needs at least one prediction, got none".into()))
 }
 
-/// RAFT-Stereo's loss: `sum_k gamma'^(N-k) * mean_{supervised} |D_k - D_gt|` with
-/// `gamma' = gamma^(15/(N-1))`, the mean over the supervised pixels of the whole batch
+/// RAFT-Stereo's loss: `sum_k w_k * mean_{supervised} |D_k - D_gt|` with the weights of its
+/// [`GammaAdjustment`] (RAFT-Stereo's `gamma'^(N-k)`, `gamma' = gamma^(15/(N-1))`, or
+/// DEFOM-Stereo's), the mean over the supervised pixels of the whole batch
 /// (`valid >= 0.5`, `|D_gt| < max_disparity`) and `D_gt` the bilinear ground truth.
 /// A batch without supervised pixels gives 0.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -65,6 +109,8 @@ pub struct SequenceL1Loss {
     pub gamma: f64,
     /// Ground truth at or above this is not supervised.
     pub max_disparity: f64,
+    /// How `gamma` is adjusted to the number of predictions.
+    pub adjustment: GammaAdjustment,
 }
 
 impl DisparityLoss for SequenceL1Loss {
@@ -78,7 +124,7 @@ impl DisparityLoss for SequenceL1Loss {
         let gt = sanitized(gt, supervised.clone());
         let supervised = supervised.float();
         let count = supervised.clone().sum().clamp_min(1.0);
-        let weights = sequence_weights(predictions.len(), self.gamma, true);
+        let weights = self.adjustment.weights(predictions.len(), self.gamma);
         weighted_sum(predictions, &weights, |prediction| {
             ((prediction.clone() - gt.clone()).abs() * supervised.clone()).sum() / count.clone()
         })
@@ -92,7 +138,7 @@ impl DisparityLoss for SequenceL1Loss {
         let gt = sanitized(gt, supervised.clone());
         let supervised = supervised.float();
         let count = f64::from(dgstereo_core::tensor::to_vec(supervised.clone().sum())[0]);
-        let weights = sequence_weights(predictions.len(), self.gamma, true);
+        let weights = self.adjustment.weights(predictions.len(), self.gamma);
         let sum = weighted_sum(predictions, &weights, |prediction| {
             ((prediction.clone() - gt.clone()).abs() * supervised.clone()).sum()
         })?;

@@ -4,7 +4,7 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_loss::{
-    DisparityLoss, EdgeAwareLoss, LossConfig, LossTarget, SequenceL1Loss, edge_mask, sequence_weights,
+    DisparityLoss, EdgeAwareLoss, GammaAdjustment, LossConfig, LossTarget, SequenceL1Loss, edge_mask, sequence_weights,
 };
 use proptest::prelude::*;
 
@@ -74,7 +74,7 @@ fn eals_averages_over_the_batch_images() {
 #[test]
 fn sequence_l1_matches_hand_computation() {
     let device = default_device();
-    let loss = SequenceL1Loss { gamma: 0.9, max_disparity: 700.0 };
+    let loss = SequenceL1Loss { gamma: 0.9, max_disparity: 700.0, adjustment: GammaAdjustment::RaftStereo };
     // Supervised: (0,0), (0,1), (0,2), (1,1) with ground truth 1, 2, 3, 5.
     // L_1 = 11 / 4, L_2 = 1; weights 0.9^15 and 1.
     let value = scalar(loss.loss(&example_predictions(&device), &example(&device)).unwrap());
@@ -83,6 +83,60 @@ fn sequence_l1_matches_hand_computation() {
     // N = 1: weight 1, no division by zero.
     let value = scalar(loss.loss(&example_predictions(&device)[..1], &example(&device)).unwrap());
     assert!((value - 2.75).abs() < 1e-5, "{value}");
+}
+
+/// DEFOM-Stereo's `sequence_loss` (`utils/utils.py`) transcribed: for `i in range(n)`,
+/// `adjusted = gamma ** (15 / n)`, `i_weight = adjusted ** (n - i)`.
+fn defom_official_weights(n: usize, gamma: f64) -> Vec<f64> {
+    (0..n).map(|i| (gamma.powf(15.0 / n as f64)).powf((n - i) as f64)).collect()
+}
+
+#[test]
+fn defom_weights_are_the_official_ones() {
+    for n in [1, 2, 3, 18, 26, 32] {
+        let ours = GammaAdjustment::DefomStereo.weights(n, 0.9);
+        let official = defom_official_weights(n, 0.9);
+        assert_eq!(ours.len(), n);
+        for (k, (a, b)) in ours.iter().zip(&official).enumerate() {
+            assert!((a - b).abs() < 1e-12, "n = {n}, prediction {k}: {a} vs {b}");
+        }
+        // Unlike RAFT-Stereo's, the last prediction weighs gamma^(15/N), not 1, and the first
+        // gamma^15.
+        assert!((ours[n - 1] - 0.9f64.powf(15.0 / n as f64)).abs() < 1e-12);
+        assert!((ours[0] - 0.9f64.powi(15)).abs() < 1e-9);
+    }
+    // DEFOM's 18 training iterations: the two adjustments differ.
+    let raft = GammaAdjustment::RaftStereo.weights(18, 0.9);
+    let defom = GammaAdjustment::DefomStereo.weights(18, 0.9);
+    assert_eq!(raft[17], 1.0);
+    assert!((defom[17] - 0.9f64.powf(15.0 / 18.0)).abs() < 1e-12 && defom[17] < 0.92);
+}
+
+#[test]
+fn sequence_l1_with_defom_adjustment_matches_hand_computation() {
+    let device = default_device();
+    let loss = SequenceL1Loss { gamma: 0.9, max_disparity: 700.0, adjustment: GammaAdjustment::DefomStereo };
+    // L_1 = 11 / 4, L_2 = 1 (as above); N = 2: gamma' = 0.9^7.5, weights 0.9^15 and 0.9^7.5.
+    let value = scalar(loss.loss(&example_predictions(&device), &example(&device)).unwrap());
+    let expected = 0.9f64.powi(15) * 2.75 + 0.9f64.powf(7.5);
+    assert!((f64::from(value) - expected).abs() < 1e-5, "{value} vs {expected}");
+    // The split form agrees: sum / count.
+    let terms = loss.terms(&example_predictions(&device), &example(&device)).unwrap();
+    let split = f64::from(scalar(terms.sum)) / terms.count;
+    assert!((split - expected).abs() < 1e-5, "{split} vs {expected}");
+    // Through the configuration.
+    let config: LossConfig = toml::from_str("kind = \"sequence-l1\"\ngamma_adjustment = \"defom-stereo\"").unwrap();
+    let value = scalar(config.loss(&example_predictions(&device), &example(&device)).unwrap());
+    assert!((f64::from(value) - expected).abs() < 1e-5, "{value} vs {expected}");
+    assert!(toml::from_str::<LossConfig>("kind = \"sequence-l1\"\ngamma_adjustment = \"igev\"").is_err());
+    assert!(toml::from_str::<LossConfig>("kind = \"edge-aware\"\ngamma_adjustment = \"defom-stereo\"").is_err());
+    for adjustment in GammaAdjustment::ALL {
+        let text = format!("kind = \"sequence-l1\"\ngamma_adjustment = \"{}\"", adjustment.name());
+        let LossConfig::SequenceL1 { gamma_adjustment, .. } = toml::from_str(&text).unwrap() else {
+            panic!("{text} is not a sequence-l1 loss");
+        };
+        assert_eq!(gamma_adjustment, adjustment);
+    }
 }
 
 #[test]
@@ -152,7 +206,10 @@ fn configs_read_from_toml() {
     let config: LossConfig = toml::from_str("kind = \"edge-aware\"\ntau = 0.5").unwrap();
     assert_eq!(config, LossConfig::EdgeAware { tau: 0.5, gamma: 0.9, max_disparity: 700.0 });
     let config: LossConfig = toml::from_str("kind = \"sequence-l1\"\ngamma = 0.8\nmax_disparity = 192.0").unwrap();
-    assert_eq!(config, LossConfig::SequenceL1 { gamma: 0.8, max_disparity: 192.0 });
+    assert_eq!(
+        config,
+        LossConfig::SequenceL1 { gamma: 0.8, max_disparity: 192.0, gamma_adjustment: GammaAdjustment::RaftStereo }
+    );
     assert!(!config.needs_nearest());
     assert!(toml::from_str::<LossConfig>("kind = \"sequence-l1\"\ntau = 0.5").is_err());
     let text = toml::to_string(&LossConfig::edge_aware()).unwrap();
@@ -228,7 +285,14 @@ fn every_kind_is_listed() {
 fn invalid_values_are_keyed_problems() {
     let keys = |config: LossConfig| config.problems().into_iter().map(|p| p.key).collect::<Vec<_>>();
     assert_eq!(keys(LossConfig::EdgeAware { tau: -1.0, gamma: 0.9, max_disparity: 700.0 }), ["tau"]);
-    assert_eq!(keys(LossConfig::SequenceL1 { gamma: 0.0, max_disparity: f64::NAN }), ["gamma", "max_disparity"]);
+    assert_eq!(
+        keys(LossConfig::SequenceL1 {
+            gamma: 0.0,
+            max_disparity: f64::NAN,
+            gamma_adjustment: GammaAdjustment::RaftStereo
+        }),
+        ["gamma", "max_disparity"]
+    );
     assert!(LossConfig::edge_aware().problems().is_empty());
 }
 

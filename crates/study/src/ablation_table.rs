@@ -345,32 +345,15 @@ impl AblationTable {
 /// the total.
 pub fn mean_metrics(metrics: &[Metrics]) -> Metrics {
     let n = metrics.len().max(1) as f64;
-    let mean = |f: fn(&Metrics) -> f64| metrics.iter().map(f).sum::<f64>() / n;
-    Metrics {
-        epe: mean(|m| m.epe),
-        bad_0_5: mean(|m| m.bad_0_5),
-        bad_1: mean(|m| m.bad_1),
-        bad_2: mean(|m| m.bad_2),
-        bad_3: mean(|m| m.bad_3),
-        bad_4: mean(|m| m.bad_4),
-        d1_all: mean(|m| m.d1_all),
-        valid_pixels: metrics.iter().map(|m| m.valid_pixels).sum(),
-    }
+    let mean = std::array::from_fn(|i| metrics.iter().map(|m| m.values()[i]).sum::<f64>() / n);
+    Metrics::from_values(mean, metrics.iter().map(|m| m.valid_pixels).sum())
 }
 
 /// The field-wise sample standard deviation of `metrics` (`n - 1`; a row's seeds).
 pub fn std_metrics(metrics: &[Metrics]) -> Metrics {
     let mean = mean_metrics(metrics);
+    let centre = mean.values();
     let n = metrics.len().saturating_sub(1).max(1) as f64;
-    let std = |f: fn(&Metrics) -> f64| (metrics.iter().map(|m| (f(m) - f(&mean)).powi(2)).sum::<f64>() / n).sqrt();
-    Metrics {
-        epe: std(|m| m.epe),
-        bad_0_5: std(|m| m.bad_0_5),
-        bad_1: std(|m| m.bad_1),
-        bad_2: std(|m| m.bad_2),
-        bad_3: std(|m| m.bad_3),
-        bad_4: std(|m| m.bad_4),
-        d1_all: std(|m| m.d1_all),
-        valid_pixels: mean.valid_pixels,
-    }
+    let squares = |i: usize| metrics.iter().map(|m| (m.values()[i] - centre[i]).powi(2)).sum::<f64>();
+    Metrics::from_values(std::array::from_fn(|i| (squares(i) / n).sqrt()), mean.valid_pixels)
 }

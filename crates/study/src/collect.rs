@@ -13,6 +13,7 @@ use std::path::Path;
 
 use dgstereo_core::{Error, Result};
 use dgstereo_eval::BenchmarkConfig;
+use dgstereo_eval::published::Table1Row;
 use dgstereo_experiment::ResolvedRun;
 use dgstereo_train::run_identity::folder_differences;
 
@@ -20,6 +21,7 @@ use crate::ablation_plot::{RowCurves, validation_series, write_ablation_plot};
 use crate::ablation_table::{AblationTable, TABLE_METRICS, mean_metrics, std_metrics};
 use crate::paper_match::{BenchmarkMatch, match_benchmarks};
 use crate::paper_report::{PaperComparison, RunScores, compare_with_paper, write_paper_tables};
+use crate::paper_table1::{table1_comparison, table1_model};
 use crate::record::{Study, recorded_steps, why_missing};
 use crate::runs::{parts_of, run_folder};
 use crate::scores::{SYNTHETIC, cached_scores};
@@ -101,7 +103,9 @@ fn empty_table(runs: &[ResolvedRun], benchmarks: &[BenchmarkConfig]) -> Ablation
 
 /// Builds and writes the tables of `runs` from their folders under `out`: `ablation.{md,csv,json}`,
 /// `ablation.png` and, where a row is one of the paper's, its tables (`paper-tables.md`,
-/// `paper-table{2,3,4,5}.csv`, with the published figures where `study.paper`).
+/// `paper-table{N}.csv`, with the published figures where `study.paper`): Tables 2 to 5 by run
+/// name and, with `study.paper`, Table 1 where a run's network is one of its models
+/// ([`table1_model`]).
 ///
 /// # Errors
 /// A run folder's configuration cannot be read, or a table cannot be written.
@@ -135,7 +139,12 @@ pub fn collect(runs: &[ResolvedRun], study: &Study, out: &Path) -> Result<Collec
     table.write(out)?;
     write_ablation_plot(&row_curves(&table, out), &out.join("ablation.png"))?;
     let matches = match_benchmarks(&benchmarks);
-    let comparisons = compare_with_paper(&rows_of(&table, &scored), &matches);
+    let rows = rows_of(&table, &scored);
+    // Table 1 compares models with the published ones: only where the study asks for the
+    // paper's figures (`--paper`), since any RAFT-Stereo run is one of its models.
+    let table1 = if study.paper { table1_comparison(&table1_models(&table, runs), &rows, &matches) } else { None };
+    let mut comparisons: Vec<PaperComparison> = table1.into_iter().collect();
+    comparisons.extend(compare_with_paper(&rows, &matches));
     let collected = Collected { table, comparisons, matches, runs: runs.len() };
     if collected.fills_paper_tables() {
         write_paper_tables(&collected.comparisons, &collected.matches, out, study.paper)?;
@@ -152,6 +161,19 @@ pub fn collect_study(out: &Path) -> Result<(Study, Collected)> {
     let runs = dgstereo_experiment::load_all(&study.files)?;
     let collected = collect(&runs, &study, out)?;
     Ok((study, collected))
+}
+
+/// Each row of `table` whose runs' network is a model of the paper's Table 1, with its row there
+/// ([`table1_model`]).
+fn table1_models(table: &AblationTable, runs: &[ResolvedRun]) -> Vec<(String, &'static Table1Row)> {
+    table
+        .rows
+        .iter()
+        .filter_map(|row| {
+            let run = runs.iter().find(|r| row.seeds.iter().any(|s| s.run == r.name))?;
+            Some((row.name.clone(), table1_model(&run.config)?))
+        })
+        .collect()
 }
 
 /// Each row's validation curves, one per seed, from its runs' logs.

@@ -12,7 +12,8 @@
 //! [`ablation_table`] (seeds folded into a row, a best row marked only beyond their spread),
 //! [`ablation_plot`] (every row's validation curve), and the paper's layout ([`paper_tables`],
 //! its published figures; [`paper_match`], which benchmark fills which of its columns;
-//! [`paper_report`], our rows beside its figures). The library never prints: what a caller shows
+//! [`paper_report`], our rows beside its figures; [`paper_table1`], the runs of Table 1's models
+//! laid out as Table 1, by their networks). The library never prints: what a caller shows
 //! comes back as values or through a callback.
 #![deny(missing_docs)]
 
@@ -21,6 +22,7 @@ pub mod ablation_table;
 pub mod collect;
 pub mod paper_match;
 pub mod paper_report;
+pub mod paper_table1;
 pub mod paper_tables;
 pub mod record;
 pub mod runs;

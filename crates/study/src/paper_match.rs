@@ -63,7 +63,8 @@ impl BenchmarkMatch {
 }
 
 /// For each data set of the paper's tables (in the order the tables first name them), the first
-/// of `benchmarks` that scores it ([`PaperBenchmark::matches`]).
+/// of `benchmarks` that scores it alone ([`PaperBenchmark::matches_alone`]: a DrivingStereo
+/// benchmark of all weathers stores one aggregate, which is no weather's column).
 pub fn match_benchmarks(benchmarks: &[BenchmarkConfig]) -> Vec<BenchmarkMatch> {
     let mut matches: Vec<BenchmarkMatch> = Vec::new();
     for column in PAPER_TABLES.iter().flat_map(|t| t.columns) {
@@ -73,7 +74,7 @@ pub fn match_benchmarks(benchmarks: &[BenchmarkConfig]) -> Vec<BenchmarkMatch> {
         matches.push(BenchmarkMatch {
             wanted: column.benchmark,
             heading: column.heading,
-            found: benchmarks.iter().find(|b| column.benchmark.matches(b)).cloned(),
+            found: benchmarks.iter().find(|b| column.benchmark.matches_alone(b)).cloned(),
         });
     }
     matches

@@ -19,7 +19,7 @@ use dgstereo_eval::Metrics;
 use dgstereo_train::checkpoint::write_atomic;
 
 use crate::paper_match::{BenchmarkMatch, label_for};
-use crate::paper_tables::{PAPER_SOURCE, PAPER_TABLES, PaperTable};
+use crate::paper_tables::{PAPER_SOURCE, PAPER_TABLES, PaperColumn, PaperTable};
 
 /// A run's results: its name and, per benchmark name, the benchmark's aggregate metrics.
 #[derive(Debug, Clone, PartialEq)]
@@ -34,11 +34,31 @@ pub struct RunScores {
     pub spread: Vec<(String, Metrics)>,
 }
 
+/// A row of a table as laid out: its label in the paper, the run that fills it and the
+/// published figures, one per column.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ComparedRow {
+    /// The row's label in the paper (an ablation's row, or Table 1's method).
+    pub label: String,
+    /// The run whose scores fill it.
+    pub run: String,
+    /// The published figures, one per column.
+    pub published: Vec<f64>,
+}
+
 /// One of the paper's tables filled with our values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PaperComparison {
-    /// The published table (layout and figures).
-    pub table: &'static PaperTable,
+    /// The table's number in the paper.
+    pub number: u32,
+    /// What the table shows.
+    pub title: &'static str,
+    /// Where its published figures come from.
+    pub source: &'static str,
+    /// The columns, in the paper's order.
+    pub columns: &'static [PaperColumn],
+    /// The rows, each with its published figures.
+    pub rows: Vec<ComparedRow>,
     /// Our value per row and column of the table (NaN where unknown).
     pub ours: Vec<Vec<f64>>,
     /// Per row, whether its run is among the results.
@@ -51,15 +71,33 @@ impl PaperComparison {
     /// Fills `table` from `runs`, each column from the benchmark `matches` gives its data set
     /// (see the module doc).
     pub fn new(table: &'static PaperTable, runs: &[RunScores], matches: &[BenchmarkMatch]) -> Self {
-        let mut ours = Vec::with_capacity(table.rows.len());
-        let mut found = Vec::with_capacity(table.rows.len());
-        let mut spread = Vec::with_capacity(table.rows.len());
-        for row in table.rows {
+        let rows = table
+            .rows
+            .iter()
+            .map(|r| ComparedRow { label: r.label.into(), run: r.run.into(), published: r.values.to_vec() })
+            .collect();
+        Self::filled(table.number, table.title, PAPER_SOURCE, table.columns, rows, runs, matches)
+    }
+
+    /// A table of `rows` over `columns`, each row filled from the run of `runs` it names and each
+    /// column from the benchmark `matches` gives its data set.
+    pub fn filled(
+        number: u32,
+        title: &'static str,
+        source: &'static str,
+        columns: &'static [PaperColumn],
+        rows: Vec<ComparedRow>,
+        runs: &[RunScores],
+        matches: &[BenchmarkMatch],
+    ) -> Self {
+        let mut ours = Vec::with_capacity(rows.len());
+        let mut found = Vec::with_capacity(rows.len());
+        let mut spread = Vec::with_capacity(rows.len());
+        for row in &rows {
             let run = runs.iter().find(|r| r.run == row.run);
             found.push(run.is_some());
             let values = |of: fn(&RunScores) -> &Vec<(String, Metrics)>| -> Vec<f64> {
-                table
-                    .columns
+                columns
                     .iter()
                     .map(|c| {
                         let label = label_for(matches, c.benchmark);
@@ -72,7 +110,7 @@ impl PaperComparison {
             ours.push(values(|r| &r.scores));
             spread.push(values(|r| &r.spread));
         }
-        Self { table, ours, found, spread }
+        Self { number, title, source, columns, rows, ours, found, spread }
     }
 
     /// Whether any row's run is among the results.
@@ -83,7 +121,7 @@ impl PaperComparison {
     /// The column headings as the paper writes them: the benchmark before its first metric
     /// (`Midd-H EPE`, `D2`, `DS-Sunny EPE`, `D3`, ...).
     pub fn headings(&self) -> Vec<String> {
-        let columns = self.table.columns;
+        let columns = self.columns;
         columns
             .iter()
             .enumerate()
@@ -105,8 +143,8 @@ impl PaperComparison {
             lines.push(("ours std", self.spread[r].clone()));
         }
         if with_paper {
-            let paper = self.table.rows[r].values;
-            lines.push(("paper", paper.to_vec()));
+            let paper = &self.rows[r].published;
+            lines.push(("paper", paper.clone()));
             lines.push(("difference", self.ours[r].iter().zip(paper).map(|(o, p)| o - p).collect()));
         }
         lines
@@ -114,8 +152,7 @@ impl PaperComparison {
 
     /// The table as Markdown, values to the paper's two decimals (see the module doc).
     pub fn to_markdown(&self, with_paper: bool) -> String {
-        let t = self.table;
-        let mut s = format!("### Table {}: {}\n\n| row | run |", t.number, t.title);
+        let mut s = format!("### Table {}: {}\n\n| row | run |", self.number, self.title);
         if with_paper {
             s += " |";
         }
@@ -123,9 +160,9 @@ impl PaperComparison {
             let _ = write!(s, " {h} |");
         }
         s += if with_paper { "\n|---|---|---|" } else { "\n|---|---|" };
-        s += &"---:|".repeat(t.columns.len());
+        s += &"---:|".repeat(self.columns.len());
         s.push('\n');
-        for (r, row) in t.rows.iter().enumerate() {
+        for (r, row) in self.rows.iter().enumerate() {
             let run = if self.found[r] { format!("`{}`", row.run) } else { format!("`{}` (not run)", row.run) };
             let lines = self.lines(r, with_paper).into_iter().filter(|(source, _)| *source != "ours std");
             for (k, (source, values)) in lines.enumerate() {
@@ -147,7 +184,7 @@ impl PaperComparison {
             }
         }
         if with_paper {
-            let _ = write!(s, "\nPublished figures: {PAPER_SOURCE}.\n");
+            let _ = write!(s, "\nPublished figures: {}.\n", self.source);
         }
         s
     }
@@ -156,15 +193,14 @@ impl PaperComparison {
     /// row (`source` = `ours`), an `ours std` line for a row of several seeds and, `with_paper`,
     /// `paper` and `difference` lines; unknown values are empty cells.
     pub fn to_csv(&self, with_paper: bool) -> String {
-        let t = self.table;
         let mut s = String::from("row,run,source");
-        for c in t.columns {
+        for c in self.columns {
             let _ = write!(s, ",{} {}", c.heading, c.metric_heading);
         }
         s.push('\n');
-        for (r, row) in t.rows.iter().enumerate() {
+        for (r, row) in self.rows.iter().enumerate() {
             for (source, values) in self.lines(r, with_paper) {
-                let _ = write!(s, "{},{},{source}", csv_cell(row.label), csv_cell(row.run));
+                let _ = write!(s, "{},{},{source}", csv_cell(&row.label), csv_cell(&row.run));
                 for v in values {
                     s += &match (v.is_finite(), source) {
                         (false, _) => ",".to_string(),
@@ -219,7 +255,7 @@ pub fn write_paper_tables(
 ) -> Result<()> {
     write_atomic(&dir.join("paper-tables.md"), paper_tables_markdown(tables, matches, with_paper).as_bytes())?;
     for t in tables {
-        let path = dir.join(format!("paper-table{}.csv", t.table.number));
+        let path = dir.join(format!("paper-table{}.csv", t.number));
         write_atomic(&path, t.to_csv(with_paper).as_bytes())?;
     }
     Ok(())

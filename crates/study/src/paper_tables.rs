@@ -5,61 +5,21 @@
 //! Tables 2 to 5 (copied from `shared/reference/paper-tables.md`, which transcribes them). Every
 //! model there is trained on SceneFlow only and evaluated zero-shot with 32 GRU iterations; EPE in
 //! pixels, D1/D2/D3 the percentage of pixels whose error exceeds 1/2/3 px. The columns are the
-//! paper's, in its order; each names the data set it scores ([`PaperBenchmark`]: a data set kind
-//! and its split or weather, which a study's `[[benchmarks]]` entry matches whatever its name) and
+//! paper's, in its order; each names the data set it scores ([`PaperBenchmark`], the one of
+//! `dgstereo_eval::published`: a data set kind and its split or weather, which a study's
+//! `[[benchmarks]]` entry scoring it alone matches whatever its name) and
 //! the metric of `dgstereo_eval` it is ([`PaperColumn`]), and each row names the run of
 //! `experiments/` that trains it ([`PaperRow::run`]). Rows that the paper repeats across tables
 //! are one run: Table 3's Depth+DCN+both is Table 2's +DGIA, Table 4's Gradient-Guided is Table
 //! 2's +DGIA +gradient-GRU. Table 5's header labels every metric "D1"; its tau = 0.9 row is the
 //! paper's model with Table 1's D2/D3/D1 within rounding, so the columns are Table 1's.
 
-use dgstereo_data::datasets::{DrivingStereoWeather, MiddleburySplit};
-use dgstereo_eval::{BenchmarkConfig, DatasetKind};
+use dgstereo_data::datasets::DrivingStereoWeather;
+pub use dgstereo_eval::published::PaperBenchmark;
 
 /// Where the figures come from, for the tables' captions.
 pub const PAPER_SOURCE: &str =
     "Lin et al., \"Rethinking Monocular Depth Embedding for Generalized Stereo Matching\", Tables 2-5";
-
-/// The data set a column scores: one of the paper's benchmarks, as a data set kind and the
-/// split or weather that selects it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum PaperBenchmark {
-    /// Middlebury's MiddEval3 training set at half resolution (`middlebury`, split `H`).
-    MiddleburyH,
-    /// One weather of DrivingStereo (`drivingstereo`, `weather`).
-    DrivingStereo(DrivingStereoWeather),
-    /// KITTI 2015's training set (`kitti2015`).
-    Kitti2015,
-    /// ETH3D's two-view training set (`eth3d`).
-    Eth3d,
-}
-
-impl PaperBenchmark {
-    /// Whether `benchmark` scores this data set: the same data set kind and, where the paper's
-    /// selects one, the same split or weather. Its name plays no part.
-    pub fn matches(self, benchmark: &BenchmarkConfig) -> bool {
-        match self {
-            Self::MiddleburyH => {
-                benchmark.dataset == DatasetKind::Middlebury && benchmark.split == Some(MiddleburySplit::H)
-            }
-            Self::DrivingStereo(weather) => {
-                benchmark.dataset == DatasetKind::Drivingstereo && benchmark.weather == Some(weather)
-            }
-            Self::Kitti2015 => benchmark.dataset == DatasetKind::Kitti2015,
-            Self::Eth3d => benchmark.dataset == DatasetKind::Eth3d,
-        }
-    }
-
-    /// The `[[benchmarks]]` keys that select it (`dataset = "middlebury", split = "H"`).
-    pub fn keys(self) -> String {
-        match self {
-            Self::MiddleburyH => "dataset = \"middlebury\", split = \"H\"".to_string(),
-            Self::DrivingStereo(weather) => format!("dataset = \"drivingstereo\", weather = \"{weather}\""),
-            Self::Kitti2015 => "dataset = \"kitti2015\"".to_string(),
-            Self::Eth3d => "dataset = \"eth3d\"".to_string(),
-        }
-    }
-}
 
 /// A column of a table: a benchmark and one of its metrics.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -98,13 +58,15 @@ pub struct PaperTable {
     pub rows: &'static [PaperRow],
 }
 
-const fn column(
-    benchmark: PaperBenchmark,
-    heading: &'static str,
-    metric: &'static str,
-    metric_heading: &'static str,
-) -> PaperColumn {
-    PaperColumn { benchmark, metric, heading, metric_heading }
+/// The EPE column of `benchmark` (headings from [`PaperBenchmark::heading`]).
+const fn epe(benchmark: PaperBenchmark) -> PaperColumn {
+    PaperColumn { benchmark, metric: "epe", heading: benchmark.heading(), metric_heading: "EPE" }
+}
+
+/// The column of the bad-pixel rate the paper reports for `benchmark` ([`PaperBenchmark::rate`]).
+const fn rate(benchmark: PaperBenchmark) -> PaperColumn {
+    let (metric, metric_heading) = benchmark.rate();
+    PaperColumn { benchmark, metric, heading: benchmark.heading(), metric_heading }
 }
 
 const fn row(label: &'static str, run: &'static str, values: &'static [f64]) -> PaperRow {
@@ -118,20 +80,20 @@ const DS_RAINY: PaperBenchmark = PaperBenchmark::DrivingStereo(DrivingStereoWeat
 
 /// Table 2's columns: the four DrivingStereo weathers, EPE and D3 each.
 pub const DRIVINGSTEREO_COLUMNS: [PaperColumn; 8] = [
-    column(DS_SUNNY, "DS-Sunny", "epe", "EPE"),
-    column(DS_SUNNY, "DS-Sunny", "bad-3", "D3"),
-    column(DS_CLOUDY, "DS-Cloudy", "epe", "EPE"),
-    column(DS_CLOUDY, "DS-Cloudy", "bad-3", "D3"),
-    column(DS_FOGGY, "DS-Foggy", "epe", "EPE"),
-    column(DS_FOGGY, "DS-Foggy", "bad-3", "D3"),
-    column(DS_RAINY, "DS-Rainy", "epe", "EPE"),
-    column(DS_RAINY, "DS-Rainy", "bad-3", "D3"),
+    epe(DS_SUNNY),
+    rate(DS_SUNNY),
+    epe(DS_CLOUDY),
+    rate(DS_CLOUDY),
+    epe(DS_FOGGY),
+    rate(DS_FOGGY),
+    epe(DS_RAINY),
+    rate(DS_RAINY),
 ];
 
 /// The seven benchmarks of Tables 1, 3, 4 and 5, EPE and the benchmark's rate each.
 pub const GENERALISATION_COLUMNS: [PaperColumn; 14] = [
-    column(PaperBenchmark::MiddleburyH, "Midd-H", "epe", "EPE"),
-    column(PaperBenchmark::MiddleburyH, "Midd-H", "bad-2", "D2"),
+    epe(PaperBenchmark::MiddleburyH),
+    rate(PaperBenchmark::MiddleburyH),
     DRIVINGSTEREO_COLUMNS[0],
     DRIVINGSTEREO_COLUMNS[1],
     DRIVINGSTEREO_COLUMNS[2],
@@ -140,10 +102,10 @@ pub const GENERALISATION_COLUMNS: [PaperColumn; 14] = [
     DRIVINGSTEREO_COLUMNS[5],
     DRIVINGSTEREO_COLUMNS[6],
     DRIVINGSTEREO_COLUMNS[7],
-    column(PaperBenchmark::Kitti2015, "KITTI15", "epe", "EPE"),
-    column(PaperBenchmark::Kitti2015, "KITTI15", "bad-3", "D3"),
-    column(PaperBenchmark::Eth3d, "ETH3D", "epe", "EPE"),
-    column(PaperBenchmark::Eth3d, "ETH3D", "bad-1", "D1"),
+    epe(PaperBenchmark::Kitti2015),
+    rate(PaperBenchmark::Kitti2015),
+    epe(PaperBenchmark::Eth3d),
+    rate(PaperBenchmark::Eth3d),
 ];
 
 /// The paper's four ablation tables, in its order.

@@ -93,3 +93,17 @@ fn every_row_of_the_papers_tables_is_a_run_of_the_folder() {
         }
     }
 }
+
+#[test]
+fn runs_are_placed_in_table1_by_their_network() {
+    use dgstereo_study::paper_table1::table1_model;
+    let model = |file: &str| table1_model(&one(file)).map(|r| r.method);
+    assert_eq!(model("zoo/defom-vits.toml"), Some("DEFOM-Stereo"));
+    assert_eq!(model("zoo/defom-vits-train.toml"), Some("DEFOM-Stereo"));
+    assert_eq!(model("zoo/defom-vitl.toml"), Some("DEFOM-Stereo"));
+    assert_eq!(model("baseline.toml"), Some("RAFT-Stereo"));
+    assert_eq!(model("paper.toml"), Some("paper's model"));
+    // Ablation rows that are none of the table's models.
+    assert_eq!(model("depth-guided-gru.toml"), None);
+    assert_eq!(model("+dgia.toml"), None);
+}

@@ -4,9 +4,11 @@
 //! a column takes the benchmark that scores its data set, whatever the benchmark's name.
 
 use dgstereo_data::datasets::{DrivingStereoWeather, MiddleburySplit};
+use dgstereo_eval::published::TABLE1;
 use dgstereo_eval::{BenchmarkConfig, DatasetKind, Metrics};
 use dgstereo_study::paper_match::{BenchmarkMatch, match_benchmarks};
 use dgstereo_study::paper_report::{RunScores, compare_with_paper, paper_tables_markdown, write_paper_tables};
+use dgstereo_study::paper_table1::{published_figures, table1_comparison};
 use dgstereo_study::paper_tables::{DRIVINGSTEREO_COLUMNS, GENERALISATION_COLUMNS, PAPER_TABLES, PaperBenchmark};
 
 /// The benchmarks of `experiments/paper.toml`: its names, data sets, splits and weathers.
@@ -82,7 +84,7 @@ fn transcribed(text: &str, number: u32) -> Vec<(String, Vec<f64>)> {
     let section = &section[..section[3..].find("\n## ").map_or(section.len(), |e| e + 3)];
     section
         .lines()
-        .filter(|l| l.starts_with("| ") && !l.starts_with("| row"))
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| row") && !l.starts_with("| method"))
         .map(|l| {
             let cells: Vec<&str> = l.trim_matches('|').split('|').map(str::trim).collect();
             (cells[0].to_string(), cells[1..].iter().map(|c| c.parse().unwrap()).collect())
@@ -101,6 +103,50 @@ fn the_figures_equal_the_shared_transcription() {
             table.rows.iter().map(|r| (r.label.to_string(), r.values.to_vec())).collect();
         assert_eq!(ours, rows, "Table {}", table.number);
     }
+}
+
+#[test]
+fn table1_figures_equal_the_shared_transcription() {
+    let relative = "reference/paper-tables.md";
+    let Some(shared) = dgstereo_core::shared::shared_dir_for_test("paper_table1", relative) else { return };
+    let text = std::fs::read_to_string(shared.join(relative)).unwrap();
+    let ours: Vec<(String, Vec<f64>)> = TABLE1.iter().map(|r| (r.method.to_string(), published_figures(r))).collect();
+    assert_eq!(ours, transcribed(&text, 1));
+}
+
+#[test]
+fn runs_of_table1_models_fill_table1_beside_the_published_figures() {
+    let row = |method: &str| TABLE1.iter().find(|r| r.method == method).unwrap();
+    let models =
+        [("zoo/defom-vits-train".to_string(), row("DEFOM-Stereo")), ("baseline".to_string(), row("RAFT-Stereo"))];
+    let runs = [
+        RunScores {
+            run: "zoo/defom-vits-train".into(),
+            scores: vec![("middlebury-h".into(), metrics(0.9, 6.5)), ("kitti2015".into(), metrics(1.1, 5.0))],
+            spread: Vec::new(),
+        },
+        RunScores { run: "baseline".into(), scores: vec![("eth3d".into(), metrics(0.3, 2.0))], spread: Vec::new() },
+    ];
+    let table1 = table1_comparison(&models, &runs, &paper_matches()).expect("two runs of Table 1's models");
+    assert_eq!(table1.number, 1);
+    let labels: Vec<(&str, &str)> = table1.rows.iter().map(|r| (r.label.as_str(), r.run.as_str())).collect();
+    assert_eq!(labels, [("DEFOM-Stereo", "zoo/defom-vits-train"), ("RAFT-Stereo", "baseline")]);
+    assert_eq!(table1.found, [true, true]);
+    assert_eq!((table1.ours[0][0], table1.ours[0][1], table1.ours[0][10], table1.ours[0][11]), (0.9, 6.5, 1.1, 5.0));
+    assert!(table1.ours[0][2].is_nan() && table1.ours[1][0].is_nan());
+    assert_eq!(table1.ours[1][12..], [0.3, 2.0]);
+    let markdown = table1.to_markdown(true);
+    assert!(markdown.starts_with("### Table 1: zero-shot generalisation"), "{markdown}");
+    assert!(markdown.contains("| DEFOM-Stereo | `zoo/defom-vits-train` | ours | 0.90 | 6.50 | – |"), "{markdown}");
+    assert!(markdown.contains("| | | paper | 0.84 | 6.03 | 1.75 |"), "{markdown}");
+    assert!(markdown.contains("| | | difference | +0.06 | +0.47 | – |"), "{markdown}");
+    assert!(markdown.contains("| RAFT-Stereo | `baseline` | ours | – |"), "{markdown}");
+    assert!(markdown.contains("Published figures: Lin et al."), "{markdown}");
+    let csv = table1.to_csv(true);
+    let lines: Vec<&str> = csv.lines().collect();
+    assert!(lines[0].starts_with("row,run,source,Midd-H EPE,Midd-H D2,DS-Sunny EPE"), "{csv}");
+    assert!(lines[2].starts_with("DEFOM-Stereo,zoo/defom-vits-train,paper,0.84,6.03,1.75,8.73"), "{csv}");
+    assert!(table1_comparison(&[], &runs, &paper_matches()).is_none());
 }
 
 #[test]

@@ -13,6 +13,9 @@
 //! and the step reproduces an uninterrupted run exactly. [`run::train`] is the loop: logging
 //! (JSONL), [`progress`] events for the binary to draw, validation, plots and atomic checkpoints
 //! that keep the last N.
+//! DEFOM-Stereo's recipe adds two keys: `train.monocular_init` loads Depth Anything V2 weights
+//! into the monocular network ([`monocular_init`]) and `train.frozen` keeps parameters out of
+//! training ([`frozen`]).
 //! `train.ema_decay` adds a moving average of the weights ([`ema`]) that validation, checkpoints'
 //! model weights and the final model use. [`verify_step`] checks two steps against the official
 //! training loop. A study of many runs (scores, tables, the paper's layout) is the
@@ -36,7 +39,9 @@ pub mod checkpoint;
 pub mod clip;
 pub mod data_parallel;
 pub mod ema;
+pub mod frozen;
 pub mod gradient_exchange;
+pub mod monocular_init;
 pub mod params;
 pub mod plot;
 pub mod preflight;

@@ -28,7 +28,7 @@ fn absolute(path: &std::path::Path) -> std::path::PathBuf {
 }
 
 /// Checks that every file and folder a run of `parts` scored on `benchmarks` reads is there:
-/// the training sources (listed, with ground truth), `train.init`, and each benchmark (its
+/// the training sources (listed, with ground truth), `train.init` and `train.monocular_init`, and each benchmark (its
 /// folder holds pairs with ground truth, and every sample it scores passes
 /// [`SampleFiles::check_headers`](dgstereo_data::SampleFiles::check_headers)).
 ///
@@ -40,10 +40,12 @@ pub fn preflight(parts: &TrainParts, benchmarks: &[BenchmarkConfig]) -> Result<P
     TrainingData::new(&parts.data, &parts.train)?;
     // Weights names were resolved by the front end (`TrainParts::with_named_weights`).
     parts.check_named_weights_resolved()?;
-    if let Some(init) = &parts.train.init
-        && !init.is_file()
-    {
-        return Err(Error::config("train.init", format!("{}: no such file", absolute(init).display())));
+    for (key, weights) in [("train.init", &parts.train.init), ("train.monocular_init", &parts.train.monocular_init)] {
+        if let Some(file) = weights
+            && !file.is_file()
+        {
+            return Err(Error::config(key, format!("{}: no such file", absolute(file).display())));
+        }
     }
     let mut benchmark_pairs = Vec::with_capacity(benchmarks.len());
     for (i, b) in benchmarks.iter().enumerate() {

@@ -18,6 +18,8 @@ use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 use crate::batch::{TensorBatch, TrainingData};
 use crate::clip::clip_global_norm;
 use crate::ema::Ema;
+use crate::frozen::freeze;
+use crate::monocular_init::load_monocular_init;
 use crate::params::materialize;
 use crate::schedule::OneCycleLr;
 use crate::step_timing::StepSeconds;
@@ -69,8 +71,12 @@ impl TrainParts {
             Some(init) => Some(fetcher.resolve_stereo(&init, "train.init")?),
             None => None,
         };
+        let monocular_init = match self.train.monocular_init {
+            Some(weights) => Some(fetcher.resolve(&weights, dgstereo_weights::Role::Prior, "train.monocular_init")?),
+            None => None,
+        };
         let prior = fetcher.resolve_prior(self.prior, "prior.weights")?;
-        Ok(Self { prior, train: TrainingConfig { init, ..self.train }, ..self })
+        Ok(Self { prior, train: TrainingConfig { init, monocular_init, ..self.train }, ..self })
     }
 
     /// Checks that no official checkpoint's name is left unresolved
@@ -78,6 +84,9 @@ impl TrainParts {
     pub fn check_named_weights_resolved(&self) -> Result<()> {
         if let Some(init) = &self.train.init {
             dgstereo_weights::check_resolved(init, "train.init")?;
+        }
+        if let Some(weights) = &self.train.monocular_init {
+            dgstereo_weights::check_resolved(weights, "train.monocular_init")?;
         }
         dgstereo_weights::check_resolved_prior(&self.prior, "prior.weights")
     }
@@ -252,12 +261,21 @@ pub fn batch_metrics(prediction: Tensor<4>, gt: Tensor<4>, valid: Tensor<4>) -> 
 }
 
 impl Trainer {
-    /// A fresh run: weights initialised from `train.seed` on `device`.
+    /// A fresh run: weights initialised from `train.seed` on `device`, then the monocular
+    /// network's from `train.monocular_init` and the network's from `train.init`, as given.
     pub fn new(parts: TrainParts, device: &Device) -> Result<Self> {
         parts.validate()?;
         parts.check_named_weights_resolved()?;
         let model = init_model(&parts.model, device, Some(parts.train.seed))?;
         let mut notices = Vec::new();
+        let model = match &parts.train.monocular_init {
+            Some(weights) => {
+                let (model, notice) = load_monocular_init(model, weights)?;
+                notices.push(notice);
+                model
+            }
+            None => model,
+        };
         let model = match &parts.train.init {
             Some(path) => {
                 let (model, missing) = dgstereo_model::checkpoint::load_weights(model, path, parts.train.init_strict)
@@ -280,8 +298,9 @@ impl Trainer {
         Ok(trainer)
     }
 
-    /// A run from given weights (plain device), optimiser and step counter; with
-    /// `train.ema_decay`, the average starts at these weights.
+    /// A run from given weights (plain device), optimiser and step counter, the parameters of
+    /// `train.frozen` frozen ([`freeze`]); with `train.ema_decay`, the average starts at these
+    /// weights.
     pub fn with_model(
         parts: TrainParts,
         model: RaftStereo,
@@ -292,7 +311,7 @@ impl Trainer {
         parts.validate()?;
         parts.check_named_weights_resolved()?;
         let autodiff = device.clone().autodiff();
-        let model = model.fork(&autodiff).train();
+        let model = freeze(model.fork(&autodiff).train(), &parts.train.frozen)?;
         let schedule =
             OneCycleLr::new(parts.train.lr, parts.train.schedule_total_steps(), parts.train.warmup_fraction)?;
         let data = TrainingData::new(&parts.data, &parts.train)?;

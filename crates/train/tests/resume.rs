@@ -5,23 +5,10 @@ mod common;
 use std::path::Path;
 
 use dgstereo_core::default_device;
-use dgstereo_model::RaftStereo;
 use dgstereo_train::Trainer;
 use dgstereo_train::checkpoint::{list_checkpoints, load_checkpoint, save_checkpoint, write_atomic};
 use dgstereo_train::run::{RunOptions, checkpoint_dir, train};
 use dgstereo_train::trainer::init_model;
-
-fn weights(model: &RaftStereo) -> Vec<(String, Vec<f32>)> {
-    use burn::store::ModuleSnapshot;
-    model
-        .collect(None, None, true)
-        .into_iter()
-        .map(|t| {
-            let data = burn::store::bridge::to_data(&t).unwrap();
-            (t.name.clone(), data.convert::<f32>().try_to_vec::<f32>().unwrap())
-        })
-        .collect()
-}
 
 fn max_diff(a: &[(String, Vec<f32>)], b: &[(String, Vec<f32>)]) -> f32 {
     assert_eq!(a.len(), b.len());
@@ -63,7 +50,7 @@ fn stopped_and_resumed_run_equals_uninterrupted_run() {
     };
     let (a, b) = (load(&full), load(&split));
     assert_eq!((a.completed_steps(), b.completed_steps()), (6, 6));
-    let diff = max_diff(&weights(&a.inference_model()), &weights(&b.inference_model()));
+    let diff = max_diff(&common::weights(&a.inference_model()), &common::weights(&b.inference_model()));
     eprintln!("max |w_resumed - w_uninterrupted| = {diff:e}");
     assert!(diff <= 1e-6, "resumed weights differ by {diff}");
     // A training checkpoint also loads as plain weights (its optimiser state is skipped).
@@ -71,10 +58,10 @@ fn stopped_and_resumed_run_equals_uninterrupted_run() {
     let as_weights =
         dgstereo_model::checkpoint::load_safetensors(init_model(&parts.model, &device, None).unwrap(), &newest)
             .unwrap();
-    assert_eq!(max_diff(&weights(&as_weights), &weights(&a.inference_model())), 0.0);
+    assert_eq!(max_diff(&common::weights(&as_weights), &common::weights(&a.inference_model())), 0.0);
     // The weights did change over training, so equality is not trivial.
     let fresh = Trainer::new(parts.clone(), &device).unwrap();
-    assert!(max_diff(&weights(&fresh.inference_model()), &weights(&a.inference_model())) > 1e-4);
+    assert!(max_diff(&common::weights(&fresh.inference_model()), &common::weights(&a.inference_model())) > 1e-4);
     // Every logged step of the uninterrupted run was logged identically by the split run.
     let train_lines = |out: &Path| -> Vec<serde_json::Value> {
         std::fs::read_to_string(out.join("log.jsonl"))
@@ -100,7 +87,7 @@ fn interrupted_write_leaves_previous_checkpoint_readable() {
     let mut trainer = Trainer::new(parts.clone(), &device).unwrap();
     trainer.step().unwrap();
     let good = save_checkpoint(&trainer, dir.path(), 3).unwrap();
-    let good_weights = weights(&trainer.inference_model());
+    let good_weights = common::weights(&trainer.inference_model());
 
     // A run killed between write and rename leaves a partial temporary file.
     trainer.step().unwrap();
@@ -117,7 +104,7 @@ fn interrupted_write_leaves_previous_checkpoint_readable() {
     assert_eq!(listed, vec![(1, good.clone())], "only complete checkpoints are listed");
     let restored = load_checkpoint(parts.clone(), &good, &device).unwrap();
     assert_eq!(restored.completed_steps(), 1);
-    assert_eq!(max_diff(&weights(&restored.inference_model()), &good_weights), 0.0);
+    assert_eq!(max_diff(&common::weights(&restored.inference_model()), &good_weights), 0.0);
     // A truncated file under a checkpoint name is refused with a clear error, not a panic.
     let broken = dir.path().join("broken.safetensors");
     std::fs::write(&broken, &bytes[..100]).unwrap();

@@ -13,9 +13,11 @@
 //! checkpoints or a finished run of another configuration, are refused before anything is written
 //! (`study.json` included), so a wrong benchmark path costs seconds, not a trained row. Where a row is one of
 //! the paper's, the rows' means also fill the paper's four ablation tables (`paper-tables.md`,
-//! `paper-table{2,3,4,5}.csv`): rows are matched by run name and columns to benchmarks by data set
+//! `paper-table{2,3,4,5}.csv`), matched by run name; columns are matched to benchmarks by data set
 //! (kind and split or weather, [`dgstereo_study::paper_match`]), and `--paper` sets the published
-//! figures and our distance from them beside ours. A study stopped by a signal continues where it
+//! figures and our distance from them beside ours and lays every row whose network is a model of
+//! the paper's Table 1 (RAFT-Stereo, DEFOM-Stereo, the paper's model) out as Table 1
+//! (`paper-table1.csv`, [`dgstereo_study::paper_table1`]). A study stopped by a signal continues where it
 //! stopped when the same command runs again. The study is the `dgstereo-study` library
 //! ([`dgstereo_study::task`] for one run, [`dgstereo_study::collect()`] for the tables,
 //! [`dgstereo_study::slurm`] for `--launcher slurm`); this command parses flags, trains with the
@@ -240,7 +242,12 @@ fn show_collected(collected: &Collected, study: &Study, out: &std::path::Path) -
         for m in &collected.matches {
             println!("  {}", m.describe());
         }
-        println!("the paper's tables written to {}/paper-tables.md and paper-table{{2,3,4,5}}.csv", out.display());
+        let numbers: Vec<String> = collected.comparisons.iter().map(|t| t.number.to_string()).collect();
+        println!(
+            "the paper's tables written to {}/paper-tables.md and paper-table{{{}}}.csv",
+            out.display(),
+            numbers.join(",")
+        );
     } else if study.paper {
         let mut names: Vec<&str> = Vec::new();
         for row in PAPER_TABLES.iter().flat_map(|t| t.rows) {
@@ -249,8 +256,9 @@ fn show_collected(collected: &Collected, study: &Study, out: &std::path::Path) -
             }
         }
         println!(
-            "--paper: no row of this study is one of the paper's (its rows are the runs named {}), so there is \
-             nothing to set beside the published figures",
+            "--paper: no row of this study is one of the paper's (its rows are the runs named {}, and the runs of \
+             Table 1's models: RAFT-Stereo, DEFOM-Stereo, the paper's model), so there is nothing to set beside \
+             the published figures",
             names.join(", ")
         );
     }

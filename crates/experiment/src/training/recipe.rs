@@ -53,6 +53,19 @@ pub struct TrainingConfig {
     /// with guidance, when the paper's model starts from RAFT-Stereo weights). Keys the model
     /// lacks are always an error.
     pub init_strict: bool,
+    /// Depth Anything V2 weights loaded into the model's monocular network before `init`
+    /// (DEFOM-Stereo's `depth_anything_v2_vit{s,l}.pth`): an official Depth Anything V2 `.pth`
+    /// or a catalog name (`depth-anything-v2-small`). Non-strict as the official code: the ViT
+    /// (`pretrained.*`) and depth head (`depth_head.*`) come from the file, the feature trunk,
+    /// which the file lacks, keeps its initialisation, and keys the network lacks are ignored.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub monocular_init: Option<PathBuf>,
+    /// Module paths whose parameters do not train (no gradient, never changed by the
+    /// optimiser, its weight decay included): each entry is a path prefix such as
+    /// `monocular.pretrained`, and must name at least one parameter of the model.
+    /// DEFOM-Stereo freezes `monocular.pretrained` and `monocular.depth_head`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub frozen: Vec<String>,
     /// Decay of an exponential moving average of the weights (the trainer's `ema`), in `[0, 1)`;
     /// absent: no average. When set, validation, the checkpoints' model weights and the final
     /// `model.safetensors` are the average (e.g. 0.999: about the last thousand steps).
@@ -81,6 +94,8 @@ impl Default for TrainingConfig {
             validate_every: 5000,
             init: None,
             init_strict: true,
+            monocular_init: None,
+            frozen: Vec::new(),
             ema_decay: None,
         }
     }
@@ -118,6 +133,15 @@ impl TrainingConfig {
         for (key, v) in [("log_every", self.log_every), ("keep_checkpoints", self.keep_checkpoints)] {
             if v == 0 {
                 add(key, "must be at least 1".into());
+            }
+        }
+        for (i, prefix) in self.frozen.iter().enumerate() {
+            let bad = prefix.is_empty() || prefix.split('.').any(str::is_empty);
+            if bad {
+                add(
+                    &format!("frozen[{i}]"),
+                    format!("'{prefix}' is not a module path (dotted names, e.g. monocular.pretrained)"),
+                );
             }
         }
         if let Some(d) = self.ema_decay

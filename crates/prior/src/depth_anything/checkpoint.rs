@@ -70,22 +70,7 @@ pub fn load_into<M: ModuleSnapshot>(model: &mut M, encoder: DepthAnythingV2Encod
     let mut store = open_store(weights)?;
     let result = model.load_from(&mut store).map_err(|e| checkpoint_error(weights, e.to_string()))?;
     if let Some(error) = result.errors.first() {
-        let message = match error {
-            ApplyError::ShapeMismatch { path, expected, found } => format!(
-                "key '{}' has shape {:?}, the {} model expects {:?}",
-                checkpoint_key(path),
-                found.to_vec(),
-                encoder,
-                expected.to_vec()
-            ),
-            ApplyError::DTypeMismatch { path, expected, found } => {
-                format!("key '{}' has dtype {found:?}, expected {expected:?}", checkpoint_key(path))
-            }
-            ApplyError::AdapterError { path, message } | ApplyError::LoadError { path, message } => {
-                format!("key '{}': {message}", checkpoint_key(path))
-            }
-        };
-        return Err(checkpoint_error(weights, message));
+        return Err(checkpoint_error(weights, apply_error_message(error, encoder)));
     }
     if let Some((path, _)) = result.missing.first() {
         return Err(checkpoint_error(
@@ -110,6 +95,73 @@ pub fn load_into<M: ModuleSnapshot>(model: &mut M, encoder: DepthAnythingV2Encod
         ));
     }
     Ok(())
+}
+
+/// What the first error of a load says, naming the checkpoint key.
+fn apply_error_message(error: &ApplyError, encoder: DepthAnythingV2Encoder) -> String {
+    match error {
+        ApplyError::ShapeMismatch { path, expected, found } => format!(
+            "key '{}' has shape {:?}, the {} model expects {:?}",
+            checkpoint_key(path),
+            found.to_vec(),
+            encoder,
+            expected.to_vec()
+        ),
+        ApplyError::DTypeMismatch { path, expected, found } => {
+            format!("key '{}' has dtype {found:?}, expected {expected:?}", checkpoint_key(path))
+        }
+        ApplyError::AdapterError { path, message } | ApplyError::LoadError { path, message } => {
+            format!("key '{}': {message}", checkpoint_key(path))
+        }
+    }
+}
+
+/// What [`load_partial_into`] did.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PartialLoad {
+    /// Parameters loaded from the file (module paths).
+    pub loaded: usize,
+    /// Parameters the file lacks, which keep their values (checkpoint keys).
+    pub kept: Vec<String>,
+    /// Keys of the file the module lacks, ignored.
+    pub ignored: Vec<String>,
+}
+
+/// Loads the tensors of `weights` that `model` has, as PyTorch's `load_state_dict(strict=False)`
+/// does: keys the module lacks are ignored and parameters the file lacks keep their values, but
+/// a tensor of another shape is an error. Every parameter whose checkpoint key starts with one
+/// of `required` (`"pretrained."`) must come from the file.
+///
+/// # Errors
+/// [`Error::Io`] when the file is missing; [`Error::Checkpoint`] naming the first key of the
+/// wrong shape or dtype, or the first required key the file lacks.
+pub fn load_partial_into<M: ModuleSnapshot>(
+    model: &mut M,
+    encoder: DepthAnythingV2Encoder,
+    weights: &Path,
+    required: &[&str],
+) -> Result<PartialLoad> {
+    let mut store = open_store(weights)?;
+    let result = model.load_from(&mut store).map_err(|e| checkpoint_error(weights, e.to_string()))?;
+    if let Some(error) = result.errors.first() {
+        return Err(checkpoint_error(weights, apply_error_message(error, encoder)));
+    }
+    let mut kept: Vec<String> = result.missing.iter().map(|(path, _)| checkpoint_key(path)).collect();
+    kept.sort();
+    let lacking: Vec<&String> = kept.iter().filter(|k| required.iter().any(|r| k.starts_with(r))).collect();
+    if let Some(first) = lacking.first() {
+        return Err(checkpoint_error(
+            weights,
+            format!(
+                "missing key '{first}' (and {} more of {}) for the {encoder} model: not a Depth Anything V2 \
+                 {encoder} checkpoint?",
+                lacking.len() - 1,
+                required.join(", ")
+            ),
+        ));
+    }
+    let ignored = result.unused.iter().map(|path| checkpoint_key(path)).collect();
+    Ok(PartialLoad { loaded: result.applied.len(), kept, ignored })
 }
 
 /// The checkpoint's keys with their shapes, sorted by key.

@@ -19,6 +19,7 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::MonocularFeatures;
 use dgstereo_kernels::resize_bilinear;
 
+use super::checkpoint::{PartialLoad, load_partial_into};
 use super::dinov2::{DinoVisionTransformer, IntermediateLayer, PATCH_SIZE};
 use super::dpt::{DptHead, FeatureFusionBlock, adapt, conv, conv_transpose, reassemble, spatial};
 use super::encoder::DepthAnythingV2Encoder;
@@ -175,6 +176,21 @@ impl DepthAnythingV2Features {
     /// The width `F` of the features it hands on (`features`: 64, 128, 256).
     pub fn feature_channels(&self) -> usize {
         self.encoder.features()
+    }
+
+    /// Loads an official Depth Anything V2 checkpoint (`depth_anything_v2_vit{s,b,l}.pth`) as
+    /// DEFOM-Stereo's `DefomEncoder` does before training (`strict=False`): the ViT
+    /// (`pretrained.*`) and the depth head (`depth_head.*`) come from the file and must all be
+    /// there with their shapes; the feature trunk (`depth_feat.*`), which such a file lacks,
+    /// keeps its values, and keys the network lacks are ignored.
+    ///
+    /// # Errors
+    /// [`dgstereo_core::Error::Io`] when the file is missing, [`dgstereo_core::Error::Checkpoint`]
+    /// naming the first key of another shape (a checkpoint of another size) or the first ViT or
+    /// head key the file lacks.
+    pub fn load_depth_anything(&mut self, weights: &std::path::Path) -> dgstereo_core::Result<PartialLoad> {
+        let encoder = self.encoder;
+        load_partial_into(self, encoder, weights, &["pretrained.", "depth_head."])
     }
 
     /// DEFOM-Stereo's `DefomEncoder` up to the disparity initialisation: both views (ImageNet-

@@ -189,7 +189,7 @@ fn recipe_lines(recipe: &TrainParts, reference: &TrainStepReference) -> Result<V
     let gamma: f64 = reference.meta("loss_gamma")?;
     let max_flow: f64 = reference.meta("max_flow")?;
     match recipe.loss {
-        LossConfig::SequenceL1 { gamma: g, max_disparity } => {
+        LossConfig::SequenceL1 { gamma: g, max_disparity, .. } => {
             number("loss.gamma", g, gamma);
             number("loss.max_disparity", max_disparity, max_flow);
         }

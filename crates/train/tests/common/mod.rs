@@ -4,7 +4,7 @@
 
 use dgstereo_experiment::{DataSource, SyntheticScenes, TrainingConfig, TrainingDataConfig, ValidationConfig};
 use dgstereo_loss::LossConfig;
-use dgstereo_model::ModelConfig;
+use dgstereo_model::{ModelConfig, RaftStereo};
 use dgstereo_prior::PriorConfig;
 use dgstereo_train::TrainParts;
 
@@ -55,4 +55,17 @@ pub fn tiny_parts(steps: usize, iters: usize, lr: f64, count: Option<usize>, bat
         data,
         resolved_toml: "# tiny test run\n".into(),
     }
+}
+
+/// Every tensor of `model` by module path, as `f32` values.
+pub fn weights(model: &RaftStereo) -> Vec<(String, Vec<f32>)> {
+    use burn::store::ModuleSnapshot;
+    model
+        .collect(None, None, true)
+        .into_iter()
+        .map(|t| {
+            let data = burn::store::bridge::to_data(&t).unwrap();
+            (t.name.clone(), data.convert::<f32>().try_to_vec::<f32>().unwrap())
+        })
+        .collect()
 }
