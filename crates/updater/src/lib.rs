@@ -13,6 +13,10 @@
 //! ([`MotionKind`]), clip each additive update to the lookup's reach (`delta_clip`), and run a
 //! second block first ([`ScaleUpdateConfig`]) whose head multiplies the disparity
 //! ([`HeadOutput::Scale`]).
+//!
+//! IGEV-Stereo's block is the same with the disparity motion and, for its superpixel
+//! upsampling ([`UpsamplingKind::Superpixel`]), a mask-feature head (`mask_feat_4`) in place of
+//! the convex-upsampling weights.
 #![deny(missing_docs)]
 
 pub mod block;
@@ -26,7 +30,7 @@ use dgstereo_core::tensor::cast_float;
 use dgstereo_core::{Probe, Problem};
 use serde::{Deserialize, Serialize};
 
-pub use block::MultiLevelUpdateBlock;
+pub use block::{MaskFeatureHead, MultiLevelUpdateBlock};
 pub use dgstereo_kernels::convex_upsample;
 pub use gru::{ConvGru, GateContext};
 pub use guidance::{GuidanceKind, gradient_feature};
@@ -92,8 +96,9 @@ pub trait Updater {
         probe: &mut Probe<'_>,
     ) -> UpdateOutput;
 
-    /// The convex-upsampling weights of the current state, `[N, 9·f², H, W]` (logits already
-    /// scaled by 0.25).
+    /// The upsampling's input from the current state: the convex-upsampling weights, `[N, 9·f²,
+    /// H, W]` (logits already scaled by 0.25), or for [`UpsamplingKind::Superpixel`] the mask
+    /// feature, `[N, 32, H, W]`.
     ///
     /// Separate from [`Updater::step`] because the mask never feeds back into the state: a
     /// caller computes it only for the iterations whose full-resolution flow it needs (the last
@@ -130,6 +135,37 @@ pub struct UpdaterConfig {
     /// A scale update block run for the first iterations (DEFOM-Stereo); none in RAFT-Stereo.
     #[serde(default)]
     pub scale_update: Option<ScaleUpdateConfig>,
+    /// How the update grid's disparity reaches full resolution, which decides the block's
+    /// second head.
+    #[serde(default)]
+    pub upsampling: UpsamplingKind,
+}
+
+/// How the loop's state is upsampled to full resolution, and so what the update block's second
+/// head gives ([`Updater::upsample_mask`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum UpsamplingKind {
+    /// RAFT-Stereo's convex upsampling: the head (`mask`) gives `9·f²` weights per pixel.
+    #[default]
+    Convex,
+    /// IGEV-Stereo's superpixel upsampling: the head (`mask_feat_4`, a 3x3 convolution and a
+    /// ReLU) gives a 32-channel feature from which the network's upsampler derives 9 weights
+    /// per full-resolution pixel.
+    Superpixel,
+}
+
+impl UpsamplingKind {
+    /// Every kind, in the order of the enum.
+    pub const ALL: [Self; 2] = [Self::Convex, Self::Superpixel];
+
+    /// The name the TOML key `upsampling` writes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Convex => "convex",
+            Self::Superpixel => "superpixel",
+        }
+    }
 }
 
 /// DEFOM-Stereo's scale update: a second update block, reading the correlation's scale lookup,
@@ -175,6 +211,7 @@ impl Default for UpdaterConfig {
             motion: MotionKind::Flow,
             delta_clip: false,
             scale_update: None,
+            upsampling: UpsamplingKind::Convex,
         }
     }
 }
