@@ -92,6 +92,12 @@ impl ModelConfig {
                  that uses it",
             ));
         }
+        if self.initial_disparity.needs_geometry() && self.correlation.geometry.is_none() {
+            problems.push(Problem::new(
+                "initial_disparity.kind",
+                "\"soft-argmin\" reads the geometry encoding volume: set model.correlation.geometry",
+            ));
+        }
         if self.updater.scale_update.is_some() && self.correlation.scale_lookup.is_none() {
             problems.push(Problem::new(
                 "updater.scale_update",

@@ -30,7 +30,7 @@ impl RaftStereo {
         probe: &mut Probe<'_>,
     ) -> dgstereo_core::Result<Encodings> {
         let monocular = self.monocular_features(left.clone(), right.clone(), probe);
-        let initial = self.initial_disparity.disparity(monocular.as_ref())?;
+        let initial = self.initial_disparity.disparity(monocular.as_ref(), None)?;
         if let Some(d) = &initial {
             probe.record("initial_disparity", d);
         }

@@ -22,6 +22,7 @@ pub mod config;
 pub mod defom_config;
 mod encode;
 pub mod file_keys;
+pub mod igev_keys;
 pub mod grown_inputs;
 pub mod inference;
 pub mod initial_disparity;

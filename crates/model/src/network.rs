@@ -25,7 +25,7 @@ use dgstereo_core::device::float_dtype;
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::tensor::cast_float;
 use dgstereo_core::{DepthPrior, Error};
-use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementation, CostVolume};
+use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementation, CostVolume, GeometryEncoding};
 use dgstereo_encoder::Encoders;
 use dgstereo_fusion::{Fusion, FusionTarget};
 use dgstereo_kernels::UpdateLoop;
@@ -53,6 +53,9 @@ pub struct RaftStereo {
     pub fusion: Fusion,
     /// Feature and context encoders, separate or with a shared backbone.
     pub encoder: Encoders,
+    /// IGEV-Stereo's geometry encoding volume (the reference's top-level `conv`, `desc`,
+    /// `corr_stem`, `corr_feature_att`, `cost_agg`, `classifier`); none in RAFT-Stereo.
+    pub geometry: Option<GeometryEncoding>,
     /// Per level, the 3x3 convolution giving the GRU's context terms `cz, cr, cq`.
     pub context_zqr_convs: Vec<Conv2d>,
     /// The update operator.
@@ -187,6 +190,7 @@ impl RaftStereo {
                 .encoder
                 .init(dims, u.n_downsample, depth_channels, device)
                 .map_err(|e| e.within("encoder"))?,
+            geometry: c.geometry.as_ref().map(|g| g.init(device)),
             // Level `i` counts from the finest (1/4, `hidden_dims[2]`) as the context does.
             context_zqr_convs: (0..u.n_gru_layers)
                 .map(|i| {
@@ -344,7 +348,8 @@ impl RaftStereo {
 
     /// Stage 3, one iteration's lookup: the cost volume sampled around each pixel's match at
     /// `x + f` for the x flow `f`, `x - d` for the disparity `d` (the loop's `state`:
-    /// `[N, 1, H/f, W/f]`, f32), in the update block's dtype.
+    /// `[N, 1, H/f, W/f]`, f32; the geometry volume also at `d` itself), in the update block's
+    /// dtype.
     pub(crate) fn lookup(
         &self,
         corr_fn: &Correlation,
@@ -352,11 +357,14 @@ impl RaftStereo {
         state: Tensor<4>,
         probe: &mut Probe<'_>,
     ) -> Tensor<4> {
-        let at = match self.motion {
-            MotionKind::Flow => grid.coords0.clone() + state,
-            MotionKind::Disparity => grid.coords0.clone() - state,
-        };
-        probe.time("correlation lookup", || cast_float(corr_fn.lookup(at), grid.dtype))
+        let coords0 = grid.coords0.clone();
+        probe.time("correlation lookup", || {
+            let corr = match self.motion {
+                MotionKind::Flow => corr_fn.lookup(coords0 + state),
+                MotionKind::Disparity => corr_fn.lookup_disparity(coords0, state),
+            };
+            cast_float(corr, grid.dtype)
+        })
     }
 
     /// Stage 3 of a scale iteration: the correlation's scale lookup around the matches of the
