@@ -19,10 +19,10 @@ use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_costvolume::{CombinedGeometryVolume, GeometryEncoding, GeometryVolume};
 use dgstereo_model::seeded::golden_state_dict;
-use dgstereo_model::verify::{FEATURE_TOLERANCE, ReferenceTensors, read_reference};
 use dgstereo_model::updater::{
     GateContext, HeadOutput, MotionKind, MultiLevelUpdateBlock, Updater, UpdaterConfig, UpsamplingKind,
 };
+use dgstereo_model::verify::{FEATURE_TOLERANCE, ReferenceTensors, read_reference};
 use dgstereo_suite::shared_dir_for_test;
 
 const GOLDEN: &str = "golden/igev_stereo_seeded.activations.safetensors";
@@ -95,7 +95,10 @@ fn assert_matches<const D: usize>(actual: Tensor<D>, refs: &ReferenceTensors, ke
 fn recorded_features(refs: &ReferenceTensors, device: &Device) -> (Vec<Tensor<4>>, Tensor<4>) {
     let quarter = |call: usize| {
         Tensor::cat(
-            vec![tensor(refs, &format!("feature.call{call}.0"), device), tensor(refs, &format!("stem_4.call{call}"), device)],
+            vec![
+                tensor(refs, &format!("feature.call{call}.0"), device),
+                tensor(refs, &format!("stem_4.call{call}"), device),
+            ],
             1,
         )
     };
@@ -151,7 +154,8 @@ fn the_update_block_matches_the_reference_on_the_recorded_volume() {
     ];
     let block = load(block, &path, under("update_block."), &renames, true);
 
-    let mut hidden: Vec<Tensor<4>> = (0..3).map(|i| tanh(tensor(&refs, &format!("cnet.call0.{i}.0"), &device))).collect();
+    let mut hidden: Vec<Tensor<4>> =
+        (0..3).map(|i| tanh(tensor(&refs, &format!("cnet.call0.{i}.0"), &device))).collect();
     let gates: Vec<GateContext> = (0..3)
         .map(|i| {
             let conv = burn::nn::conv::Conv2dConfig::new([128, 384], [3, 3])
@@ -169,8 +173,7 @@ fn the_update_block_matches_the_reference_on_the_recorded_volume() {
     assert_eq!(calls, 4);
     for k in 0..calls {
         let corr = combined.lookup(coords0.clone(), disparity.clone());
-        let update =
-            block.step(&mut hidden, &gates, corr, disparity.clone(), None, &mut dgstereo_core::Probe::none());
+        let update = block.step(&mut hidden, &gates, corr, disparity.clone(), None, &mut dgstereo_core::Probe::none());
         for (i, state) in hidden.iter().enumerate() {
             assert_matches(state.clone(), &refs, &format!("update_block.call{k}.0.{i}"));
         }

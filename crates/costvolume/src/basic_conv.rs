@@ -145,7 +145,10 @@ pub struct BasicConv2d {
 impl BasicConv2d {
     /// A `kernel²` convolution of `channels` (`[in, out]`), stride 1, with `padding`.
     pub fn new(channels: [usize; 2], kernel: usize, padding: usize, device: &Device) -> Self {
-        Self { conv: conv2d_without_bias(channels, kernel, padding, device), bn: FrozenBatchNorm::new(channels[1], device) }
+        Self {
+            conv: conv2d_without_bias(channels, kernel, padding, device),
+            bn: FrozenBatchNorm::new(channels[1], device),
+        }
     }
 
     /// Convolution, batch norm, leaky ReLU.

@@ -136,7 +136,13 @@ fn default_radius() -> usize {
 
 impl Default for CorrelationConfig {
     fn default() -> Self {
-        Self { implementation: CorrelationImplementation::Reg, levels: 4, radius: 4, scale_lookup: None, geometry: None }
+        Self {
+            implementation: CorrelationImplementation::Reg,
+            levels: 4,
+            radius: 4,
+            scale_lookup: None,
+            geometry: None,
+        }
     }
 }
 

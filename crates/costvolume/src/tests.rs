@@ -191,9 +191,14 @@ fn kernel_follows_the_device() {
 #[test]
 fn on_the_fly_kernel_follows_the_device() {
     let (n, c, h, w) = (1, 4, 2, 6);
-    let alt =
-        CorrelationConfig { implementation: CorrelationImplementation::Alt, levels: 2, radius: 1, scale_lookup: None, geometry: None }
-            .build(features(n, c, h, w, 1), features(n, c, h, w, 2));
+    let alt = CorrelationConfig {
+        implementation: CorrelationImplementation::Alt,
+        levels: 2,
+        radius: 1,
+        scale_lookup: None,
+        geometry: None,
+    }
+    .build(features(n, c, h, w, 1), features(n, c, h, w, 2));
     let Correlation::Alt(alt) = alt else { panic!("an Alt config builds the on-the-fly volume") };
     assert_eq!(alt.path(), Path::Host);
 
@@ -242,8 +247,13 @@ fn lookup_at_integer_offsets_equals_direct_dot_products() {
     let (n, c, h, w, r) = (1, 8, 2, 12, 3);
     let f1 = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
     let f2 = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
-    let cfg =
-        CorrelationConfig { implementation: CorrelationImplementation::Reg, levels: 2, radius: r, scale_lookup: None, geometry: None };
+    let cfg = CorrelationConfig {
+        implementation: CorrelationImplementation::Reg,
+        levels: 2,
+        radius: r,
+        scale_lookup: None,
+        geometry: None,
+    };
     let disparity = 2usize;
     let coords: Vec<f32> = (0..h * w).map(|i| (i % w) as f32 - disparity as f32).collect();
     let out = to_vec(cfg.build(f1.clone(), f2.clone()).lookup(from_vec(coords, [n, 1, h, w], &device)));
@@ -309,7 +319,13 @@ fn scale_lookup_samples_level_zero_at_scaled_matches() {
     let expected = from_vec(expected, [n, channels, h, w], &device);
     for implementation in [CorrelationImplementation::Reg, CorrelationImplementation::Alt] {
         for pinned in [Path::Host, Path::Stock] {
-            let cfg = CorrelationConfig { implementation, levels: 2, radius: 4, scale_lookup: Some(lookup.clone()), geometry: None };
+            let cfg = CorrelationConfig {
+                implementation,
+                levels: 2,
+                radius: 4,
+                scale_lookup: Some(lookup.clone()),
+                geometry: None,
+            };
             let volume = with_path(pinned, || cfg.build(f1.clone(), f2.clone()));
             let out = with_path(pinned, || {
                 volume.scale_lookup(

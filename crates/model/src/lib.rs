@@ -22,8 +22,9 @@ pub mod config;
 pub mod defom_config;
 mod encode;
 pub mod file_keys;
-pub mod igev_keys;
+mod geometry_stage;
 pub mod grown_inputs;
+pub mod igev_keys;
 pub mod inference;
 pub mod initial_disparity;
 pub mod network;
@@ -33,6 +34,7 @@ pub mod seeded;
 pub mod stage_backward;
 pub mod verify;
 pub mod verify_defom;
+pub mod verify_igev;
 
 pub use config::{EncoderConfig, ModelConfig};
 pub use inference::{StereoModel, padded_disparities};

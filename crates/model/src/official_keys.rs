@@ -70,7 +70,8 @@ pub fn model_official_keys(model: &RaftStereo) -> Vec<KeyShape> {
     let mut keys: Vec<KeyShape> = tensors
         .iter()
         .map(|t| {
-            let path = igev.patterns.iter().fold(t.name.clone(), |k, (p, r)| p.replace_all(&k, r.as_str()).into_owned());
+            let path =
+                igev.patterns.iter().fold(t.name.clone(), |k, (p, r)| p.replace_all(&k, r.as_str()).into_owned());
             (official_key_of_module_path(&path), t.shape.to_vec())
         })
         .collect();
