@@ -37,7 +37,7 @@ impl RaftStereo {
         let mut inputs = self.fuse(left, right, prior, probe)?;
         // Only encoders that add the features get them (the initialiser may be their only reader).
         inputs.depth = monocular.filter(|_| self.encoder.takes_depth_features());
-        let Encoded { fmap1, fmap2, context } = self.encoder.encode(inputs, self.n_gru_layers, probe)?;
+        let Encoded { fmap1, fmap2, context, .. } = self.encoder.encode(inputs, self.n_gru_layers, probe)?;
         probe.record("fnet.left", &fmap1);
         probe.record("fnet.right", &fmap2);
         let (hidden, gates) = self.gru_context(context, probe);
