@@ -11,17 +11,20 @@
 use std::path::{Path, PathBuf};
 
 use burn::store::burn_pack::Tensor as PackTensor;
-use burn::store::{KeyRemapper, ModuleSnapshot, PyTorchToBurnAdapter, bridge};
+use burn::store::{BurnToPyTorchAdapter, KeyRemapper, ModuleSnapshot, PyTorchToBurnAdapter, bridge};
 use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Tensor, TensorData};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
-use dgstereo_encoder::official_keys::IGEV_ENCODER_RENAMES;
+use dgstereo_encoder::official_keys::{IGEV_ENCODER_INVERSE_RENAMES, IGEV_ENCODER_RENAMES};
 use dgstereo_encoder::{EncoderConfig, Encoders, FeatureNetwork, PyramidEncoders};
+use dgstereo_model::official_keys::official_key_of_module_path;
 use dgstereo_model::seeded::golden_state_dict;
 use dgstereo_model::verify::{ReferenceTensors, read_reference};
 use dgstereo_suite::shared_dir_for_test;
-use dgstereo_updater::superpixel::{SUPERPIXEL_RENAMES, SuperpixelUpsampler, context_upsample};
+use dgstereo_updater::superpixel::{
+    SUPERPIXEL_INVERSE_RENAMES, SUPERPIXEL_RENAMES, SuperpixelUpsampler, context_upsample,
+};
 
 const GOLDEN: &str = "golden/igev_stereo_seeded.activations.safetensors";
 /// Tolerance on features, relative to the reference tensor's largest magnitude.
@@ -177,4 +180,50 @@ fn igev_superpixel_upsampling_matches() {
         println!("disparity.iter{k}: {error:.2e} px");
         assert!(error <= DISPARITY_TOLERANCE, "disparity.iter{k} off by {error} px");
     }
+}
+
+/// Our module paths, through RAFT-Stereo's inverse renames and then IGEV's, are the official
+/// keys of these modules, each once (the redundant `downsample.1.*` and `num_batches_tracked`
+/// aside): the listing of an IGEV checkpoint's keys can be derived from the modules.
+#[test]
+fn igev_module_paths_map_back_to_the_official_keys() {
+    let Some(path) = golden("igev_module_paths_map_back_to_the_official_keys") else { return };
+    let device = default_device();
+    let (state, _) = golden_state_dict(&path).unwrap();
+    let official = |prefixes: &[&str]| {
+        let mut keys: Vec<(String, Vec<usize>)> = state
+            .iter()
+            .filter(|t| prefixes.iter().any(|p| t.key.starts_with(p)))
+            .filter(|t| !t.key.contains("downsample.1.") && !t.key.ends_with("num_batches_tracked"))
+            .map(|t| (t.key.clone(), t.shape.clone()))
+            .collect();
+        keys.sort();
+        keys
+    };
+    let ours = |module: &dyn Fn() -> Vec<PackTensor>, inverse: &[(&str, &str)]| {
+        let inverse = KeyRemapper::from_patterns(inverse.to_vec()).unwrap();
+        let mut keys: Vec<(String, Vec<usize>)> = module()
+            .iter()
+            .map(|t| {
+                let mut key = official_key_of_module_path(&t.name);
+                for (pattern, replacement) in inverse.patterns.iter() {
+                    key = pattern.replace_all(&key, replacement.as_str()).into_owned();
+                }
+                (key, t.shape.to_vec())
+            })
+            .collect();
+        keys.sort();
+        keys
+    };
+    let config = EncoderConfig { feature_network: FeatureNetwork::MobilenetPyramid, ..Default::default() };
+    let Encoders::Pyramid(encoders) = config.init([128; 3], 2, None, &device).unwrap() else { unreachable!() };
+    let encoders = || encoders.collect(None, Some(Box::new(BurnToPyTorchAdapter)), false);
+    let encoder_keys: Vec<_> = ours(&encoders, IGEV_ENCODER_INVERSE_RENAMES);
+    assert_eq!(encoder_keys, official(&["feature.", "stem_2.", "stem_4.", "cnet."]));
+    let up = SuperpixelUpsampler::new(&device);
+    let up = || up.collect(None, Some(Box::new(BurnToPyTorchAdapter)), false);
+    assert_eq!(
+        ours(&up, SUPERPIXEL_INVERSE_RENAMES),
+        official(&["spx.", "spx_2.", "spx_4.", "spx_2_gru.", "spx_gru."])
+    );
 }
