@@ -11,8 +11,8 @@ use std::process::Command;
 
 use burn::backend::capture::CaptureBackend;
 use burn::tensor::module::{
-    attention, avg_pool2d, conv_transpose2d, conv2d, deform_conv2d, interpolate, layer_norm, linear, max_pool2d,
-    unfold4d,
+    attention, avg_pool2d, conv_transpose2d, conv_transpose3d, conv2d, conv3d, deform_conv2d, interpolate, layer_norm,
+    linear, max_pool2d, unfold4d,
 };
 use burn::tensor::ops::{
     AttentionModuleOptions, AvgPoolOptions, ConvOptions, ConvTransposeOptions, DeformConvOptions, InterpolateMode,
@@ -125,6 +125,29 @@ fn cases() -> Vec<(&'static str, Vec<[usize; 4]>, Program)> {
             let grouped = ConvTransposeOptions::new([2, 2], [1, 1], [1, 1], [1, 1], 2);
             let half = conv_transpose2d(x[0].clone(), x[1].clone().narrow(1, 0, 2), None, grouped);
             up.slice([0..1, 0..3, 0..7, 0..11]) + half.slice([0..1, 0..3, 0..7, 0..11])
+        }),
+        // A 3D cost-volume network's blocks (IGEV-Stereo's geometry encoding volume); the
+        // volumes `[N, C, D, H, W]` travel as `[N, C, D·H, W]`.
+        ("leaky_relu", vec![s], |x| burn::tensor::activation::leaky_relu(x[0].clone(), 0.01)),
+        ("conv3d", vec![[1, 4, 15, 6], [6, 2, 9, 3], [1, 1, 1, 6]], |x| {
+            let volume = x[0].clone().reshape([1, 4, 3, 5, 6]);
+            let weight = x[1].clone().reshape([6, 2, 3, 3, 3]);
+            let bias = x[2].clone().reshape([6]);
+            let grouped = ConvOptions::new([1, 2, 1], [1, 1, 1], [1, 1, 2], 2);
+            let y = conv3d(volume.clone(), weight.clone(), Some(bias), grouped);
+            let plain = ConvOptions::new([1, 1, 1], [1, 1, 1], [1, 1, 1], 2);
+            let z = conv3d(volume, weight, None, plain);
+            let [_, c, d, h, w] = y.dims();
+            y.reshape([1, c, d * h, w]) + z.slice([0..1, 0..6, 0..3, 0..3, 0..4]).reshape([1, 6, 9, 4])
+        }),
+        ("conv_transpose3d", vec![[1, 4, 6, 4], [4, 3, 16, 4], [1, 1, 1, 3]], |x| {
+            let volume = x[0].clone().reshape([1, 4, 2, 3, 4]);
+            let weight = x[1].clone().reshape([4, 3, 4, 4, 4]);
+            let bias = x[2].clone().reshape([3]);
+            let up = ConvTransposeOptions::new([2, 2, 2], [1, 1, 1], [0, 0, 0], [1, 1, 1], 1);
+            let y = conv_transpose3d(volume, weight, Some(bias), up);
+            let [_, c, d, h, w] = y.dims();
+            y.reshape([1, c, d * h, w])
         }),
     ]
 }

@@ -51,11 +51,14 @@ const RENAMES: &[(&str, &str)] = &[
     (r"\.resConfUnit([12])\.", ".res_conf_unit$1."),
 ];
 
-/// The renames from `model`'s official keys to its module paths: the common ones, then for
-/// IGEV-Stereo (a model with the geometry encoding volume) its own ([`crate::igev_keys`]).
+/// The renames from `model`'s official keys to its module paths: RAFT-Stereo's, and for
+/// IGEV-Stereo (a model with the geometry encoding volume) its own before them
+/// ([`crate::igev_keys::from_official`]).
 pub fn official_renames(model: &RaftStereo) -> Vec<(&'static str, &'static str)> {
-    let igev: &[(&str, &str)] = if model.geometry.is_some() { crate::igev_keys::FROM_OFFICIAL } else { &[] };
-    RENAMES.iter().chain(igev).copied().collect()
+    match model.geometry {
+        Some(_) => crate::igev_keys::from_official(RENAMES),
+        None => RENAMES.to_vec(),
+    }
 }
 
 /// Our module path of an official state-dict key (with or without the `module.` prefix): the

@@ -20,18 +20,20 @@
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
+use burn::tensor::activation::softmax;
 use burn::tensor::{DType, Device, FloatDType, Tensor, TensorData};
 use dgstereo_core::device::float_dtype;
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::tensor::cast_float;
 use dgstereo_core::{DepthPrior, Error};
 use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementation, CostVolume, GeometryEncoding};
-use dgstereo_encoder::Encoders;
+use dgstereo_encoder::{Encoders, FeaturePyramid};
 use dgstereo_fusion::{Fusion, FusionTarget};
 use dgstereo_kernels::UpdateLoop;
 use dgstereo_prior::DepthAnythingV2Features;
 use dgstereo_updater::{
-    GateContext, GuidanceKind, HeadOutput, MotionKind, MultiLevelUpdateBlock, UpdateOutput, Updater, convex_upsample,
+    GateContext, GuidanceKind, HeadOutput, MotionKind, MultiLevelUpdateBlock, SuperpixelUpsampler, UpdateOutput,
+    Updater, UpsamplingKind, context_upsample, convex_upsample,
 };
 
 use crate::config::ModelConfig;
@@ -60,6 +62,9 @@ pub struct RaftStereo {
     pub context_zqr_convs: Vec<Conv2d>,
     /// The update operator.
     pub update_block: MultiLevelUpdateBlock,
+    /// IGEV-Stereo's superpixel upsampling heads (the reference's top-level `spx*`); none with
+    /// convex upsampling.
+    pub superpixel: Option<SuperpixelUpsampler>,
     /// The scale update operator run for the first `scale_iters` iterations (DEFOM-Stereo).
     pub scale_update_block: Option<MultiLevelUpdateBlock>,
     /// Iterations that run the scale update block.
@@ -113,8 +118,10 @@ pub(crate) struct Encodings {
     /// Per GRU level, finest first, the gates' context terms.
     pub gates: Vec<GateContext>,
     /// The loop's initial state (f32, the motion's convention) where the initialiser gives
-    /// one; zero otherwise.
+    /// one; zero otherwise (and for the soft-argmin, which the geometry stage computes).
     pub initial: Option<Tensor<4>>,
+    /// The left view's feature pyramid and 1/2 stem (IGEV-Stereo's encoders), `None` otherwise.
+    pub pyramid: Option<FeaturePyramid>,
 }
 
 /// The fixed inputs of the update loop at the update grid `[N, 1, H/f, W/f]`
@@ -129,6 +136,8 @@ pub(crate) struct UpdateGrid {
     guidance: Option<Tensor<4>>,
     /// The update block's dtype (the device's).
     dtype: FloatDType,
+    /// The left view's 1/2 image stem, which the superpixel upsampling reads (IGEV-Stereo).
+    pub(crate) stem_2: Option<Tensor<4>>,
 }
 
 impl UpdateGrid {
@@ -199,6 +208,7 @@ impl RaftStereo {
                 })
                 .collect(),
             update_block: MultiLevelUpdateBlock::new(u, c.channels(), output, device),
+            superpixel: (u.upsampling == UpsamplingKind::Superpixel).then(|| SuperpixelUpsampler::new(device)),
             scale_update_block,
             scale_iters: u.scale_update.as_ref().map_or(0, |s| s.iters),
             motion: u.motion,
@@ -234,10 +244,16 @@ impl RaftStereo {
     ) -> dgstereo_core::Result<FlowOutput> {
         let ForwardOptions { flow_init, implementation, all_iterations, mut probe } = options;
         let probe = &mut probe;
-        let Encodings { fmap1, fmap2, mut hidden, gates, initial } = self.encode(left, right, prior, probe)?;
+        let Encodings { fmap1, fmap2, mut hidden, gates, initial, pyramid } = self.encode(left, right, prior, probe)?;
         let implementation = implementation.unwrap_or(self.correlation.implementation);
-        let corr_fn = self.correlation_volume(fmap1, fmap2, implementation, probe);
-        let grid = self.update_grid(&hidden[0], prior, probe)?;
+        let (corr_fn, initial) = match (&self.geometry, &pyramid) {
+            (Some(geometry), Some(pyramid)) => {
+                let (corr_fn, logits) = self.geometry_volume(geometry, &pyramid.levels, fmap2, probe);
+                (corr_fn, self.geometry_initial(&logits, pyramid, probe)?.or(initial))
+            }
+            _ => (self.correlation_volume(fmap1, fmap2, implementation, probe), initial),
+        };
+        let grid = self.update_grid(&hidden[0], prior, pyramid.map(|p| p.stem_2), probe)?;
         // The loop's state: the x flow, or a positive disparity (`MotionKind`), in f32.
         let mut state = match (flow_init, initial) {
             (Some(flow), _) => state_of_flow(self.motion, cast_float(flow, FloatDType::F32)),
@@ -275,7 +291,12 @@ impl RaftStereo {
                 if !upsampled {
                     continue;
                 }
-                let up = self.upsample(state.clone(), up_mask, probe);
+                if probe.tracing() {
+                    if let Some(logits) = self.superpixel_logits(up_mask.clone(), &grid) {
+                        probe.record(format_args!("iter.{k}.spx_gru"), &logits);
+                    }
+                }
+                let up = self.upsample(state.clone(), up_mask, &grid, probe);
                 if self.motion == MotionKind::Disparity {
                     probe.record(format_args!("iter.{k}.disparity_up"), &up);
                 }
@@ -318,12 +339,13 @@ impl RaftStereo {
     }
 
     /// The update loop's fixed inputs at the grid of the finest hidden state `hidden_fine`
-    /// (`[N, C, H/f, W/f]`): the positions, the zero y flow and the guidance feature from the left
-    /// prior (computed once per pass).
+    /// (`[N, C, H/f, W/f]`): the positions, the zero y flow, the guidance feature from the left
+    /// prior (computed once per pass) and the image stem `stem_2` of the superpixel upsampling.
     pub(crate) fn update_grid(
         &self,
         hidden_fine: &Tensor<4>,
         prior: Option<&DepthPrior>,
+        stem_2: Option<Tensor<4>>,
         probe: &mut Probe<'_>,
     ) -> dgstereo_core::Result<UpdateGrid> {
         let [n, _, h, w] = hidden_fine.dims();
@@ -343,7 +365,7 @@ impl RaftStereo {
                 .reshape([1, 1, 1, w])
                 .expand([n, 1, h, w]);
         let zeros = Tensor::<4>::zeros([n, 1, h, w], &device);
-        Ok(UpdateGrid { coords0, zeros, guidance, dtype: float_dtype(&device) })
+        Ok(UpdateGrid { coords0, zeros, guidance, dtype: float_dtype(&device), stem_2 })
     }
 
     /// Stage 3, one iteration's lookup: the cost volume sampled around each pixel's match at
@@ -416,8 +438,21 @@ impl RaftStereo {
         probe.time("mask head", || block.upsample_mask(hidden))
     }
 
-    /// Stage 5b, convex upsampling of the loop's state (f32) to full resolution by `mask`.
-    pub(crate) fn upsample(&self, state: Tensor<4>, mask: Tensor<4>, probe: &mut Probe<'_>) -> Tensor<4> {
+    /// Stage 5b, the loop's state (f32) to full resolution: convex upsampling by `mask`, or
+    /// the superpixel upsampling of IGEV-Stereo from the mask feature `mask` and the grid's
+    /// image stem.
+    pub(crate) fn upsample(
+        &self,
+        state: Tensor<4>,
+        mask: Tensor<4>,
+        grid: &UpdateGrid,
+        probe: &mut Probe<'_>,
+    ) -> Tensor<4> {
+        if let Some(logits) = self.superpixel_logits(mask.clone(), grid) {
+            return probe.time("superpixel upsample", || {
+                context_upsample(state, softmax(cast_float(logits, FloatDType::F32), 1))
+            });
+        }
         let factor = 1usize << self.n_downsample;
         probe.time("convex upsample", || convex_upsample(state, cast_float(mask, FloatDType::F32), factor))
     }

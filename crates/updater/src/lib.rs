@@ -15,8 +15,8 @@
 //! ([`HeadOutput::Scale`]).
 //!
 //! IGEV-Stereo's block is the same with the disparity motion and, for its superpixel
-//! upsampling ([`UpsamplingKind::Superpixel`]), a mask-feature head (`mask_feat_4`) in place of
-//! the convex-upsampling weights.
+//! upsampling ([`superpixel`], [`UpsamplingKind::Superpixel`]) instead of the convex one, a
+//! mask-feature head (`mask_feat_4`) in place of the convex-upsampling weights.
 #![deny(missing_docs)]
 
 pub mod block;
@@ -24,6 +24,7 @@ pub mod gru;
 pub mod guidance;
 mod loop_numerics;
 pub mod motion;
+pub mod superpixel;
 
 use burn::tensor::{FloatDType, Tensor};
 use dgstereo_core::tensor::cast_float;
@@ -35,6 +36,7 @@ pub use dgstereo_kernels::convex_upsample;
 pub use gru::{ConvGru, GateContext};
 pub use guidance::{GuidanceKind, gradient_feature};
 pub use motion::MotionKind;
+pub use superpixel::{SuperpixelUpsampler, UpsamplingKind, context_upsample};
 
 /// What a block's head predicts and how it changes the iterated state.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -139,33 +141,6 @@ pub struct UpdaterConfig {
     /// second head.
     #[serde(default)]
     pub upsampling: UpsamplingKind,
-}
-
-/// How the loop's state is upsampled to full resolution, and so what the update block's second
-/// head gives ([`Updater::upsample_mask`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum UpsamplingKind {
-    /// RAFT-Stereo's convex upsampling: the head (`mask`) gives `9·f²` weights per pixel.
-    #[default]
-    Convex,
-    /// IGEV-Stereo's superpixel upsampling: the head (`mask_feat_4`, a 3x3 convolution and a
-    /// ReLU) gives a 32-channel feature from which the network's upsampler derives 9 weights
-    /// per full-resolution pixel.
-    Superpixel,
-}
-
-impl UpsamplingKind {
-    /// Every kind, in the order of the enum.
-    pub const ALL: [Self; 2] = [Self::Convex, Self::Superpixel];
-
-    /// The name the TOML key `upsampling` writes.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Convex => "convex",
-            Self::Superpixel => "superpixel",
-        }
-    }
 }
 
 /// DEFOM-Stereo's scale update: a second update block, reading the correlation's scale lookup,
