@@ -79,6 +79,10 @@ pub fn verify_igev(reference: &Path, device: &Device) -> Result<VerifyReport> {
     let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
     let (config, model) = checkpoint_config::model_from_keys(&keys, device)
         .map_err(|p| Error::Checkpoint { path: reference.into(), message: p.to_string() })?;
+    if config.preset != checkpoint_config::OfficialPreset::Igev {
+        let message = format!("the keys are not an IGEV-Stereo state dict (they show {config})");
+        return Err(Error::Checkpoint { path: reference.into(), message });
+    }
     let model = checkpoint::load_state_dict(model, &state, reference)?;
     let iters = metadata_count(&metadata, "iters", reference)?;
 
