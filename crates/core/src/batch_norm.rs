@@ -47,10 +47,12 @@ impl FrozenBatchNorm {
         (scale, shift)
     }
 
-    /// Normalises `[N, C, H, W]` with the running statistics.
-    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let c = self.weight.dims()[0];
+    /// Normalises `[N, C, ...]` (a 2D map or a 3D volume) with the running statistics, per
+    /// channel (dimension 1).
+    pub fn forward<const D: usize>(&self, x: Tensor<D>) -> Tensor<D> {
+        let mut shape = [1; D];
+        shape[1] = self.weight.dims()[0];
         let (scale, shift) = self.scale_shift();
-        x * scale.reshape([1, c, 1, 1]) + shift.reshape([1, c, 1, 1])
+        x * scale.reshape(shape) + shift.reshape(shape)
     }
 }

@@ -6,7 +6,7 @@ use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor};
 
-use crate::basic_conv::BasicConv2d;
+use dgstereo_core::conv_blocks::{BasicConv, BlockNorm};
 
 /// `sigmoid(expand(reduce(feat)))` broadcast over the disparities, times the volume. `reduce`
 /// and `expand` are the reference's `feat_att.0` (a `BasicConv`, 1x1 to half the features'
@@ -17,7 +17,7 @@ use crate::basic_conv::BasicConv2d;
 #[derive(Module, Debug)]
 pub struct FeatureAttention {
     /// 1x1 `BasicConv` to `C_feat / 2` channels (`feat_att.0`).
-    pub reduce: BasicConv2d,
+    pub reduce: BasicConv,
     /// 1x1 convolution to `C_cv` channels (`feat_att.1`).
     pub expand: Conv2d,
 }
@@ -27,7 +27,7 @@ impl FeatureAttention {
     pub fn new(volume_channels: usize, feature_channels: usize, device: &Device) -> Self {
         let half = feature_channels / 2;
         Self {
-            reduce: BasicConv2d::new([feature_channels, half], 1, 0, device),
+            reduce: BasicConv::new([feature_channels, half], 1, 1, 0, BlockNorm::Batch, device),
             expand: Conv2dConfig::new([half, volume_channels], [1, 1]).init(device),
         }
     }

@@ -8,7 +8,9 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::Problem;
 use serde::{Deserialize, Serialize};
 
-use crate::basic_conv::{BasicConv3d, BasicConvIn2d};
+use dgstereo_core::conv_blocks::{BasicConv, BlockNorm};
+
+use crate::basic_conv::BasicConv3d;
 use crate::feature_attention::FeatureAttention;
 use crate::hourglass::Hourglass;
 
@@ -68,7 +70,7 @@ impl GeometryVolume {
         let [f4, f8, f16, f32] = FEATURE_CHANNELS;
         let g = self.groups;
         GeometryEncoding {
-            conv: BasicConvIn2d::new([f4, f4], 3, 1, device),
+            conv: BasicConv::new([f4, f4], 3, 1, 1, BlockNorm::Instance, device),
             desc: Conv2dConfig::new([f4, f4], [1, 1]).init(device),
             corr_stem: BasicConv3d::new([g, g], 3, 1, 1, device),
             corr_feature_att: FeatureAttention::new(g, f4, device),
@@ -88,7 +90,7 @@ impl GeometryVolume {
 #[derive(Module, Debug)]
 pub struct GeometryEncoding {
     /// `BasicConv_IN` 3x3 on the 1/4 features.
-    pub conv: BasicConvIn2d,
+    pub conv: BasicConv,
     /// 1x1 giving the match features.
     pub desc: Conv2d,
     /// 3x3x3 `BasicConv` on the correlation volume.

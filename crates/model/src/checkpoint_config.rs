@@ -185,7 +185,7 @@ fn dim(keys: &BTreeMap<&str, &[usize]>, key: &str, axis: usize, problems: &mut V
 /// The architecture the primary keys show, or the problems with them.
 fn architecture(keys: &BTreeMap<&str, &[usize]>) -> std::result::Result<ModelConfig, Vec<String>> {
     if igev_config::is_igev(keys) {
-        return igev_config::architecture(keys);
+        return igev_config::architecture(keys, correlation_split);
     }
     let mut problems = Vec::new();
     let mut config = ModelConfig::default();

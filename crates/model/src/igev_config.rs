@@ -7,8 +7,8 @@
 //! - the GRU levels, from the count of `context_zqr_convs.{i}`;
 //! - the correlation groups, from `corr_stem.conv.weight`'s channels;
 //! - `levels · (2·radius + 1) · (groups + 1)`, the motion encoder's input channels, split as
-//!   RAFT-Stereo's count ([`crate::checkpoint_config::correlation_split`]) once divided by
-//!   `groups + 1`;
+//!   RAFT-Stereo's count is (the caller's rule, `checkpoint_config::correlation_split`) once
+//!   divided by `groups + 1`;
 //! - the context encoder's trunk widths and norm, as RAFT-Stereo's.
 //!
 //! The rest is IGEV-Stereo's architecture: the disparity motion, superpixel upsampling, the
@@ -21,7 +21,6 @@ use dgstereo_costvolume::GeometryVolume;
 use dgstereo_encoder::{FeatureNetwork, NormKind};
 use dgstereo_updater::{MotionKind, UpsamplingKind};
 
-use crate::checkpoint_config::correlation_split;
 use crate::{InitialDisparity, ModelConfig};
 
 /// Whether a state dict is IGEV-Stereo's: the MobileNetV2 pyramid and the geometry volume's
@@ -44,8 +43,12 @@ fn dim(keys: &BTreeMap<&str, &[usize]>, key: &str, axis: usize, problems: &mut V
     }
 }
 
-/// The IGEV-Stereo architecture `keys` show, or the problems with them.
-pub fn architecture(keys: &BTreeMap<&str, &[usize]>) -> Result<ModelConfig, Vec<String>> {
+/// The IGEV-Stereo architecture `keys` show, or the problems with them; `split` divides a
+/// correlation channel count into `(levels, radius)`.
+pub fn architecture(
+    keys: &BTreeMap<&str, &[usize]>,
+    split: impl Fn(usize) -> Option<(usize, usize)>,
+) -> Result<ModelConfig, Vec<String>> {
     let mut problems = Vec::new();
     let mut config = ModelConfig::default();
     config.encoder.feature_network = FeatureNetwork::MobilenetPyramid;
@@ -77,7 +80,7 @@ pub fn architecture(keys: &BTreeMap<&str, &[usize]>) -> Result<ModelConfig, Vec<
     let groups = dim(keys, "corr_stem.conv.weight", 0, &mut problems);
     let corr = dim(keys, "update_block.encoder.convc1.weight", 1, &mut problems);
     if groups > 0 && corr > 0 {
-        match (corr % (groups + 1) == 0).then(|| correlation_split(corr / (groups + 1))).flatten() {
+        match (corr % (groups + 1) == 0).then(|| split(corr / (groups + 1))).flatten() {
             Some((l, r)) => (config.correlation.levels, config.correlation.radius) = (l, r),
             None => problems.push(format!(
                 "'update_block.encoder.convc1.weight' has {corr} input channels: not levels·(2·radius + 1)·{} for \

@@ -36,7 +36,7 @@ pub use dgstereo_kernels::convex_upsample;
 pub use gru::{ConvGru, GateContext};
 pub use guidance::{GuidanceKind, gradient_feature};
 pub use motion::MotionKind;
-pub use superpixel::{SuperpixelUpsampler, UpsamplingKind, context_upsample};
+pub use superpixel::{SuperpixelUpsampler, context_upsample};
 
 /// What a block's head predicts and how it changes the iterated state.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -141,6 +141,20 @@ pub struct UpdaterConfig {
     /// second head.
     #[serde(default)]
     pub upsampling: UpsamplingKind,
+}
+
+/// How the loop's state is upsampled to full resolution, and so what the update block's second
+/// head gives ([`Updater::upsample_mask`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum UpsamplingKind {
+    /// RAFT-Stereo's convex upsampling: the head (`mask`) gives `9·f²` weights per pixel.
+    #[default]
+    Convex,
+    /// IGEV-Stereo's superpixel upsampling ([`SuperpixelUpsampler`]): the head (`mask_feat_4`, a
+    /// 3x3 convolution and a ReLU) gives a 32-channel feature from which the network's upsampler
+    /// derives 9 weights per full-resolution pixel.
+    Superpixel,
 }
 
 /// DEFOM-Stereo's scale update: a second update block, reading the correlation's scale lookup,
