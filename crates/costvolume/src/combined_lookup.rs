@@ -153,7 +153,8 @@ mod tests {
         let dot: f32 = (0..c).map(|k| l[(k * h + y) * w + x] * r[(k * h + y) * w + x]).sum();
         assert!((out_at(g * 3 + 1) - dot).abs() < 1e-4, "{} vs {dot}", out_at(g * 3 + 1));
         // Level 1's geometry middle tap at disparity 0: the mean of disparities 0 and 1.
-        let pooled = (v[((0 * d) * h + y) * w + x] + v[((0 * d + 1) * h + y) * w + x]) / 2.0;
+        // Group 0: disparities 0 and 1 of the pixel.
+        let pooled = (v[y * w + x] + v[(h + y) * w + x]) / 2.0;
         assert!((out_at(3 * (g + 1) + 1) - pooled).abs() < 1e-6);
     }
 }

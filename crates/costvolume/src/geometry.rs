@@ -56,10 +56,10 @@ impl GeometryVolume {
     /// `groups` must divide the match features' 96 channels.
     pub fn problems(&self) -> Vec<Problem> {
         let mut problems = Vec::new();
-        if self.max_disp == 0 || self.max_disp % 32 != 0 {
+        if self.max_disp == 0 || !self.max_disp.is_multiple_of(32) {
             problems.push(Problem::new("max_disp", format!("{} is not a positive multiple of 32", self.max_disp)));
         }
-        if self.groups == 0 || FEATURE_CHANNELS[0] % self.groups != 0 {
+        if self.groups == 0 || !FEATURE_CHANNELS[0].is_multiple_of(self.groups) {
             problems.push(Problem::new("groups", format!("{} does not divide the 96 match channels", self.groups)));
         }
         problems

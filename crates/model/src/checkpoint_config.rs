@@ -138,7 +138,11 @@ pub fn summary(config: &ModelConfig) -> String {
     let norm = serde_json::to_value(e.context_norm).ok().and_then(|v| v.as_str().map(String::from));
     let raft = format!(
         "{}, n_downsample {}, {} GRU levels, hidden {:?}, context_norm {}, corr {} levels x radius {}, slow_fast_gru {}",
-        if e.shared_backbone { "shared backbone" } else { "separate feature encoder" },
+        match (e.feature_network, e.shared_backbone) {
+            (dgstereo_encoder::FeatureNetwork::MobilenetPyramid, _) => "MobileNetV2 feature pyramid",
+            (_, true) => "shared backbone",
+            (_, false) => "separate feature encoder",
+        },
         u.n_downsample,
         u.n_gru_layers,
         u.hidden_dims,

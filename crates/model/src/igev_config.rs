@@ -80,7 +80,7 @@ pub fn architecture(
     let groups = dim(keys, "corr_stem.conv.weight", 0, &mut problems);
     let corr = dim(keys, "update_block.encoder.convc1.weight", 1, &mut problems);
     if groups > 0 && corr > 0 {
-        match (corr % (groups + 1) == 0).then(|| split(corr / (groups + 1))).flatten() {
+        match corr.is_multiple_of(groups + 1).then(|| split(corr / (groups + 1))).flatten() {
             Some((l, r)) => (config.correlation.levels, config.correlation.radius) = (l, r),
             None => problems.push(format!(
                 "'update_block.encoder.convc1.weight' has {corr} input channels: not levels·(2·radius + 1)·{} for \

@@ -291,10 +291,10 @@ impl RaftStereo {
                 if !upsampled {
                     continue;
                 }
-                if probe.tracing() {
-                    if let Some(logits) = self.superpixel_logits(up_mask.clone(), &grid) {
-                        probe.record(format_args!("iter.{k}.spx_gru"), &logits);
-                    }
+                if probe.tracing()
+                    && let Some(logits) = self.superpixel_logits(up_mask.clone(), &grid)
+                {
+                    probe.record(format_args!("iter.{k}.spx_gru"), &logits);
                 }
                 let up = self.upsample(state.clone(), up_mask, &grid, probe);
                 if self.motion == MotionKind::Disparity {
