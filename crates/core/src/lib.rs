@@ -11,6 +11,8 @@
 #![deny(missing_docs)]
 
 pub mod atomic_file;
+pub mod batch_norm;
+pub mod conv_blocks;
 pub mod device;
 pub mod error;
 pub mod layers;

@@ -16,12 +16,28 @@
 //! DEFOM-Stereo adds a second lookup of the same volume ([`ScaleLookup`]): its level 0 sampled
 //! around the matches of scaled disparities, `x - s·d` for each scale `s`, for the update block
 //! that rescales the disparity.
+//!
+//! IGEV-Stereo builds another volume from the same kind of features ([`GeometryVolume`]): the
+//! group-wise correlation of match features over `max_disp / 4` disparities, aggregated by 3-D
+//! convolutions gated by the image features ([`GeometryEncoding`]) into a geometry encoding
+//! volume, whose classifier's soft-argmin starts the loop; its lookup
+//! ([`CombinedGeometryVolume`], [`Correlation::Geometry`]) joins that volume sampled at the
+//! disparity with the plain all-pairs correlation sampled at the match.
 #![deny(missing_docs)]
+
+pub mod basic_conv;
+pub mod combined_lookup;
+pub mod feature_attention;
+pub mod geometry;
+pub mod hourglass;
 
 use burn::tensor::Tensor;
 use dgstereo_core::Problem;
 pub use dgstereo_kernels::{CorrelationPyramid, OnTheFlyCorrelation, all_pairs};
 use serde::{Deserialize, Serialize};
+
+pub use combined_lookup::CombinedGeometryVolume;
+pub use geometry::{GeometryEncoding, GeometryOutput, GeometryVolume};
 
 /// The stage trait: correlation features around the current match positions.
 ///
@@ -60,6 +76,10 @@ pub struct CorrelationConfig {
     /// The scale lookup beside the normal one (DEFOM-Stereo); none in RAFT-Stereo.
     #[serde(default)]
     pub scale_lookup: Option<ScaleLookup>,
+    /// IGEV-Stereo's geometry encoding volume, looked up instead of the all-pairs pyramid alone
+    /// ([`Correlation::Geometry`]); none in RAFT-Stereo.
+    #[serde(default)]
+    pub geometry: Option<GeometryVolume>,
 }
 
 /// DEFOM-Stereo's scale lookup: the volume's level 0 sampled at `x + s·f + dx` for each scale `s`
@@ -116,7 +136,13 @@ fn default_radius() -> usize {
 
 impl Default for CorrelationConfig {
     fn default() -> Self {
-        Self { implementation: CorrelationImplementation::Reg, levels: 4, radius: 4, scale_lookup: None }
+        Self {
+            implementation: CorrelationImplementation::Reg,
+            levels: 4,
+            radius: 4,
+            scale_lookup: None,
+            geometry: None,
+        }
     }
 }
 
@@ -131,12 +157,20 @@ impl CorrelationConfig {
         if let Some(scale) = &self.scale_lookup {
             problems.extend(scale.problems().into_iter().map(|p| p.within("scale_lookup")));
         }
+        if let Some(geometry) = &self.geometry {
+            problems.extend(geometry.problems().into_iter().map(|p| p.within("geometry")));
+            if self.scale_lookup.is_some() {
+                problems.push(Problem::new("geometry", "the geometry volume has no scale lookup: remove scale_lookup"));
+            }
+        }
         problems
     }
 
-    /// Channels of a lookup: `levels · (2·radius + 1)`.
+    /// Channels of a lookup: `levels · (2·radius + 1)`, and with the geometry volume
+    /// `levels · (groups + 1) · (2·radius + 1)`.
     pub fn channels(&self) -> usize {
-        self.levels * (2 * self.radius + 1)
+        let per_tap = self.geometry.as_ref().map_or(1, |g| g.groups + 1);
+        self.levels * per_tap * (2 * self.radius + 1)
     }
 
     /// Builds the volume of `fmap1` against `fmap2` (`[N, C, H, W]` each).
@@ -180,6 +214,8 @@ pub enum Correlation {
     Reg(CorrelationPyramid),
     /// On-the-fly.
     Alt(OnTheFlyCorrelation),
+    /// IGEV-Stereo's geometry volume and all-pairs correlation.
+    Geometry(CombinedGeometryVolume),
 }
 
 impl Correlation {
@@ -198,10 +234,26 @@ impl Correlation {
                 match self {
                     Self::Reg(c) => c.lookup_levels(at, 1, lookup.radius),
                     Self::Alt(c) => c.lookup_levels(at, 1, lookup.radius),
+                    Self::Geometry(c) => c.lookup(coords0.clone(), flow_x.clone().mul_scalar(-s)),
                 }
             })
             .collect();
         Tensor::cat(samples, 1)
+    }
+}
+
+impl Correlation {
+    /// The lookup at the positive disparity `disparity` of the pixels at columns `coords0`:
+    /// the geometry volume reads the disparity itself, the others the match `coords0 -
+    /// disparity`.
+    ///
+    /// # Shapes
+    /// - `coords0`, `disparity`: `[N, 1, H, W]`
+    pub fn lookup_disparity(&self, coords0: Tensor<4>, disparity: Tensor<4>) -> Tensor<4> {
+        match self {
+            Self::Geometry(c) => c.lookup(coords0, disparity),
+            _ => self.lookup(coords0 - disparity),
+        }
     }
 }
 
@@ -222,6 +274,13 @@ impl CostVolume for Correlation {
         match self {
             Self::Reg(c) => c.lookup(coords_x),
             Self::Alt(c) => c.lookup(coords_x),
+            Self::Geometry(c) => {
+                // The disparity of a match: each pixel's column less the match's.
+                let [n, _, h, w] = coords_x.dims();
+                let columns = Tensor::<1, burn::tensor::Int>::arange(0..w as i64, &coords_x.device()).float();
+                let coords0 = columns.reshape([1, 1, 1, w]).expand([n, 1, h, w]);
+                c.lookup(coords0.clone(), coords0 - coords_x)
+            }
         }
     }
 }

@@ -27,7 +27,7 @@ proptest! {
     fn reg_and_alt_agree(w in 3usize..40, h in 1usize..4, levels in 1usize..5, radius in 0usize..5, seed in 0u64..1000, shift in -50f32..50.0) {
         let device = default_device();
         let c = 16;
-        let cfg = CorrelationConfig { implementation: CorrelationImplementation::Reg, levels, radius, scale_lookup: None };
+        let cfg = CorrelationConfig { implementation: CorrelationImplementation::Reg, levels, radius, scale_lookup: None, geometry: None };
         let (f1, f2) = (features(1, c, h, w, seed), features(1, c, h, w, seed + 1));
         let reg = cfg.build_with(CorrelationImplementation::Reg, f1.clone(), f2.clone());
         let alt = cfg.build_with(CorrelationImplementation::Alt, f1, f2);
@@ -44,9 +44,14 @@ proptest! {
 #[test]
 fn an_alt_configuration_builds_the_on_the_fly_volume() {
     let (n, c, h, w) = (1, 4, 2, 6);
-    let alt =
-        CorrelationConfig { implementation: CorrelationImplementation::Alt, levels: 2, radius: 1, scale_lookup: None }
-            .build(features(n, c, h, w, 1), features(n, c, h, w, 2));
+    let alt = CorrelationConfig {
+        implementation: CorrelationImplementation::Alt,
+        levels: 2,
+        radius: 1,
+        scale_lookup: None,
+        geometry: None,
+    }
+    .build(features(n, c, h, w, 1), features(n, c, h, w, 2));
     let Correlation::Alt(alt) = alt else { panic!("an Alt config builds the on-the-fly volume") };
     assert_eq!(alt.path(), Path::Host);
 }
@@ -93,7 +98,13 @@ fn scale_lookup_samples_level_zero_at_scaled_matches() {
     let expected = from_vec(expected, [n, channels, h, w], &device);
     for implementation in [CorrelationImplementation::Reg, CorrelationImplementation::Alt] {
         for pinned in [Path::Host, Path::Stock] {
-            let cfg = CorrelationConfig { implementation, levels: 2, radius: 4, scale_lookup: Some(lookup.clone()) };
+            let cfg = CorrelationConfig {
+                implementation,
+                levels: 2,
+                radius: 4,
+                scale_lookup: Some(lookup.clone()),
+                geometry: None,
+            };
             let volume = with_path(pinned, || cfg.build(f1.clone(), f2.clone()));
             let out = with_path(pinned, || {
                 volume.scale_lookup(

@@ -6,8 +6,21 @@ use serde::{Deserialize, Serialize};
 use crate::context::ContextEncoder;
 use crate::depth_block::DepthFeatureInput;
 use crate::feature::{FeatureEncoder, SharedFeatureHead};
-use crate::layout::{Encoders, SeparateEncoders, SharedBackbone};
+use crate::layout::{Encoders, PyramidEncoders, SeparateEncoders, SharedBackbone};
 use crate::norm::NormKind;
+use crate::pyramid::{MobileNetPyramid, stem_2, stem_4};
+
+/// Which network gives the matching features.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FeatureNetwork {
+    /// RAFT-Stereo's residual feature encoder (`fnet`), or the shared backbone's head.
+    #[default]
+    Residual,
+    /// IGEV-Stereo's MobileNetV2 pyramid with its image stems (`feature`, `stem_2`, `stem_4`):
+    /// four levels, the finest (1/4, 96 channels) the matching features.
+    MobilenetPyramid,
+}
 
 /// Encoder options of RAFT-Stereo.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -30,6 +43,11 @@ pub struct EncoderConfig {
     /// ImageNet-normalised images (`added`: DEFOM-Stereo), or read the image alone (`none`).
     #[serde(default)]
     pub depth_features: DepthFeatureInput,
+    /// The network of the matching features (`residual`: RAFT-Stereo's; `mobilenet-pyramid`:
+    /// IGEV-Stereo's, whose `feature_dim` is fixed and whose `trunk_dims` are the context
+    /// encoder's alone).
+    #[serde(default)]
+    pub feature_network: FeatureNetwork,
 }
 
 fn default_feature_dim() -> usize {
@@ -48,6 +66,7 @@ impl Default for EncoderConfig {
             feature_dim: 256,
             trunk_dims: default_trunk_dims(),
             depth_features: DepthFeatureInput::None,
+            feature_network: FeatureNetwork::Residual,
         }
     }
 }
@@ -82,6 +101,20 @@ impl EncoderConfig {
                 "\"added\" needs separate feature and context encoders (shared_backbone = false)".into(),
             );
         }
+        if self.feature_network == FeatureNetwork::MobilenetPyramid {
+            if self.shared_backbone {
+                add(
+                    "feature_network",
+                    "\"mobilenet-pyramid\" has its own feature network: it needs shared_backbone = false".into(),
+                );
+            }
+            if self.depth_features == DepthFeatureInput::Added {
+                add(
+                    "feature_network",
+                    "\"mobilenet-pyramid\" adds no monocular features (depth_features = \"none\")".into(),
+                );
+            }
+        }
         problems
     }
 
@@ -101,7 +134,8 @@ impl EncoderConfig {
     ///
     /// # Errors
     /// [`dgstereo_core::Error::Config`] keyed `depth_features` when they add features and
-    /// `depth_channels` is `None`.
+    /// `depth_channels` is `None`, keyed `feature_network` when the MobileNetV2 pyramid (fixed
+    /// at stride 4) meets another `n_downsample` than 2.
     pub fn init(
         &self,
         context_dims: [usize; 3],
@@ -123,6 +157,24 @@ impl EncoderConfig {
         // the order fresh weights are drawn in.
         let trunk = self.trunk_dims;
         let cnet = |depth| ContextEncoder::new(context_dims, trunk, self.context_norm, n_downsample, depth, device);
+        if self.feature_network == FeatureNetwork::MobilenetPyramid {
+            if n_downsample != 2 {
+                return Err(dgstereo_core::Error::config(
+                    "feature_network",
+                    format!(
+                        "\"mobilenet-pyramid\" gives features at 1/4: it needs n_downsample = 2, not {n_downsample}"
+                    ),
+                ));
+            }
+            // The official constructor's order: `cnet`, then `feature`, `stem_2`, `stem_4`.
+            let cnet = cnet(None);
+            return Ok(Encoders::Pyramid(PyramidEncoders {
+                cnet,
+                feature: MobileNetPyramid::new(device),
+                stem_2: stem_2(device),
+                stem_4: stem_4(device),
+            }));
+        }
         Ok(match self.shared_backbone {
             false => Encoders::Separate(SeparateEncoders {
                 fnet: FeatureEncoder::new(self.feature_dim, trunk, NormKind::Instance, n_downsample, depth, device),

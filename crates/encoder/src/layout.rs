@@ -2,13 +2,15 @@
 
 use burn::module::Module;
 use burn::tensor::Tensor;
+use dgstereo_core::conv_blocks::InstanceStem;
 use dgstereo_core::{Error, MonocularFeatures, Probe, Result};
 use dgstereo_kernels::Numerics;
 
-use crate::ContextFeatures;
 use crate::context::ContextEncoder;
 use crate::depth_block::InputNormalisation;
 use crate::feature::{FeatureEncoder, SharedFeatureHead};
+use crate::pyramid::{FeaturePyramid, MobileNetPyramid, feature_pyramid};
+use crate::{ContextExtractor, ContextFeatures};
 
 /// What the encoders give the rest of the network.
 ///
@@ -22,6 +24,9 @@ pub struct Encoded {
     pub fmap2: Tensor<4>,
     /// Context of the left view per GRU level, finest first.
     pub context: ContextFeatures,
+    /// The left view's feature pyramid and 1/2 stem, from encoders that build one (IGEV-Stereo's;
+    /// `fmap1` is then its finest level).
+    pub pyramid: Option<FeaturePyramid>,
 }
 
 /// The images the encoders see, RGB in 0..255 (`[N, 3, H, W]` each).
@@ -59,6 +64,22 @@ pub struct SharedBackbone {
     pub conv2: SharedFeatureHead,
 }
 
+/// IGEV-Stereo's encoders: the MobileNetV2 feature pyramid (`feature`) with the image stems
+/// (`stem_2`, `stem_4`) for both views, and RAFT-Stereo's context encoder (`cnet`, batch norm) for
+/// the left view. The matching features are the pyramid's finest level joined with `stem_4`.
+#[derive(Module, Debug)]
+pub struct PyramidEncoders {
+    /// The feature pyramid network.
+    pub feature: MobileNetPyramid,
+    /// The 1/2 image stem.
+    pub stem_2: InstanceStem,
+    /// The 1/4 image stem.
+    pub stem_4: InstanceStem,
+    /// Context encoder (the official `MultiBasicEncoder`; its heads `outputs04/08/16` are
+    /// `outputs08/16/32` here, named after RAFT-Stereo's strides).
+    pub cnet: ContextEncoder,
+}
+
 /// A built encoder layout, chosen by [`EncoderConfig`](crate::EncoderConfig).
 // One per network, its variants' sizes are the modules' own: boxing them would buy nothing.
 #[allow(clippy::large_enum_variant)]
@@ -68,6 +89,8 @@ pub enum Encoders {
     Separate(SeparateEncoders),
     /// One trunk for both.
     Shared(SharedBackbone),
+    /// IGEV-Stereo's feature pyramid and context encoder.
+    Pyramid(PyramidEncoders),
 }
 
 impl Encoders {
@@ -76,6 +99,7 @@ impl Encoders {
         match self {
             Self::Separate(e) => &e.cnet,
             Self::Shared(e) => &e.cnet,
+            Self::Pyramid(e) => &e.cnet,
         }
     }
 
@@ -84,7 +108,7 @@ impl Encoders {
     pub fn normalisation(&self) -> InputNormalisation {
         match self {
             Self::Separate(e) => e.normalisation,
-            Self::Shared(_) => InputNormalisation::SignedUnit,
+            Self::Shared(_) | Self::Pyramid(_) => InputNormalisation::SignedUnit,
         }
     }
 
@@ -92,15 +116,16 @@ impl Encoders {
     pub fn takes_depth_features(&self) -> bool {
         match self {
             Self::Separate(e) => e.fnet.convd.is_some() || e.cnet.conv08.is_some(),
-            Self::Shared(_) => false,
+            Self::Shared(_) | Self::Pyramid(_) => false,
         }
     }
 
-    /// The variant's name, as it appears in module paths (`Separate`, `Shared`).
+    /// The variant's name, as it appears in module paths (`Separate`, `Shared`, `Pyramid`).
     pub fn variant_name(&self) -> &'static str {
         match self {
             Self::Separate(_) => "Separate",
             Self::Shared(_) => "Shared",
+            Self::Pyramid(_) => "Pyramid",
         }
     }
 
@@ -140,7 +165,7 @@ impl Encoders {
                     probe.time("feature encoder", || fnet.features_with_depth(normalise(features_left), left_depth));
                 let fmap2 =
                     probe.time("feature encoder", || fnet.features_with_depth(normalise(features_right), right_depth));
-                Encoded { fmap1, fmap2, context }
+                Encoded { fmap1, fmap2, context, pyramid: None }
             }
             Self::Shared(SharedBackbone { cnet, conv2 }) => {
                 // The trunk sees both images; the context heads only the left.
@@ -154,7 +179,20 @@ impl Encoders {
                     cnet.heads(trunk.clone().narrow(0, 0, n), levels, cnet.numerics(), None)
                 });
                 let feats = probe.time("feature encoder", || conv2.forward(trunk));
-                Encoded { fmap1: feats.clone().narrow(0, 0, n), fmap2: feats.narrow(0, n, n), context }
+                Encoded { fmap1: feats.clone().narrow(0, 0, n), fmap2: feats.narrow(0, n, n), context, pyramid: None }
+            }
+            Self::Pyramid(PyramidEncoders { feature, stem_2, stem_4, cnet }) => {
+                let context = probe.time("context encoder", || cnet.context(normalise(context_left), levels));
+                let left = probe
+                    .time("feature encoder", || feature_pyramid(feature, [stem_2, stem_4], normalise(features_left)));
+                let right = probe
+                    .time("feature encoder", || feature_pyramid(feature, [stem_2, stem_4], normalise(features_right)));
+                if probe.tracing() {
+                    left.record("left", probe);
+                    right.record("right", probe);
+                }
+                let fmap2 = right.levels.into_iter().next().expect("a pyramid has four levels");
+                Encoded { fmap1: left.levels[0].clone(), fmap2, context, pyramid: Some(left) }
             }
         })
     }

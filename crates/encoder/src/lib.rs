@@ -23,17 +23,21 @@ pub mod context;
 pub mod depth_block;
 pub mod feature;
 pub mod layout;
+pub mod mobilenet;
 pub mod norm;
+pub mod official_keys;
+pub mod pyramid;
 pub mod residual;
 
 use burn::tensor::Tensor;
 
-pub use config::EncoderConfig;
+pub use config::{EncoderConfig, FeatureNetwork};
 pub use context::ContextEncoder;
 pub use depth_block::{DepthFeatureBlock, DepthFeatureInput, InputNormalisation};
 pub use feature::{FeatureEncoder, SharedFeatureHead};
-pub use layout::{Encoded, EncoderInputs, Encoders, SeparateEncoders, SharedBackbone};
+pub use layout::{Encoded, EncoderInputs, Encoders, PyramidEncoders, SeparateEncoders, SharedBackbone};
 pub use norm::NormKind;
+pub use pyramid::{FeaturePyramid, MobileNetPyramid};
 
 /// Context of each GRU level, finest first: `[hidden, context]` before their activations.
 #[derive(Debug, Clone)]

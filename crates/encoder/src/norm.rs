@@ -4,6 +4,7 @@ use burn::module::{Module, Param};
 use burn::nn::Identity;
 use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor};
+pub use dgstereo_core::batch_norm::FrozenBatchNorm;
 use dgstereo_core::tensor::instance_norm;
 use dgstereo_kernels::{Normalization, Numerics, affine_planes, conv2d_affine, conv2d_forward, normalize_planes};
 use serde::{Deserialize, Serialize};
@@ -99,55 +100,6 @@ impl Norm {
                 if relu_after { dgstereo_kernels::rectify(y) } else { y }
             }
         }
-    }
-}
-
-/// BatchNorm in evaluation mode at all times (RAFT-Stereo's `freeze_bn`).
-///
-/// The running statistics never update; `weight` and `bias` still train. Fields carry PyTorch's
-/// names so official checkpoints load without renaming.
-#[derive(Module, Debug)]
-pub struct FrozenBatchNorm {
-    /// Scale (`gamma`).
-    pub weight: Param<Tensor<1>>,
-    /// Shift (`beta`).
-    pub bias: Param<Tensor<1>>,
-    /// Running mean; not trained.
-    pub running_mean: Param<Tensor<1>>,
-    /// Running variance; not trained.
-    pub running_var: Param<Tensor<1>>,
-    /// Added to the variance.
-    pub epsilon: f64,
-}
-
-impl FrozenBatchNorm {
-    /// A fresh layer: identity statistics, unit scale, zero shift.
-    pub fn new(channels: usize, device: &Device) -> Self {
-        let frozen = |t: Tensor<1>| Param::from_tensor(t).set_require_grad(false);
-        Self {
-            weight: Param::from_tensor(Tensor::ones([channels], device)),
-            bias: Param::from_tensor(Tensor::zeros([channels], device)),
-            running_mean: frozen(Tensor::zeros([channels], device)),
-            running_var: frozen(Tensor::ones([channels], device)),
-            epsilon: EPS,
-        }
-    }
-
-    /// The per-channel affine the layer applies: `(weight / sqrt(var + eps), bias - mean · scale)`.
-    ///
-    /// # Shapes
-    /// - both `[C]`
-    pub fn scale_shift(&self) -> (Tensor<1>, Tensor<1>) {
-        let scale = self.weight.val() / self.running_var.val().detach().add_scalar(self.epsilon).sqrt();
-        let shift = self.bias.val() - self.running_mean.val().detach() * scale.clone();
-        (scale, shift)
-    }
-
-    /// Normalises `[N, C, H, W]` with the running statistics.
-    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let c = self.weight.dims()[0];
-        let (scale, shift) = self.scale_shift();
-        x * scale.reshape([1, c, 1, 1]) + shift.reshape([1, c, 1, 1])
     }
 }
 

@@ -51,6 +51,16 @@ const RENAMES: &[(&str, &str)] = &[
     (r"\.resConfUnit([12])\.", ".res_conf_unit$1."),
 ];
 
+/// The renames from `model`'s official keys to its module paths: RAFT-Stereo's, and for
+/// IGEV-Stereo (a model with the geometry encoding volume) its own before them
+/// ([`crate::igev_keys::from_official`]).
+pub fn official_renames(model: &RaftStereo) -> Vec<(&'static str, &'static str)> {
+    match model.geometry {
+        Some(_) => crate::igev_keys::from_official(RENAMES),
+        None => RENAMES.to_vec(),
+    }
+}
+
 /// Our module path of an official state-dict key (with or without the `module.` prefix): the
 /// renames the loader applies, and `downsample.1`, the same BatchNorm as the block's `norm3` in
 /// the reference, as `norm3`.
@@ -81,8 +91,8 @@ fn load_pytorch_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Result
         return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
     }
     let mut store = PytorchStore::from_file(path).map_indices_contiguous(false).allow_partial(true).validate(false);
-    for (from, to) in RENAMES {
-        store = store.with_key_remapping(*from, *to);
+    for (from, to) in official_renames(&model) {
+        store = store.with_key_remapping(from, to);
     }
     let result = model
         .load_from(&mut store)
@@ -103,7 +113,7 @@ pub fn load_state_dict(mut model: RaftStereo, state: &StateDict, origin: &Path) 
         .iter()
         .map(|t| bridge::from_data(TensorData::new(t.values.clone(), t.shape.clone()), t.key.clone(), None))
         .collect();
-    let renames = KeyRemapper::from_patterns(RENAMES.to_vec()).expect("the renames are valid patterns");
+    let renames = KeyRemapper::from_patterns(official_renames(&model)).expect("the renames are valid patterns");
     let (tensors, _) = renames.remap(tensors);
     // As the PyTorch store applies a file's tensors: PyTorch's layouts, enum variants skipped.
     let result = model.apply(tensors, None, Some(Box::new(PyTorchToBurnAdapter)), true);

@@ -31,7 +31,7 @@ use dgstereo_core::{Error, Problem, Result};
 use dgstereo_encoder::NormKind;
 
 use crate::official_keys::{KeyShape, model_official_keys, pth_keys, redundant};
-use crate::{ModelConfig, RaftStereo, checkpoint, defom_config};
+use crate::{ModelConfig, RaftStereo, checkpoint, defom_config, igev_config};
 
 /// The most disagreeing keys an error lists.
 const LISTED: usize = 12;
@@ -50,6 +50,9 @@ pub enum OfficialPreset {
     /// `defomstereo_*.pth`: `evaluate_stereo.py`'s defaults, 32 iterations of which 8 scale
     /// iterations ([`crate::defom_config`]).
     Defom,
+    /// IGEV-Stereo's `sceneflow.pth` (and its fine-tuned checkpoints): `demo_imgs.py`'s
+    /// defaults, `max_disp` 192, 32 iterations ([`crate::igev_config`]).
+    Igev,
     /// An architecture no official checkpoint has: the argparse defaults for the rest.
     Custom,
 }
@@ -59,6 +62,9 @@ impl OfficialPreset {
     pub fn of(config: &ModelConfig) -> Self {
         if !matches!(config.monocular, dgstereo_prior::MonocularConfig::None {}) {
             return Self::Defom;
+        }
+        if config.correlation.geometry.is_some() {
+            return Self::Igev;
         }
         let (e, u) = (&config.encoder, &config.updater);
         let c = &config.correlation;
@@ -102,6 +108,7 @@ impl OfficialPreset {
             Self::InstanceContext => "instance-norm context (iraftstereo_rvc.pth)",
             Self::Default => "default (raftstereo-sceneflow/middlebury/eth3d.pth)",
             Self::Defom => "DEFOM-Stereo (defomstereo_*.pth, evaluate_stereo.py's arguments)",
+            Self::Igev => "IGEV-Stereo (sceneflow.pth, demo_imgs.py's arguments)",
             Self::Custom => "no official preset (argparse defaults)",
         }
     }
@@ -131,7 +138,11 @@ pub fn summary(config: &ModelConfig) -> String {
     let norm = serde_json::to_value(e.context_norm).ok().and_then(|v| v.as_str().map(String::from));
     let raft = format!(
         "{}, n_downsample {}, {} GRU levels, hidden {:?}, context_norm {}, corr {} levels x radius {}, slow_fast_gru {}",
-        if e.shared_backbone { "shared backbone" } else { "separate feature encoder" },
+        match (e.feature_network, e.shared_backbone) {
+            (dgstereo_encoder::FeatureNetwork::MobilenetPyramid, _) => "MobileNetV2 feature pyramid",
+            (_, true) => "shared backbone",
+            (_, false) => "separate feature encoder",
+        },
         u.n_downsample,
         u.n_gru_layers,
         u.hidden_dims,
@@ -140,8 +151,8 @@ pub fn summary(config: &ModelConfig) -> String {
         c.radius,
         if u.slow_fast_gru { "on" } else { "off" },
     );
-    match defom_config::summary(config) {
-        Some(defom) => format!("{raft}; {defom}"),
+    match defom_config::summary(config).or_else(|| igev_config::summary(config)) {
+        Some(variant) => format!("{raft}; {variant}"),
         None => raft,
     }
 }
@@ -177,6 +188,9 @@ fn dim(keys: &BTreeMap<&str, &[usize]>, key: &str, axis: usize, problems: &mut V
 
 /// The architecture the primary keys show, or the problems with them.
 fn architecture(keys: &BTreeMap<&str, &[usize]>) -> std::result::Result<ModelConfig, Vec<String>> {
+    if igev_config::is_igev(keys) {
+        return igev_config::architecture(keys, correlation_split);
+    }
     let mut problems = Vec::new();
     let mut config = ModelConfig::default();
     let has = |prefix: &str| keys.keys().any(|k| k.starts_with(prefix));
@@ -306,8 +320,10 @@ fn config_and_model(
     let primary: BTreeMap<&str, &[usize]> = keys.iter().map(|(k, s)| (k.as_str(), s.as_slice())).collect();
     // Keyed by the state dict as a whole: the listing names each key that disagrees.
     let fail = |p: &[String]| {
-        let reason =
-            format!("the tensors match no consistent RAFT-Stereo (or DEFOM-Stereo) configuration: {}", listing(p));
+        let reason = format!(
+            "the tensors match no consistent RAFT-Stereo (DEFOM-Stereo, IGEV-Stereo) configuration: {}",
+            listing(p)
+        );
         Problem::new("", reason)
     };
     let mut model_config = architecture(&primary).map_err(|p| fail(&p))?;

@@ -2,11 +2,11 @@
 
 use dgstereo_core::{Error, Problem, Result};
 use dgstereo_costvolume::CorrelationConfig;
-use dgstereo_encoder::DepthFeatureInput;
 pub use dgstereo_encoder::EncoderConfig;
+use dgstereo_encoder::{DepthFeatureInput, FeatureNetwork};
 use dgstereo_fusion::FusionConfig;
 use dgstereo_prior::MonocularConfig;
-use dgstereo_updater::{GuidanceKind, UpdaterConfig};
+use dgstereo_updater::{GuidanceKind, UpdaterConfig, UpsamplingKind};
 use serde::{Deserialize, Serialize};
 
 use crate::initial_disparity::InitialDisparity;
@@ -90,6 +90,26 @@ impl ModelConfig {
                 "monocular.kind",
                 "nothing reads the monocular network: set encoder.depth_features = \"added\" or an initial_disparity \
                  that uses it",
+            ));
+        }
+        if self.initial_disparity.needs_geometry() && self.correlation.geometry.is_none() {
+            problems.push(Problem::new(
+                "initial_disparity.kind",
+                "\"soft-argmin\" reads the geometry encoding volume: set model.correlation.geometry",
+            ));
+        }
+        let pyramid = self.encoder.feature_network == FeatureNetwork::MobilenetPyramid;
+        if self.correlation.geometry.is_some() && !pyramid {
+            problems.push(Problem::new(
+                "correlation.geometry",
+                "the geometry volume reads the feature pyramid: set model.encoder.feature_network = \"mobilenet-pyramid\"",
+            ));
+        }
+        if self.updater.upsampling == UpsamplingKind::Superpixel && !pyramid {
+            problems.push(Problem::new(
+                "updater.upsampling",
+                "\"superpixel\" reads the feature pyramid's image stem: set model.encoder.feature_network = \
+                 \"mobilenet-pyramid\"",
             ));
         }
         if self.updater.scale_update.is_some() && self.correlation.scale_lookup.is_none() {

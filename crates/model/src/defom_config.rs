@@ -102,6 +102,7 @@ pub fn summary(config: &ModelConfig) -> Option<String> {
     let init = match config.initial_disparity {
         InitialDisparity::ScaledInverseDepth { scale } => format!("initial disparity {scale} x inverse depth"),
         InitialDisparity::Zero {} => "initial disparity 0".into(),
+        InitialDisparity::SoftArgmin {} => "initial disparity soft-argmin".into(),
     };
     Some(format!("DEFOM-Stereo: Depth Anything V2 {encoder}, {scale}, {init}"))
 }

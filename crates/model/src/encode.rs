@@ -30,20 +30,24 @@ impl RaftStereo {
         probe: &mut Probe<'_>,
     ) -> dgstereo_core::Result<Encodings> {
         let monocular = self.monocular_features(left.clone(), right.clone(), probe);
-        let initial = self.initial_disparity.disparity(monocular.as_ref())?;
+        // The soft-argmin reads the geometry volume, which the geometry stage builds after this.
+        let initial = match self.initial_disparity.needs_geometry() {
+            true => None,
+            false => self.initial_disparity.disparity(monocular.as_ref(), None)?,
+        };
         if let Some(d) = &initial {
             probe.record("initial_disparity", d);
         }
         let mut inputs = self.fuse(left, right, prior, probe)?;
         // Only encoders that add the features get them (the initialiser may be their only reader).
         inputs.depth = monocular.filter(|_| self.encoder.takes_depth_features());
-        let Encoded { fmap1, fmap2, context } = self.encoder.encode(inputs, self.n_gru_layers, probe)?;
+        let Encoded { fmap1, fmap2, context, pyramid } = self.encoder.encode(inputs, self.n_gru_layers, probe)?;
         probe.record("fnet.left", &fmap1);
         probe.record("fnet.right", &fmap2);
         let (hidden, gates) = self.gru_context(context, probe);
         // The loop's state of the x flow `-d`.
         let initial = initial.map(|d| state_of_flow(self.motion, cast_float(d, FloatDType::F32).neg()));
-        Ok(Encodings { fmap1, fmap2, hidden, gates, initial })
+        Ok(Encodings { fmap1, fmap2, hidden, gates, initial, pyramid })
     }
 
     /// The monocular network's features of both views (normalised as the encoders see them),

@@ -1,14 +1,15 @@
 //! The disparity initialiser: where the update loop starts.
 //!
 //! RAFT-Stereo starts from zero; DEFOM-Stereo from its monocular network's inverse depth, scaled
-//! per sample; IGEV-Stereo (to come) from a soft-argmin of its geometry volume. The initialiser
-//! is a concept of the composed network, not of one stage: it reads what other stages make (the
+//! per sample; IGEV-Stereo from a soft-argmin of its geometry volume's classifier logits. The
+//! initialiser is a concept of the composed network, not of one stage: it reads what other stages make (the
 //! monocular network's depth here, the cost volume's aggregation for IGEV-Stereo), and stage
 //! crates never see each other's outputs. So it lives beside the composition, in this crate, as a
 //! configuration enum of its own (`[model.initial_disparity]`) that the forward pass asks once
 //! per pass; it has no weights.
 
-use burn::tensor::Tensor;
+use burn::tensor::activation::softmax;
+use burn::tensor::{Int, Tensor};
 use dgstereo_core::{Error, MonocularFeatures, Problem, Result};
 use serde::{Deserialize, Serialize};
 
@@ -34,6 +35,9 @@ pub enum InitialDisparity {
         #[serde(default = "default_scale")]
         scale: f32,
     },
+    /// IGEV-Stereo's: the soft-argmin of the geometry encoding volume's classifier logits `l`
+    /// over its disparities, `Σ_d softmax(l)_d · d` (`disparity_regression`), at the update grid.
+    SoftArgmin {},
 }
 
 impl Default for InitialDisparity {
@@ -46,7 +50,7 @@ impl InitialDisparity {
     /// One configuration of every kind, with the reference's parameters, in the order of the
     /// enum (the kinds tests, property strategies and experiment checks draw from).
     pub fn variants() -> Vec<Self> {
-        vec![Self::Zero {}, Self::scaled_inverse_depth()]
+        vec![Self::Zero {}, Self::scaled_inverse_depth(), Self::SoftArgmin {}]
     }
 
     /// DEFOM-Stereo's initialiser with its `idepth_scale` (0.5).
@@ -59,12 +63,18 @@ impl InitialDisparity {
         match self {
             Self::Zero {} => "zero",
             Self::ScaledInverseDepth { .. } => "scaled-inverse-depth",
+            Self::SoftArgmin {} => "soft-argmin",
         }
     }
 
     /// Whether it reads a monocular network's inverse depth.
     pub fn needs_monocular(&self) -> bool {
         matches!(self, Self::ScaledInverseDepth { .. })
+    }
+
+    /// Whether it reads the geometry encoding volume's logits.
+    pub fn needs_geometry(&self) -> bool {
+        matches!(self, Self::SoftArgmin {})
     }
 
     /// Everything wrong with the parameters, keys relative to its table (`scale` must be a
@@ -82,13 +92,27 @@ impl InitialDisparity {
     ///
     /// # Errors
     /// [`Error::Config`] keyed `initial_disparity.kind` when it needs the monocular features and
-    /// `monocular` is `None`.
+    /// `monocular` is `None`, or the geometry volume's logits and `geometry_logits` is `None`.
     ///
     /// # Shapes
-    /// - output: `[N, 1, H/f, W/f]`, the monocular inverse depth's
-    pub fn disparity(&self, monocular: Option<&MonocularFeatures>) -> Result<Option<Tensor<4>>> {
+    /// - `geometry_logits`: `[N, D, H/f, W/f]`
+    /// - output: `[N, 1, H/f, W/f]`, the monocular inverse depth's or the logits' grid
+    pub fn disparity(
+        &self,
+        monocular: Option<&MonocularFeatures>,
+        geometry_logits: Option<&Tensor<4>>,
+    ) -> Result<Option<Tensor<4>>> {
         match self {
             Self::Zero {} => Ok(None),
+            Self::SoftArgmin {} => {
+                let logits = geometry_logits.ok_or_else(|| {
+                    Error::config(
+                        "initial_disparity.kind",
+                        "\"soft-argmin\" needs the geometry encoding volume: set model.correlation.geometry",
+                    )
+                })?;
+                Ok(Some(soft_argmin(logits.clone())))
+            }
             Self::ScaledInverseDepth { scale } => {
                 let depth = &monocular
                     .ok_or_else(|| {
@@ -107,6 +131,17 @@ impl InitialDisparity {
     }
 }
 
+/// `Σ_d softmax(logits)_d · d` over dimension 1, in the reference's order (softmax, product,
+/// sum).
+///
+/// # Shapes
+/// - `logits`: `[N, D, H, W]`; output `[N, 1, H, W]`
+pub fn soft_argmin(logits: Tensor<4>) -> Tensor<4> {
+    let d = logits.dims()[1];
+    let values = Tensor::<1, Int>::arange(0..d as i64, &logits.device()).float().reshape([1, d, 1, 1]);
+    (softmax(logits, 1) * values).sum_dim(1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -122,7 +157,6 @@ mod tests {
                 serde_json::from_str(&format!("{{\"kind\": \"{}\"}}", variant.kind())).unwrap();
             assert_eq!(back, variant);
         }
-        assert!(serde_json::from_str::<InitialDisparity>("{\"kind\": \"soft-argmin\"}").is_err());
         assert!(serde_json::from_str::<InitialDisparity>("{\"kind\": \"zero\", \"scale\": 0.5}").is_err());
         assert_eq!(InitialDisparity::ScaledInverseDepth { scale: 0.0 }.problems()[0].key, "scale");
     }
@@ -139,7 +173,7 @@ mod tests {
         let monocular =
             MonocularFeatures { context: Vec::new(), left: depth.clone(), right: depth.clone(), inverse_depth: depth };
         let init = InitialDisparity::ScaledInverseDepth { scale: 0.5 };
-        let out = to_vec(init.disparity(Some(&monocular)).unwrap().unwrap());
+        let out = to_vec(init.disparity(Some(&monocular), None).unwrap().unwrap());
         for (sample, chunk) in values.chunks(h * w).enumerate() {
             let max = chunk.iter().cloned().fold(f32::MIN, f32::max) + 1e-8;
             for (i, v) in chunk.iter().enumerate() {
@@ -147,7 +181,26 @@ mod tests {
                 assert_eq!(out[sample * h * w + i], expected, "sample {sample} element {i}");
             }
         }
-        assert!(InitialDisparity::Zero {}.disparity(None).unwrap().is_none());
-        assert!(init.disparity(None).is_err());
+        assert!(InitialDisparity::Zero {}.disparity(None, None).unwrap().is_none());
+        assert!(init.disparity(None, None).is_err());
+    }
+
+    /// The soft-argmin is the softmax-weighted mean disparity: logits peaked at one disparity
+    /// give it, equal logits the middle of the range; without logits it is an error naming the
+    /// key.
+    #[test]
+    fn soft_argmin_is_the_expected_disparity() {
+        let device = default_device();
+        let d = 6;
+        let mut values = vec![0.0f32; 2 * d];
+        values[4] = 50.0;
+        let logits = from_vec(values, [1, d, 1, 2], &device);
+        let init = InitialDisparity::SoftArgmin {};
+        let out = to_vec(init.disparity(None, Some(&logits)).unwrap().unwrap());
+        // Pixel 0 peaks at disparity 2 (element 4 = d 2, x 0); pixel 1 is flat.
+        assert!((out[0] - 2.0).abs() < 1e-5, "{out:?}");
+        assert!((out[1] - 2.5).abs() < 1e-5, "{out:?}");
+        let e = init.disparity(None, None).unwrap_err().to_string();
+        assert!(e.contains("initial_disparity.kind") && e.contains("geometry"), "{e}");
     }
 }

@@ -20,18 +20,20 @@
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
+use burn::tensor::activation::softmax;
 use burn::tensor::{DType, Device, FloatDType, Tensor, TensorData};
 use dgstereo_core::device::float_dtype;
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_core::tensor::cast_float;
 use dgstereo_core::{DepthPrior, Error};
-use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementation, CostVolume};
-use dgstereo_encoder::Encoders;
+use dgstereo_costvolume::{Correlation, CorrelationConfig, CorrelationImplementation, CostVolume, GeometryEncoding};
+use dgstereo_encoder::{Encoders, FeaturePyramid};
 use dgstereo_fusion::{Fusion, FusionTarget};
 use dgstereo_kernels::UpdateLoop;
 use dgstereo_prior::DepthAnythingV2Features;
 use dgstereo_updater::{
-    GateContext, GuidanceKind, HeadOutput, MotionKind, MultiLevelUpdateBlock, UpdateOutput, Updater, convex_upsample,
+    GateContext, GuidanceKind, HeadOutput, MotionKind, MultiLevelUpdateBlock, SuperpixelUpsampler, UpdateOutput,
+    Updater, UpsamplingKind, context_upsample, convex_upsample,
 };
 
 use crate::config::ModelConfig;
@@ -53,10 +55,16 @@ pub struct RaftStereo {
     pub fusion: Fusion,
     /// Feature and context encoders, separate or with a shared backbone.
     pub encoder: Encoders,
+    /// IGEV-Stereo's geometry encoding volume (the reference's top-level `conv`, `desc`,
+    /// `corr_stem`, `corr_feature_att`, `cost_agg`, `classifier`); none in RAFT-Stereo.
+    pub geometry: Option<GeometryEncoding>,
     /// Per level, the 3x3 convolution giving the GRU's context terms `cz, cr, cq`.
     pub context_zqr_convs: Vec<Conv2d>,
     /// The update operator.
     pub update_block: MultiLevelUpdateBlock,
+    /// IGEV-Stereo's superpixel upsampling heads (the reference's top-level `spx*`); none with
+    /// convex upsampling.
+    pub superpixel: Option<SuperpixelUpsampler>,
     /// The scale update operator run for the first `scale_iters` iterations (DEFOM-Stereo).
     pub scale_update_block: Option<MultiLevelUpdateBlock>,
     /// Iterations that run the scale update block.
@@ -110,8 +118,10 @@ pub(crate) struct Encodings {
     /// Per GRU level, finest first, the gates' context terms.
     pub gates: Vec<GateContext>,
     /// The loop's initial state (f32, the motion's convention) where the initialiser gives
-    /// one; zero otherwise.
+    /// one; zero otherwise (and for the soft-argmin, which the geometry stage computes).
     pub initial: Option<Tensor<4>>,
+    /// The left view's feature pyramid and 1/2 stem (IGEV-Stereo's encoders), `None` otherwise.
+    pub pyramid: Option<FeaturePyramid>,
 }
 
 /// The fixed inputs of the update loop at the update grid `[N, 1, H/f, W/f]`
@@ -126,6 +136,8 @@ pub(crate) struct UpdateGrid {
     guidance: Option<Tensor<4>>,
     /// The update block's dtype (the device's).
     dtype: FloatDType,
+    /// The left view's 1/2 image stem, which the superpixel upsampling reads (IGEV-Stereo).
+    pub(crate) stem_2: Option<Tensor<4>>,
 }
 
 impl UpdateGrid {
@@ -187,6 +199,7 @@ impl RaftStereo {
                 .encoder
                 .init(dims, u.n_downsample, depth_channels, device)
                 .map_err(|e| e.within("encoder"))?,
+            geometry: c.geometry.as_ref().map(|g| g.init(device)),
             // Level `i` counts from the finest (1/4, `hidden_dims[2]`) as the context does.
             context_zqr_convs: (0..u.n_gru_layers)
                 .map(|i| {
@@ -195,6 +208,7 @@ impl RaftStereo {
                 })
                 .collect(),
             update_block: MultiLevelUpdateBlock::new(u, c.channels(), output, device),
+            superpixel: (u.upsampling == UpsamplingKind::Superpixel).then(|| SuperpixelUpsampler::new(device)),
             scale_update_block,
             scale_iters: u.scale_update.as_ref().map_or(0, |s| s.iters),
             motion: u.motion,
@@ -230,10 +244,16 @@ impl RaftStereo {
     ) -> dgstereo_core::Result<FlowOutput> {
         let ForwardOptions { flow_init, implementation, all_iterations, mut probe } = options;
         let probe = &mut probe;
-        let Encodings { fmap1, fmap2, mut hidden, gates, initial } = self.encode(left, right, prior, probe)?;
+        let Encodings { fmap1, fmap2, mut hidden, gates, initial, pyramid } = self.encode(left, right, prior, probe)?;
         let implementation = implementation.unwrap_or(self.correlation.implementation);
-        let corr_fn = self.correlation_volume(fmap1, fmap2, implementation, probe);
-        let grid = self.update_grid(&hidden[0], prior, probe)?;
+        let (corr_fn, initial) = match (&self.geometry, &pyramid) {
+            (Some(geometry), Some(pyramid)) => {
+                let (corr_fn, logits) = self.geometry_volume(geometry, &pyramid.levels, fmap2, probe);
+                (corr_fn, self.geometry_initial(&logits, pyramid, probe)?.or(initial))
+            }
+            _ => (self.correlation_volume(fmap1, fmap2, implementation, probe), initial),
+        };
+        let grid = self.update_grid(&hidden[0], prior, pyramid.map(|p| p.stem_2), probe)?;
         // The loop's state: the x flow, or a positive disparity (`MotionKind`), in f32.
         let mut state = match (flow_init, initial) {
             (Some(flow), _) => state_of_flow(self.motion, cast_float(flow, FloatDType::F32)),
@@ -271,7 +291,12 @@ impl RaftStereo {
                 if !upsampled {
                     continue;
                 }
-                let up = self.upsample(state.clone(), up_mask, probe);
+                if probe.tracing()
+                    && let Some(logits) = self.superpixel_logits(up_mask.clone(), &grid)
+                {
+                    probe.record(format_args!("iter.{k}.spx_gru"), &logits);
+                }
+                let up = self.upsample(state.clone(), up_mask, &grid, probe);
                 if self.motion == MotionKind::Disparity {
                     probe.record(format_args!("iter.{k}.disparity_up"), &up);
                 }
@@ -314,12 +339,13 @@ impl RaftStereo {
     }
 
     /// The update loop's fixed inputs at the grid of the finest hidden state `hidden_fine`
-    /// (`[N, C, H/f, W/f]`): the positions, the zero y flow and the guidance feature from the left
-    /// prior (computed once per pass).
+    /// (`[N, C, H/f, W/f]`): the positions, the zero y flow, the guidance feature from the left
+    /// prior (computed once per pass) and the image stem `stem_2` of the superpixel upsampling.
     pub(crate) fn update_grid(
         &self,
         hidden_fine: &Tensor<4>,
         prior: Option<&DepthPrior>,
+        stem_2: Option<Tensor<4>>,
         probe: &mut Probe<'_>,
     ) -> dgstereo_core::Result<UpdateGrid> {
         let [n, _, h, w] = hidden_fine.dims();
@@ -339,12 +365,13 @@ impl RaftStereo {
                 .reshape([1, 1, 1, w])
                 .expand([n, 1, h, w]);
         let zeros = Tensor::<4>::zeros([n, 1, h, w], &device);
-        Ok(UpdateGrid { coords0, zeros, guidance, dtype: float_dtype(&device) })
+        Ok(UpdateGrid { coords0, zeros, guidance, dtype: float_dtype(&device), stem_2 })
     }
 
     /// Stage 3, one iteration's lookup: the cost volume sampled around each pixel's match at
     /// `x + f` for the x flow `f`, `x - d` for the disparity `d` (the loop's `state`:
-    /// `[N, 1, H/f, W/f]`, f32), in the update block's dtype.
+    /// `[N, 1, H/f, W/f]`, f32; the geometry volume also at `d` itself), in the update block's
+    /// dtype.
     pub(crate) fn lookup(
         &self,
         corr_fn: &Correlation,
@@ -352,11 +379,14 @@ impl RaftStereo {
         state: Tensor<4>,
         probe: &mut Probe<'_>,
     ) -> Tensor<4> {
-        let at = match self.motion {
-            MotionKind::Flow => grid.coords0.clone() + state,
-            MotionKind::Disparity => grid.coords0.clone() - state,
-        };
-        probe.time("correlation lookup", || cast_float(corr_fn.lookup(at), grid.dtype))
+        let coords0 = grid.coords0.clone();
+        probe.time("correlation lookup", || {
+            let corr = match self.motion {
+                MotionKind::Flow => corr_fn.lookup(coords0 + state),
+                MotionKind::Disparity => corr_fn.lookup_disparity(coords0, state),
+            };
+            cast_float(corr, grid.dtype)
+        })
     }
 
     /// Stage 3 of a scale iteration: the correlation's scale lookup around the matches of the
@@ -408,8 +438,21 @@ impl RaftStereo {
         probe.time("mask head", || block.upsample_mask(hidden))
     }
 
-    /// Stage 5b, convex upsampling of the loop's state (f32) to full resolution by `mask`.
-    pub(crate) fn upsample(&self, state: Tensor<4>, mask: Tensor<4>, probe: &mut Probe<'_>) -> Tensor<4> {
+    /// Stage 5b, the loop's state (f32) to full resolution: convex upsampling by `mask`, or
+    /// the superpixel upsampling of IGEV-Stereo from the mask feature `mask` and the grid's
+    /// image stem.
+    pub(crate) fn upsample(
+        &self,
+        state: Tensor<4>,
+        mask: Tensor<4>,
+        grid: &UpdateGrid,
+        probe: &mut Probe<'_>,
+    ) -> Tensor<4> {
+        if let Some(logits) = self.superpixel_logits(mask.clone(), grid) {
+            return probe.time("superpixel upsample", || {
+                context_upsample(state, softmax(cast_float(logits, FloatDType::F32), 1))
+            });
+        }
         let factor = 1usize << self.n_downsample;
         probe.time("convex upsample", || convex_upsample(state, cast_float(mask, FloatDType::F32), factor))
     }

@@ -65,8 +65,20 @@ pub fn redundant(key: &str) -> bool {
 /// `model`'s architecture holds, redundant ones left out, sorted by key.
 pub fn model_official_keys(model: &RaftStereo) -> Vec<KeyShape> {
     let tensors = model.collect(None, Some(Box::new(BurnToPyTorchAdapter)), false);
-    let mut keys: Vec<KeyShape> =
-        tensors.iter().map(|t| (official_key_of_module_path(&t.name), t.shape.to_vec())).collect();
+    // IGEV-Stereo's renames follow RAFT-Stereo's inverse ones (`crate::igev_keys::to_official`).
+    let igev = match model.geometry {
+        Some(_) => crate::igev_keys::to_official(),
+        None => Vec::new(),
+    };
+    let igev = KeyRemapper::from_patterns(igev).expect("the renames are valid patterns");
+    let mut keys: Vec<KeyShape> = tensors
+        .iter()
+        .map(|t| {
+            let key = official_key_of_module_path(&t.name);
+            let key = igev.patterns.iter().fold(key, |k, (p, r)| p.replace_all(&k, r.as_str()).into_owned());
+            (key, t.shape.to_vec())
+        })
+        .collect();
     keys.sort();
     keys
 }

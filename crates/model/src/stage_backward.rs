@@ -111,11 +111,11 @@ pub fn profile_backward(
         outputs.extend(encodings.gates.iter().flat_map(|g| [g.zr.clone(), g.q.clone()]));
         Ok((outputs, encodings))
     })?;
-    let Encodings { fmap1, fmap2, hidden, gates, .. } = encodings;
+    let Encodings { fmap1, fmap2, hidden, gates, pyramid, .. } = encodings;
 
     let [n, _, h, w] = hidden[0].dims();
     let f32_on = (&device, DType::F32);
-    let grid = model.update_grid(&hidden[0], prior, &mut probe)?;
+    let grid = model.update_grid(&hidden[0], prior, pyramid.map(|p| p.stem_2), &mut probe)?;
     // Positions spread as a step's are: a random flow of up to a quarter of the grid's width.
     let flows: Vec<Tensor<4>> = (0..iters)
         .map(|_| Tensor::<4>::random([n, 1, h, w], Distribution::Uniform(-(w as f64) / 4.0, 0.0), f32_on))
@@ -151,7 +151,7 @@ pub fn profile_backward(
             .zip(&flows)
             .map(|(state, flow_x)| {
                 let mask = model.upsample_weights(&model.update_block, &[leaf(state)], &mut probe);
-                model.upsample(leaf(flow_x), mask, &mut probe)
+                model.upsample(leaf(flow_x), mask, &grid, &mut probe)
             })
             .collect();
         Ok((up, ()))

@@ -24,7 +24,7 @@ use dgstereo_core::{Error, Result};
 use crate::official_keys::KeyShape;
 use crate::seeded::golden_state_dict;
 use crate::verify::{FEATURE_TOLERANCE, ReferenceTensors, VerifyLine, VerifyReport, read_reference};
-use crate::{ForwardOptions, Probe, checkpoint, checkpoint_config};
+use crate::{ForwardOptions, Probe, Trace, checkpoint, checkpoint_config};
 
 /// Tolerance on disparities (absolute, pixels).
 pub const DISPARITY_TOLERANCE: f32 = 1e-4;
@@ -69,7 +69,7 @@ fn is_disparity(key: &str) -> bool {
     key.starts_with("disparity.")
 }
 
-fn tensor4(reference: &ReferenceTensors, key: &str, path: &Path, device: &Device) -> Result<Tensor<4>> {
+pub(crate) fn tensor4(reference: &ReferenceTensors, key: &str, path: &Path, device: &Device) -> Result<Tensor<4>> {
     let (shape, values) = reference.get(key).ok_or_else(|| Error::format(path, format!("missing key '{key}'")))?;
     let shape: [usize; 4] = shape
         .as_slice()
@@ -78,7 +78,7 @@ fn tensor4(reference: &ReferenceTensors, key: &str, path: &Path, device: &Device
     Ok(from_vec(values.clone(), shape, device))
 }
 
-fn metadata_count(metadata: &BTreeMap<String, String>, name: &str, path: &Path) -> Result<usize> {
+pub(crate) fn metadata_count(metadata: &BTreeMap<String, String>, name: &str, path: &Path) -> Result<usize> {
     let text = metadata.get(name).ok_or_else(|| Error::format(path, format!("no metadata entry '{name}'")))?;
     text.parse().map_err(|_| Error::format(path, format!("metadata entry '{name}' = '{text}' is not a count")))
 }
@@ -110,19 +110,42 @@ pub fn verify_defom(reference: &Path, device: &Device) -> Result<VerifyReport> {
     model.forward_flow(left, right, None, iters, options)?;
 
     let last = format!("disparity.iter{}", iters.saturating_sub(1));
+    let (lines, unmatched, final_flow_error) = compare_trace(&refs, &trace, |k| traced_name(k, scale_iters), &last)?;
+    let configuration = format!("{config}; seeded weights, {iters} iterations of which {scale_iters} scale iterations");
+    Ok(VerifyReport { lines, final_flow_error, unmatched, configuration })
+}
+
+/// Compares every output the reference `refs` holds (not `input.*` nor `state.*`) with the
+/// traced tensor `name_of` names: disparities (`disparity.*`) within [`DISPARITY_TOLERANCE`]
+/// pixels, the rest within [`FEATURE_TOLERANCE`] of the reference's largest magnitude. A 5-D
+/// reference (a cost volume `[N, C, D, H, W]`) compares with the trace's `[N, C·D, H, W]`.
+/// Returns the lines, the keys without a traced tensor and the error of `last`.
+///
+/// # Errors
+/// [`Error::Shape`] when a traced tensor's shape is not the reference's.
+pub(crate) fn compare_trace(
+    refs: &ReferenceTensors,
+    trace: &Trace,
+    name_of: impl Fn(&str) -> Option<String>,
+    last: &str,
+) -> Result<(Vec<VerifyLine>, Vec<String>, f32)> {
     let mut lines = Vec::new();
     let mut unmatched = Vec::new();
     let mut final_flow_error = f32::NAN;
-    for (key, (shape, expected)) in &refs {
+    for (key, (shape, expected)) in refs {
         if key.starts_with("input.") || key.starts_with("state.") {
             continue;
         }
-        let Some(actual) = traced_name(key, scale_iters).and_then(|name| trace.get(&name)) else {
+        let Some(actual) = name_of(key).and_then(|name| trace.get(&name)) else {
             unmatched.push(key.clone());
             continue;
         };
         let dims = actual.dims().to_vec();
-        if dims != *shape {
+        let flattened = match shape.as_slice() {
+            [n, c, d, h, w] => dims == [*n, c * d, *h, *w],
+            _ => false,
+        };
+        if dims != *shape && !flattened {
             return Err(Error::Shape(format!("{key}: produced {dims:?}, reference {shape:?}")));
         }
         let actual = to_vec(actual.clone());
@@ -133,7 +156,7 @@ pub fn verify_defom(reference: &Path, device: &Device) -> Result<VerifyReport> {
             true => max_abs_error <= DISPARITY_TOLERANCE,
             false => relative_error <= FEATURE_TOLERANCE,
         };
-        if *key == last {
+        if key == last {
             final_flow_error = max_abs_error;
         }
         lines.push(VerifyLine {
@@ -144,8 +167,7 @@ pub fn verify_defom(reference: &Path, device: &Device) -> Result<VerifyReport> {
             passed: passed && max_abs_error.is_finite(),
         });
     }
-    let configuration = format!("{config}; seeded weights, {iters} iterations of which {scale_iters} scale iterations");
-    Ok(VerifyReport { lines, final_flow_error, unmatched, configuration })
+    Ok((lines, unmatched, final_flow_error))
 }
 
 #[cfg(test)]

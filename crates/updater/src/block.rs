@@ -11,7 +11,7 @@ use dgstereo_kernels::{conv2d_forward, conv2d_forward_then, conv2d_relu_forward}
 use crate::gru::{ConvGru, GateContext};
 use crate::loop_numerics::UPDATE_LOOP;
 use crate::motion::{MotionEncoder, MotionKind};
-use crate::{HeadOutput, UpdateOutput, Updater, UpdaterConfig};
+use crate::{HeadOutput, UpdateOutput, Updater, UpdaterConfig, UpsamplingKind};
 
 /// Two convolutions predicting the update (`FlowHead`, and DEFOM-Stereo's `DispHead`).
 #[derive(Module, Debug)]
@@ -32,8 +32,20 @@ pub struct MaskHead {
     pub conv2: Conv2d,
 }
 
+/// IGEV-Stereo's `mask_feat_4`: a 3x3 convolution to 32 channels and a ReLU, the feature the
+/// superpixel upsampling reads (`mask_feat_4.0` in the reference is `conv` here).
+#[derive(Module, Debug)]
+pub struct MaskFeatureHead {
+    /// 3x3 to 32 channels.
+    pub conv: Conv2d,
+}
+
+/// Channels of IGEV-Stereo's mask feature.
+pub const MASK_FEATURE_CHANNELS: usize = 32;
+
 /// ConvGRUs at 1/4, 1/8 and 1/16 (always built, as in the reference), the motion encoder and
-/// the two heads. The update head is `flow_head` (RAFT-Stereo's flow) or `disp_head` (a
+/// the two heads (the second one the convex upsampling's `mask` or IGEV-Stereo's `mask_feat_4`,
+/// [`crate::UpsamplingKind`]). The update head is `flow_head` (RAFT-Stereo's flow) or `disp_head` (a
 /// disparity, [`MotionKind::Disparity`]); what its prediction does is the block's
 /// [`HeadOutput`] (DEFOM-Stereo's scale block multiplies).
 ///
@@ -56,8 +68,10 @@ pub struct MultiLevelUpdateBlock {
     pub flow_head: Option<FlowHead>,
     /// Disparity head (DEFOM-Stereo's `disp_head`).
     pub disp_head: Option<FlowHead>,
-    /// Upsampling-weight head.
-    pub mask: MaskHead,
+    /// Upsampling-weight head (convex upsampling).
+    pub mask: Option<MaskHead>,
+    /// Mask-feature head (IGEV-Stereo's superpixel upsampling).
+    pub mask_feat_4: Option<MaskFeatureHead>,
     /// GRU levels in use (1..=3).
     pub n_gru_layers: usize,
     /// Extra coarse-level updates before each step (`slow_fast_gru`).
@@ -102,10 +116,12 @@ impl MultiLevelUpdateBlock {
             gru32: ConvGru::new(d32, d16, device),
             flow_head: head(MotionKind::Flow),
             disp_head: head(MotionKind::Disparity),
-            mask: MaskHead {
+            mask: (config.upsampling == UpsamplingKind::Convex).then(|| MaskHead {
                 conv1: conv2d([d08, 256], 3, 1, 1, init, device),
                 conv2: conv2d([256, factor * factor * 9], 1, 1, 0, init, device),
-            },
+            }),
+            mask_feat_4: (config.upsampling == UpsamplingKind::Superpixel)
+                .then(|| MaskFeatureHead { conv: conv2d([d08, MASK_FEATURE_CHANNELS], 3, 1, 1, init, device) }),
             n_gru_layers: n,
             slow_fast_gru: config.slow_fast_gru,
             output,
@@ -178,9 +194,14 @@ impl Updater for MultiLevelUpdateBlock {
         UpdateOutput { prediction, output: self.output }
     }
 
-    /// The mask head on the finest state, its logits scaled by 0.25 as in the reference.
+    /// The mask head on the finest state, its logits scaled by 0.25 as in the reference; or
+    /// the mask feature.
     fn upsample_mask(&self, hidden: &[Tensor<4>]) -> Tensor<4> {
-        let features = conv2d_relu_forward(&self.mask.conv1, hidden[0].clone(), UPDATE_LOOP);
-        conv2d_forward_then(&self.mask.conv2, features, UPDATE_LOOP, |m| m.mul_scalar(0.25))
+        if let Some(head) = &self.mask_feat_4 {
+            return conv2d_relu_forward(&head.conv, hidden[0].clone(), UPDATE_LOOP);
+        }
+        let mask = self.mask.as_ref().expect("the constructor builds one of the two heads");
+        let features = conv2d_relu_forward(&mask.conv1, hidden[0].clone(), UPDATE_LOOP);
+        conv2d_forward_then(&mask.conv2, features, UPDATE_LOOP, |m| m.mul_scalar(0.25))
     }
 }

@@ -13,6 +13,10 @@
 //! ([`MotionKind`]), clip each additive update to the lookup's reach (`delta_clip`), and run a
 //! second block first ([`ScaleUpdateConfig`]) whose head multiplies the disparity
 //! ([`HeadOutput::Scale`]).
+//!
+//! IGEV-Stereo's block is the same with the disparity motion and, for its superpixel
+//! upsampling ([`superpixel`], [`UpsamplingKind::Superpixel`]) instead of the convex one, a
+//! mask-feature head (`mask_feat_4`) in place of the convex-upsampling weights.
 #![deny(missing_docs)]
 
 pub mod block;
@@ -20,17 +24,19 @@ pub mod gru;
 pub mod guidance;
 mod loop_numerics;
 pub mod motion;
+pub mod superpixel;
 
 use burn::tensor::{FloatDType, Tensor};
 use dgstereo_core::tensor::cast_float;
 use dgstereo_core::{Probe, Problem};
 use serde::{Deserialize, Serialize};
 
-pub use block::MultiLevelUpdateBlock;
+pub use block::{MaskFeatureHead, MultiLevelUpdateBlock};
 pub use dgstereo_kernels::convex_upsample;
 pub use gru::{ConvGru, GateContext};
 pub use guidance::{GuidanceKind, gradient_feature};
 pub use motion::MotionKind;
+pub use superpixel::{SuperpixelUpsampler, context_upsample};
 
 /// What a block's head predicts and how it changes the iterated state.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -92,8 +98,9 @@ pub trait Updater {
         probe: &mut Probe<'_>,
     ) -> UpdateOutput;
 
-    /// The convex-upsampling weights of the current state, `[N, 9·f², H, W]` (logits already
-    /// scaled by 0.25).
+    /// The upsampling's input from the current state: the convex-upsampling weights, `[N, 9·f²,
+    /// H, W]` (logits already scaled by 0.25), or for [`UpsamplingKind::Superpixel`] the mask
+    /// feature, `[N, 32, H, W]`.
     ///
     /// Separate from [`Updater::step`] because the mask never feeds back into the state: a
     /// caller computes it only for the iterations whose full-resolution flow it needs (the last
@@ -130,6 +137,24 @@ pub struct UpdaterConfig {
     /// A scale update block run for the first iterations (DEFOM-Stereo); none in RAFT-Stereo.
     #[serde(default)]
     pub scale_update: Option<ScaleUpdateConfig>,
+    /// How the update grid's disparity reaches full resolution, which decides the block's
+    /// second head.
+    #[serde(default)]
+    pub upsampling: UpsamplingKind,
+}
+
+/// How the loop's state is upsampled to full resolution, and so what the update block's second
+/// head gives ([`Updater::upsample_mask`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum UpsamplingKind {
+    /// RAFT-Stereo's convex upsampling: the head (`mask`) gives `9·f²` weights per pixel.
+    #[default]
+    Convex,
+    /// IGEV-Stereo's superpixel upsampling ([`SuperpixelUpsampler`]): the head (`mask_feat_4`, a
+    /// 3x3 convolution and a ReLU) gives a 32-channel feature from which the network's upsampler
+    /// derives 9 weights per full-resolution pixel.
+    Superpixel,
 }
 
 /// DEFOM-Stereo's scale update: a second update block, reading the correlation's scale lookup,
@@ -175,6 +200,7 @@ impl Default for UpdaterConfig {
             motion: MotionKind::Flow,
             delta_clip: false,
             scale_update: None,
+            upsampling: UpsamplingKind::Convex,
         }
     }
 }

@@ -4,8 +4,8 @@
 //! reference file, prints one line per compared value with its error, and exits with status 1
 //! when any is outside the tolerance. `raft-stereo` and `depth-anything-v2` check inference
 //! against reference activations; `defom` checks DEFOM-Stereo against the official code's
-//! activations with the seeded weights the file's metadata lists; `train-step` checks two
-//! training steps against the official training loop.
+//! activations with the seeded weights the file's metadata lists, `igev` IGEV-Stereo likewise;
+//! `train-step` checks two training steps against the official training loop.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -13,6 +13,7 @@ use std::process::ExitCode;
 use clap::{Args, Subcommand};
 use dgstereo_model::verify::verify_raft_stereo;
 use dgstereo_model::verify_defom::verify_defom;
+use dgstereo_model::verify_igev::verify_igev;
 use dgstereo_prior::verify_depth_anything_v2;
 use dgstereo_train::TrainParts;
 use dgstereo_train::verify_step::verify_train_step;
@@ -34,6 +35,14 @@ pub enum VerifyCommand {
     /// ends with `final flow max abs error: X` (the final disparity's); fails above 1e-4 px on
     /// disparities, 1e-4 relative on the rest.
     Defom(SeededArgs),
+    /// IGEV-Stereo: a seeded golden file (`igev_stereo_seeded.activations.safetensors`), whose
+    /// weights are rebuilt from its metadata and loaded as an official checkpoint, the
+    /// configuration read from their keys and shapes. Prints the configuration, then every
+    /// tensor the reference holds (both views' feature pyramids and stems, the geometry volume's
+    /// stages, the superpixel weights, the context encoder, every update block's outputs, the
+    /// initial and each iteration's disparity); ends with `final flow max abs error: X` (the
+    /// final disparity's); fails above 1e-4 px on disparities, 1e-4 relative on the rest.
+    Igev(SeededArgs),
     /// Depth Anything V2 (vits, vitb or vitl, read from the checkpoint): a `.pth` checkpoint
     /// against a reference activations file. Ends with `depth max abs error: X`; fails above
     /// 1e-3 of each tensor's range.
@@ -92,6 +101,11 @@ pub fn run(cmd: VerifyCommand) -> anyhow::Result<ExitCode> {
         }
         VerifyCommand::Defom(a) => {
             let report = verify_defom(&a.reference, &device)?;
+            println!("{report}");
+            report.passed()
+        }
+        VerifyCommand::Igev(a) => {
+            let report = verify_igev(&a.reference, &device)?;
             println!("{report}");
             report.passed()
         }

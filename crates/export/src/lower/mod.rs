@@ -1,6 +1,7 @@
 //! Lowering a captured burn-ir graph to an ONNX model: the graph's boundaries and values first,
 //! then one ONNX node pattern per burn-ir operation (`lower/table.rs`, and `lower/transformer.rs`
-//! for a monocular network's ViT and DPT head; [`LOWERED`] lists them).
+//! for a monocular network's ViT and DPT head, `lower/volume.rs` for a 3D cost-volume network's
+//! convolutions; [`LOWERED`] lists them).
 //! An operation the table lacks is an error naming it, never a file.
 //!
 //! The model is static: every shape is the captured one (reshape targets, expand shapes and
@@ -9,6 +10,7 @@
 mod builder;
 mod table;
 mod transformer;
+mod volume;
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 

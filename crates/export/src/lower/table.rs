@@ -9,7 +9,7 @@ use burn::backend::ir::{
 use dgstereo_core::{Error, Result};
 
 use super::builder::{Lowering, onnx_dtype, scalar_tensor};
-use super::transformer;
+use super::{transformer, volume};
 
 /// The burn-ir operations the table lowers, as their IR names them (for errors and docs).
 pub const LOWERED: &[&str] = &[
@@ -67,6 +67,9 @@ pub const LOWERED: &[&str] = &[
     "LayerNorm",
     "Attention",
     "ConvTranspose2d",
+    "LeakyRelu",
+    "Conv3d",
+    "ConvTranspose3d",
 ];
 
 fn unsupported(index: usize, operation: &OperationIr) -> Error {
@@ -119,6 +122,7 @@ pub(super) fn lower(l: &mut Lowering, index: usize, operation: &OperationIr) -> 
         // Values and drops carry no computation: the values are the file's initializers.
         OperationIr::Init(_) | OperationIr::Drop(_) => {}
         OperationIr::Activation(ActivationOperationIr::Gelu(op)) => transformer::gelu(l, index, op)?,
+        OperationIr::Activation(ActivationOperationIr::LeakyRelu(op)) => volume::leaky_relu(l, index, op)?,
         OperationIr::Activation(ActivationOperationIr::Softmax(op)) => {
             l.node(node, "Softmax", vec![l.name(op.input.id)], vec![l.name(op.out.id)]).int("axis", op.axis as i64);
         }
@@ -394,6 +398,8 @@ fn lower_module(l: &mut Lowering, index: usize, operation: &OperationIr, op: &Mo
         ModuleOperationIr::LayerNorm(op) => transformer::layer_norm(l, index, op)?,
         ModuleOperationIr::Attention(op) => transformer::attention(l, index, op)?,
         ModuleOperationIr::ConvTranspose2d(op) => transformer::conv_transpose2d(l, index, op)?,
+        ModuleOperationIr::Conv3d(op) => volume::conv3d(l, index, op)?,
+        ModuleOperationIr::ConvTranspose3d(op) => volume::conv_transpose3d(l, index, op)?,
         _ => return Err(unsupported(index, operation)),
     }
     Ok(())

@@ -1,0 +1,160 @@
+//! IGEV-Stereo's lookup (`Combined_Geo_Encoding_Volume`): per level, the geometry encoding
+//! volume sampled around the current disparity and the all-pairs correlation of the match
+//! features sampled around the match `x - d`.
+//!
+//! Both pyramids average-pool by 2 along their last axis (disparity, or the right view's
+//! column); level `i` is sampled at `d / 2^i + dx` (geometry) and `(x - d) / 2^i + dx`
+//! (correlation), `dx = -r..=r`, by linear interpolation with zeros outside, as `grid_sample`
+//! with `align_corners=True` samples. The correlation is the kernels' [`CorrelationPyramid`] of
+//! the left match features scaled by `sqrt(C)`: IGEV-Stereo's correlation is the plain dot
+//! product, the pyramid's divides by `sqrt(C)`.
+
+use burn::tensor::{Int, Tensor};
+
+use crate::CorrelationPyramid;
+
+/// The two pyramids of one pass.
+///
+/// # Shapes
+/// - `geometry[i]`: `[N·H·W, C, D / 2^i]`
+#[derive(Debug, Clone)]
+pub struct CombinedGeometryVolume {
+    geometry: Vec<Tensor<3>>,
+    correlation: CorrelationPyramid,
+    radius: usize,
+    /// `[N, H, W]` of the grid.
+    grid: [usize; 3],
+}
+
+impl CombinedGeometryVolume {
+    /// The pyramids of `levels` levels of the geometry encoding volume `volume` and of the match
+    /// features `match_left` against `match_right`, looked up with `radius`.
+    ///
+    /// # Shapes
+    /// - `match_left`, `match_right`: `[N, C, H, W]`; `volume`: `[N, G, D, H, W]`
+    pub fn new(match_left: Tensor<4>, match_right: Tensor<4>, volume: Tensor<5>, levels: usize, radius: usize) -> Self {
+        let [n, g, d, h, w] = volume.dims();
+        let c = match_left.dims()[1];
+        let mut level = volume.permute([0, 3, 4, 1, 2]).reshape([n * h * w, g, d]);
+        let mut geometry = Vec::with_capacity(levels);
+        for _ in 1..levels {
+            let half = level.dims()[2] / 2;
+            let pooled = level.clone().narrow(2, 0, 2 * half).reshape([n * h * w, g, half, 2]).mean_dim(3);
+            geometry.push(level);
+            level = pooled.squeeze_dim::<3>(3);
+        }
+        geometry.push(level);
+        let scaled = match_left.mul_scalar((c as f32).sqrt());
+        let correlation = CorrelationPyramid::new(scaled, match_right, levels, radius);
+        Self { geometry, correlation, radius, grid: [n, h, w] }
+    }
+
+    /// Channels of a lookup: per level `(G + 1) · (2r + 1)`.
+    pub fn channels(&self) -> usize {
+        self.geometry.iter().map(|v| (v.dims()[1] + 1) * (2 * self.radius + 1)).sum()
+    }
+
+    /// The lookup at the disparity `disparity` of each pixel at column `coords0`: per level the
+    /// geometry samples (group-major, offsets ascending) then the correlation samples.
+    ///
+    /// # Shapes
+    /// - `coords0`, `disparity`: `[N, 1, H, W]`; output `[N, levels · (G + 1) · (2r + 1), H, W]`
+    pub fn lookup(&self, coords0: Tensor<4>, disparity: Tensor<4>) -> Tensor<4> {
+        let [n, h, w] = self.grid;
+        let taps = 2 * self.radius + 1;
+        let levels = self.geometry.len();
+        let correlation = self.correlation.lookup_levels(coords0 - disparity.clone(), levels, self.radius);
+        let flat = disparity.reshape([n * h * w, 1]);
+        let mut parts = Vec::with_capacity(2 * levels);
+        for (i, volume) in self.geometry.iter().enumerate() {
+            let at = flat.clone().div_scalar((1u32 << i) as f32);
+            let sampled = sample_linear(volume, at, self.radius);
+            let g = volume.dims()[1];
+            parts.push(sampled.reshape([n, h, w, g * taps]).permute([0, 3, 1, 2]));
+            parts.push(correlation.clone().narrow(1, i * taps, taps));
+        }
+        Tensor::cat(parts, 1)
+    }
+}
+
+/// Linear interpolation of each row of `volume` at `at + dx`, `dx = -radius..=radius`, zero
+/// outside the row.
+///
+/// # Shapes
+/// - `volume`: `[M, G, D]`; `at`: `[M, 1]`; output `[M, G, 2·radius + 1]`
+fn sample_linear(volume: &Tensor<3>, at: Tensor<2>, radius: usize) -> Tensor<3> {
+    let [m, g, d] = volume.dims();
+    let taps = 2 * radius + 1;
+    let device = volume.device();
+    let offsets = Tensor::<1, Int>::arange(0..taps as i64, &device).float().sub_scalar(radius as f32);
+    let x = at + offsets.reshape([1, taps]);
+    let x0 = x.clone().floor();
+    let w1 = x - x0.clone();
+    let w0 = w1.clone().neg().add_scalar(1.0);
+    let tap = |corner: Tensor<2>, weight: Tensor<2>| {
+        let inside = corner.clone().greater_equal_elem(0.0).bool_and(corner.clone().lower_equal_elem((d - 1) as f32));
+        let weight = weight * inside.float();
+        let index = corner.clamp(0.0, (d - 1) as f32).int().reshape([m, 1, taps]).expand([m, g, taps]);
+        volume.clone().gather(2, index) * weight.reshape([m, 1, taps])
+    };
+    tap(x0.clone(), w0) + tap(x0.add_scalar(1.0), w1)
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::tensor::Distribution;
+    use dgstereo_core::default_device;
+    use dgstereo_core::tensor::{from_vec, to_vec};
+
+    use super::*;
+
+    /// A geometry row sampled between its entries is their linear blend, and past either end
+    /// it fades to zero over one step.
+    #[test]
+    fn the_geometry_samples_interpolate_with_zeros_outside() {
+        let device = default_device();
+        let row: Vec<f32> = (0..6).map(|i| (i * i) as f32).collect();
+        let volume = from_vec(row.clone(), [1, 1, 6], &device);
+        let sampled = to_vec(sample_linear(&volume, from_vec(vec![1.25], [1, 1], &device), 2));
+        let expected = |x: f32| {
+            let x0 = x.floor();
+            let v = |i: f32| if (0.0..6.0).contains(&i) { row[i as usize] } else { 0.0 };
+            v(x0) * (1.0 - (x - x0)) + v(x0 + 1.0) * (x - x0)
+        };
+        for (k, got) in sampled.iter().enumerate() {
+            let x = 1.25 + k as f32 - 2.0;
+            assert!((got - expected(x)).abs() < 1e-6, "tap {k}: {got} vs {}", expected(x));
+        }
+    }
+
+    /// The lookup holds, per level, the geometry samples then the correlation samples; the
+    /// correlation is the plain dot product of the match features (not divided by `sqrt(C)`).
+    #[test]
+    fn the_lookup_joins_both_pyramids_per_level() {
+        let device = default_device();
+        let (n, c, g, d, h, w) = (1, 4, 2, 8, 2, 6);
+        let left = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+        let right = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+        let volume = Tensor::<5>::random([n, g, d, h, w], Distribution::Normal(0.0, 1.0), &device);
+        let combined = CombinedGeometryVolume::new(left.clone(), right.clone(), volume.clone(), 2, 1);
+        assert_eq!(combined.channels(), 2 * (g + 1) * 3);
+        let coords0 = from_vec((0..n * h * w).map(|i| (i % w) as f32).collect(), [n, 1, h, w], &device);
+        let disparity = Tensor::<4>::zeros([n, 1, h, w], &device);
+        let out = combined.lookup(coords0, disparity);
+        assert_eq!(out.dims(), [n, 18, h, w]);
+        let (l, r, v, o) = (to_vec(left), to_vec(right), to_vec(volume), to_vec(out));
+        // Pixel (y, x) = (1, 3), level 0, at disparity 0: the middle tap of each group is the
+        // volume's disparity 0; the correlation's middle tap is <left(x), right(x)>.
+        let (y, x) = (1, 3);
+        let out_at = |ch: usize| o[(ch * h + y) * w + x];
+        for group in 0..g {
+            assert!((out_at(group * 3 + 1) - v[((group * d) * h + y) * w + x]).abs() < 1e-6);
+        }
+        let dot: f32 = (0..c).map(|k| l[(k * h + y) * w + x] * r[(k * h + y) * w + x]).sum();
+        assert!((out_at(g * 3 + 1) - dot).abs() < 1e-4, "{} vs {dot}", out_at(g * 3 + 1));
+        // Level 1's geometry middle tap at disparity 0: the mean of disparities 0 and 1.
+        // Group 0: disparities 0 and 1 of the pixel.
+        let pooled = (v[y * w + x] + v[(h + y) * w + x]) / 2.0;
+        assert!((out_at(3 * (g + 1) + 1) - pooled).abs() < 1e-6);
+    }
+}

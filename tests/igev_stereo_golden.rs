@@ -1,0 +1,133 @@
+//! Conformance of IGEV-Stereo with the official PyTorch code.
+//!
+//! The numbers come from `../shared/golden/igev_stereo_seeded.activations.safetensors`: the
+//! official IGEV-Stereo (gangweiX/IGEV, `IGEV-Stereo/core/`, unchanged; timm 0.5.4's
+//! `mobilenetv2_100` built without its ImageNet weights), `demo_imgs.py`'s arguments, run in
+//! float32 on CPU by `make_igev_golden.py` on a 96x128 pair for 4 iterations, with seeded weights
+//! (every tensor a function of its key and shape, `seeded_weights.py`; see
+//! `../shared/golden/README.md`). The test rebuilds the weights from the file's metadata, reads
+//! the configuration from their keys and shapes alone, loads them through the
+//! official-checkpoint loader and compares every recorded tensor.
+
+use std::path::PathBuf;
+
+use dgstereo_core::default_device;
+use dgstereo_core::tensor::{from_vec, max_abs_diff};
+use dgstereo_model::checkpoint_config::{self, OfficialPreset, config_from_keys, model_from_keys};
+use dgstereo_model::official_keys::KeyShape;
+use dgstereo_model::seeded::golden_state_dict;
+use dgstereo_model::verify_igev::{DISPARITY_TOLERANCE, verify_igev};
+use dgstereo_model::{InitialDisparity, ModelConfig, checkpoint, verify};
+use dgstereo_suite::shared_dir_for_test;
+
+#[path = "support/official_pth.rs"]
+mod official_pth;
+
+const GOLDEN: &str = "golden/igev_stereo_seeded.activations.safetensors";
+
+fn golden(test: &str) -> Option<PathBuf> {
+    Some(shared_dir_for_test(test, GOLDEN)?.join(GOLDEN))
+}
+
+#[test]
+fn every_igev_reference_tensor_matches() {
+    let Some(reference) = golden("every_igev_reference_tensor_matches") else { return };
+    let report = verify_igev(&reference, &default_device()).expect("verification runs");
+    println!("{report}");
+    assert!(report.unmatched.is_empty(), "keys not produced: {:?}", report.unmatched);
+    // Both views' 4 pyramid levels and 2 stems, the volume's 4 stages, the initial superpixel
+    // weights' 3, cnet's 6, 4 update blocks' 5 each, 4 iterations' superpixel logits, the
+    // initial and 4 iterated disparities.
+    assert_eq!(report.lines.len(), 54, "{report}");
+    assert!(report.passed(), "some tensors are off:\n{report}");
+    assert!(report.final_flow_error <= DISPARITY_TOLERANCE, "final disparity off by {}", report.final_flow_error);
+}
+
+fn keys_of(path: &std::path::Path) -> Vec<KeyShape> {
+    let (state, _) = golden_state_dict(path).unwrap();
+    state.into_iter().map(|t| (t.key, t.shape)).collect()
+}
+
+/// The configuration comes from the tensors alone, and it is the zoo's IGEV-Stereo (with the
+/// official demo's 32 iterations).
+#[test]
+fn the_igev_configuration_is_read_from_the_keys_and_shapes() {
+    let Some(reference) = golden("the_igev_configuration_is_read_from_the_keys_and_shapes") else { return };
+    let keys = keys_of(&reference);
+    let detected = config_from_keys(&keys, &default_device()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(detected.preset, OfficialPreset::Igev);
+    assert_eq!(detected.valid_iters, 32);
+    let zoo = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/experiments/zoo/igev.toml")).unwrap();
+    let zoo: toml::Table = toml::from_str(&zoo).unwrap();
+    let zoo: ModelConfig = zoo["model"].clone().try_into().unwrap();
+    assert_eq!(detected.model, zoo);
+    assert_eq!(detected.model.initial_disparity, InitialDisparity::SoftArgmin {});
+    assert!(detected.to_string().contains("IGEV-Stereo: geometry volume max_disp 192, 8 groups"), "{detected}");
+    // 12,598,114 parameters, as the official model counts them (no buffers, aliases once).
+    let parameters: usize = keys
+        .iter()
+        .filter(|(k, _)| !(k.ends_with("running_mean") || k.ends_with("running_var")))
+        .filter(|(k, _)| !k.contains("downsample.1."))
+        .map(|(_, s)| s.iter().product::<usize>())
+        .sum();
+    assert_eq!(parameters, 12_598_114);
+    // A key the configuration cannot explain is refused by name.
+    let mut bad = keys.clone();
+    bad.iter_mut().find(|(k, _)| k == "update_block.encoder.convc1.weight").unwrap().1[1] = 160;
+    let e = config_from_keys(&bad, &default_device()).unwrap_err().to_string();
+    assert!(e.contains("update_block.encoder.convc1.weight"), "{e}");
+    let mut bad = keys;
+    bad.retain(|(k, _)| k != "cost_agg.conv1_up.conv.weight");
+    let e = config_from_keys(&bad, &default_device()).unwrap_err().to_string();
+    assert!(e.contains("cost_agg.conv1_up.conv.weight"), "{e}");
+}
+
+/// The comparison tells a wrong network from the official one: starting from zero instead of
+/// the geometry volume's soft-argmin, the final disparity is far off.
+#[test]
+fn the_reference_tells_the_soft_argmin_start() {
+    let Some(reference) = golden("the_reference_tells_the_soft_argmin_start") else { return };
+    let device = default_device();
+    let (state, _) = golden_state_dict(&reference).unwrap();
+    let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
+    let refs = verify::read_reference(&reference).unwrap();
+    let f = |k: &str| {
+        let (s, v) = &refs[k];
+        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
+    };
+    let expected = f("disparity.iter3");
+    let run = |alter: &dyn Fn(&mut dgstereo_model::RaftStereo)| {
+        let (_, model) = model_from_keys(&keys, &device).unwrap();
+        let mut model = checkpoint::load_state_dict(model, &state, &reference).unwrap();
+        alter(&mut model);
+        let out = model.forward_flow(f("input.left"), f("input.right"), None, 4, Default::default()).unwrap();
+        max_abs_diff(out.flow_up.last().unwrap().clone().neg(), expected.clone())
+    };
+    let right = run(&|_| {});
+    assert!(right <= DISPARITY_TOLERANCE, "the official configuration is off by {right}");
+    let from_zero = run(&|m| m.initial_disparity = InitialDisparity::Zero {});
+    assert!(from_zero > 100.0 * DISPARITY_TOLERANCE, "from zero within {from_zero}");
+}
+
+/// The seeded weights written as an official `.pth` (under `module.`, as the released
+/// checkpoints are saved) load through the file loader with the configuration detected from the
+/// file, and give the official code's disparity.
+#[test]
+fn an_official_igev_pth_file_loads_and_gives_the_reference_disparity() {
+    let Some(reference) = golden("an_official_igev_pth_file_loads_and_gives_the_reference_disparity") else { return };
+    let device = default_device();
+    let (state, _) = golden_state_dict(&reference).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let pth = dir.path().join("igev_sceneflow_seeded.pth");
+    official_pth::write_pth(&state, "module.", &pth);
+    let (model, detected) = checkpoint_config::load_detected(&pth, &device).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(detected.preset, OfficialPreset::Igev);
+    let refs = verify::read_reference(&reference).unwrap();
+    let f = |k: &str| {
+        let (s, v) = &refs[k];
+        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
+    };
+    let out = model.forward_flow(f("input.left"), f("input.right"), None, 4, Default::default()).unwrap();
+    let error = max_abs_diff(out.flow_up.last().unwrap().clone().neg(), f("disparity.iter3"));
+    assert!(error <= DISPARITY_TOLERANCE, "the .pth file's model is off by {error} px");
+}
