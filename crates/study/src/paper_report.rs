@@ -1,6 +1,7 @@
-//! Our runs in the paper's ablation tables, optionally beside the published figures.
+//! Our runs in the paper's tables, optionally beside the published figures.
 //!
-//! [`PaperComparison::new`] fills one of [`PAPER_TABLES`] from run results: a row takes the
+//! [`PaperComparison::new`] fills one of [`PAPER_TABLES`] (the ablation tables) from run results
+//! ([`PaperComparison::filled`] any rows, Table 1's among them: [`crate::paper_table1`]): a row takes the
 //! scores of the run named by [`PaperRow::run`](crate::paper_tables::PaperRow::run), a column
 //! the metric of the benchmark that scores its data set
 //! ([`PaperColumn::benchmark`](crate::paper_tables::PaperColumn::benchmark), matched by
@@ -226,11 +227,12 @@ pub fn compare_with_paper(runs: &[RunScores], matches: &[BenchmarkMatch]) -> Vec
     PAPER_TABLES.iter().map(|t| PaperComparison::new(t, runs, matches)).collect()
 }
 
-/// All tables as one Markdown document, with how ours were matched: rows by run name, columns
-/// by data set, each column's benchmark listed.
+/// All tables as one Markdown document, with how ours were matched: rows by run name (Table 1's
+/// by the run's network), columns by data set, each column's benchmark listed.
 pub fn paper_tables_markdown(tables: &[PaperComparison], matches: &[BenchmarkMatch], with_paper: bool) -> String {
     let mut s = String::from(
-        "# The paper's ablation tables\n\nOurs: each row is the run it names, each column the \
+        "# The paper's tables\n\nOurs: each row is the run it names (in Table 1, a run whose network \
+         is the row's model), each column the \
          `[[benchmarks]]` entry that scores its data set (by data set kind and split or weather, \
          whatever its name), under its protocol (EPE in px; D1/D2/D3 the % of pixels with an error \
          over 1/2/3 px); `–` where the run or the benchmark is missing.\n\nColumns matched:\n\n",
