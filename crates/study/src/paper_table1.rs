@@ -3,8 +3,9 @@
 //!
 //! Design decision: Table 1 compares models, not ablation rows, so a run is placed by its network
 //! ([`table1_model`]), never by its name: DEFOM-Stereo is a network with a monocular network and
-//! the scale update, the paper's model one with DGIA's deformable fusion and the gradient
-//! guidance, RAFT-Stereo one with none of these (the stage variants that make the others). Every
+//! the scale update, IGEV-Stereo one with the geometry encoding volume, the paper's model one with
+//! DGIA's deformable fusion and the gradient guidance, RAFT-Stereo one with none of these (the
+//! stage variants that make the others). Every
 //! such run is a row of its own (method, run), so two recipes or checkpoints of one model are two
 //! rows beside the same published figures. The figures are `dgstereo_eval::published`'s (the one
 //! copy `eval` also prints), the columns Tables 3 to 5's, which are Table 1's.
@@ -22,15 +23,20 @@ fn method(method: &str) -> Option<&'static Table1Row> {
 }
 
 /// The row of Table 1 whose model the network of `config` is, if any (see the module doc).
-/// IGEV-Stereo's and the other rows' networks are not in the workspace, so no run is theirs.
+/// The other rows' networks (Selective-IGEV, MonSter, ...) are not in the workspace, so no run
+/// is theirs.
 pub fn table1_model(config: &ExperimentConfig) -> Option<&'static Table1Row> {
     let m = &config.model;
     let monocular = m.monocular.feature_channels().is_some();
     let scale_update = m.updater.scale_update.is_some();
-    if monocular && scale_update {
+    let geometry = m.correlation.geometry.is_some();
+    if monocular && scale_update && !geometry {
         return method("DEFOM-Stereo");
     }
-    if monocular || scale_update || m.initial_disparity.needs_monocular() {
+    if geometry && !monocular && !scale_update && m.fusion.kind() == "none" {
+        return method("IGEV-Stereo");
+    }
+    if geometry || monocular || scale_update || m.initial_disparity.needs_monocular() {
         return None;
     }
     match (m.fusion.kind(), m.updater.guidance.name()) {

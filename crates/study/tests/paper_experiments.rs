@@ -101,6 +101,7 @@ fn runs_are_placed_in_table1_by_their_network() {
     assert_eq!(model("zoo/defom-vits.toml"), Some("DEFOM-Stereo"));
     assert_eq!(model("zoo/defom-vits-train.toml"), Some("DEFOM-Stereo"));
     assert_eq!(model("zoo/defom-vitl.toml"), Some("DEFOM-Stereo"));
+    assert_eq!(model("zoo/igev.toml"), Some("IGEV-Stereo"));
     assert_eq!(model("baseline.toml"), Some("RAFT-Stereo"));
     assert_eq!(model("paper.toml"), Some("paper's model"));
     // Ablation rows that are none of the table's models.
