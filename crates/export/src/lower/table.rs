@@ -70,6 +70,7 @@ pub const LOWERED: &[&str] = &[
     "LeakyRelu",
     "Conv3d",
     "ConvTranspose3d",
+    "SliceAssign",
 ];
 
 fn unsupported(index: usize, operation: &OperationIr) -> Error {
@@ -237,6 +238,7 @@ fn lower_base(l: &mut Lowering, index: usize, operation: &OperationIr, op: &Base
             let inputs = c.tensors.iter().map(|t| l.name(t.id)).collect();
             l.node(node, "Concat", inputs, vec![l.name(c.out.id)]).int("axis", c.dim as i64);
         }
+        BaseOperationIr::SliceAssign(s) => volume::slice_assign(l, index, s)?,
         BaseOperationIr::Slice(s) => {
             let (starts, ends): (Vec<i64>, Vec<i64>) =
                 s.ranges.iter().map(|r| slice_bounds(r.start, r.end, r.step)).unzip();
