@@ -13,9 +13,6 @@
 //! ([`MotionKind`]), clip each additive update to the lookup's reach (`delta_clip`), and run a
 //! second block first ([`ScaleUpdateConfig`]) whose head multiplies the disparity
 //! ([`HeadOutput::Scale`]).
-//!
-//! IGEV-Stereo's full-resolution disparity comes from its [`superpixel`] upsampling instead of
-//! the convex one ([`UpsamplingKind`]).
 #![deny(missing_docs)]
 
 pub mod block;
@@ -35,7 +32,7 @@ pub use dgstereo_kernels::convex_upsample;
 pub use gru::{ConvGru, GateContext};
 pub use guidance::{GuidanceKind, gradient_feature};
 pub use motion::MotionKind;
-pub use superpixel::{SuperpixelUpsampler, UpsamplingKind, context_upsample};
+pub use superpixel::{SuperpixelUpsampler, context_upsample};
 
 /// What a block's head predicts and how it changes the iterated state.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -5,25 +5,14 @@
 //! Two weight heads share the upsampling: the initial disparity's (`spx_4`, `spx_2`, `spx`, from
 //! the left view's 1/4 features and 1/2 stem) and the iterations' (`spx_2_gru`, `spx_gru`, from the
 //! update block's 1/4 mask features and the same stem). This is the choice beside RAFT-Stereo's
-//! convex upsampling ([`UpsamplingKind`]), whose weights the update block predicts at 1/4 itself.
+//! convex upsampling (`updater.upsampling = "superpixel"`), whose weights the update block
+//! predicts at 1/4 itself.
 
 use burn::module::Module;
 use burn::nn::conv::ConvTranspose2d;
 use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::conv_blocks::{BlockNorm, InstanceStem, UpConcat, upsample_deconv};
-use serde::{Deserialize, Serialize};
-
-/// How the 1/4-resolution disparity becomes full resolution.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum UpsamplingKind {
-    /// RAFT-Stereo's convex upsampling, its weights from the update block's mask head.
-    #[default]
-    Convex,
-    /// IGEV-Stereo's superpixel upsampling ([`SuperpixelUpsampler`]).
-    Superpixel,
-}
 
 /// Renames from IGEV-Stereo's state-dict keys under `spx.`, `spx_2.`, `spx_4.`, `spx_2_gru.` and
 /// `spx_gru.` to the paths of [`SuperpixelUpsampler`]'s fields, applied in order (the
