@@ -64,7 +64,7 @@ fn cases() -> Vec<(&'static str, Vec<[usize; 4]>, Program)> {
         }),
         ("gather", vec![s], |x| {
             let idx: Tensor<4, Int> = (x[0].clone().abs() * 2.0).floor().clamp(0.0, 5.0).int();
-            x[0].clone().gather(3, idx)
+            x[0].clone().gather(3, idx.clone()) + idx.float()
         }),
         ("created", vec![s], |x| {
             let d = x[0].device();

@@ -3,8 +3,8 @@
 
 use burn::backend::DType;
 use burn::backend::ir::{
-    ActivationOperationIr, BaseOperationIr, BoolOperationIr, FloatOperationIr, InterpolateModeIr, ModuleOperationIr,
-    NumericOperationIr, OperationIr, PadModeIr, ScalarIr,
+    ActivationOperationIr, BaseOperationIr, BoolOperationIr, FloatOperationIr, IntOperationIr, InterpolateModeIr,
+    ModuleOperationIr, NumericOperationIr, OperationIr, PadModeIr, ScalarIr,
 };
 use dgstereo_core::{Error, Result};
 
@@ -127,7 +127,9 @@ pub(super) fn lower(l: &mut Lowering, index: usize, operation: &OperationIr) -> 
         OperationIr::Activation(ActivationOperationIr::Softmax(op)) => {
             l.node(node, "Softmax", vec![l.name(op.input.id)], vec![l.name(op.out.id)]).int("axis", op.axis as i64);
         }
-        OperationIr::Float(_, FloatOperationIr::IntoInt(op)) | OperationIr::Bool(BoolOperationIr::IntoFloat(op)) => {
+        OperationIr::Float(_, FloatOperationIr::IntoInt(op))
+        | OperationIr::Int(IntOperationIr::IntoFloat(op))
+        | OperationIr::Bool(BoolOperationIr::IntoFloat(op)) => {
             let to = onnx_dtype(op.out.dtype)? as i64;
             l.node(node, "Cast", vec![l.name(op.input.id)], vec![l.name(op.out.id)]).int("to", to);
         }
