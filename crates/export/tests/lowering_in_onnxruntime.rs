@@ -20,7 +20,7 @@ use burn::tensor::ops::{
     AttentionModuleOptions, AvgPoolOptions, ConvOptions, ConvTransposeOptions, DeformConvOptions, InterpolateMode,
     InterpolateOptions, MaxPoolOptions, PadMode, UnfoldOptions,
 };
-use burn::tensor::{Device, Distribution, Int, Tensor};
+use burn::tensor::{Device, Distribution, Int, Tensor, s};
 use dgstereo_encoder::pyramid::feature_pyramid;
 use dgstereo_encoder::{EncoderConfig, Encoders, FeatureNetwork, PyramidEncoders};
 use dgstereo_export::lower::{Boundaries, lower_graph, to_bytes};
@@ -64,7 +64,7 @@ fn cases() -> Vec<(&'static str, Vec<[usize; 4]>, Program)> {
         }),
         ("gather", vec![s], |x| {
             let idx: Tensor<4, Int> = (x[0].clone().abs() * 2.0).floor().clamp(0.0, 5.0).int();
-            x[0].clone().gather(3, idx)
+            x[0].clone().gather(3, idx.clone()) + idx.float()
         }),
         ("created", vec![s], |x| {
             let d = x[0].device();
@@ -153,6 +153,15 @@ fn cases() -> Vec<(&'static str, Vec<[usize; 4]>, Program)> {
             let y = conv_transpose3d(volume, weight, Some(bias), up);
             let [_, c, d, h, w] = y.dims();
             y.reshape([1, c, d * h, w])
+        }),
+        ("slice_assign", vec![s, [1, 2, 3, 4], [1, 3, 5, 2]], |x| {
+            // An inner region, a region reaching the ends of its axes (negative bounds), and a
+            // region spanning all but the last axis (one concatenation).
+            let inner = x[0].clone().slice_assign([0..1, 1..3, 1..4, 1..5], x[1].clone());
+            let ends =
+                x[0].clone().slice_assign(s![0..1, -2.., 2.., ..-2], x[1].clone().narrow(2, 0, 3).narrow(3, 0, 4));
+            let last = x[0].clone().slice_assign(s![.., .., .., 4..], x[2].clone());
+            inner + ends * 2.0 + last * 3.0
         }),
         // IGEV-Stereo's encoder side as modules: the MobileNetV2 pyramid (depthwise convolutions,
         // ReLU6), the image stems, the superpixel weights (transposed convolutions, nearest

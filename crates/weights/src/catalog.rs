@@ -72,17 +72,13 @@ pub enum Architecture {
 }
 
 impl Architecture {
-    /// Why no network of this architecture loads in dgstereo, `None` where one does (RAFT-Stereo,
-    /// DEFOM-Stereo, Depth Anything V2). A weights option refuses such a name before fetching it;
-    /// `weights fetch` still downloads it.
+    /// Why no network of this architecture loads in dgstereo, `None` where one does: every
+    /// architecture of the catalog has one (RAFT-Stereo, DEFOM-Stereo, IGEV-Stereo, Depth Anything
+    /// V2). A weights option refuses a name with a reason before fetching it; `weights fetch`
+    /// would still download it.
     pub fn unloadable_reason(self) -> Option<&'static str> {
         match self {
-            Self::RaftStereo(_) | Self::DepthAnythingV2(_) | Self::DefomStereo(_) => None,
-            Self::IgevStereo => Some(
-                "IGEV-Stereo has no network in dgstereo yet (its geometry encoding volume and \
-                 soft-argmin initialiser are not built): `dgstereo weights fetch` keeps the file, but no \
-                 command loads it",
-            ),
+            Self::RaftStereo(_) | Self::DepthAnythingV2(_) | Self::DefomStereo(_) | Self::IgevStereo => None,
         }
     }
 }

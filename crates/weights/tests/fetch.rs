@@ -200,25 +200,22 @@ fn a_file_published_on_a_page_says_where_to_get_it_and_is_checked_where_placed()
 }
 
 #[test]
-fn a_weights_option_refuses_an_architecture_without_a_network_before_fetching() {
+fn a_weights_option_takes_every_stereo_name_on_to_its_source() {
     let server = Server::start();
     let cache = tempfile::tempdir().unwrap();
     let f = fetcher(&server, cache.path());
-    // A file placed in the cache is not even looked at: the refusal comes first.
-    let place = cache.path().join("igev-stereo-sceneflow/sceneflow.pth");
-    std::fs::create_dir_all(place.parent().unwrap()).unwrap();
-    std::fs::write(&place, b"not looked at").unwrap();
-    let e = f.resolve_stereo(Path::new("igev-stereo-sceneflow"), "weights").unwrap_err();
-    assert!(matches!(&e, Error::Config(p) if p.key == "weights"), "{e}");
-    let text = e.to_string();
-    assert!(text.contains("igev-stereo-sceneflow") && text.contains("IGEV-Stereo has no network"), "{text}");
-    assert_eq!(f.cache().recorded(find("igev-stereo-sceneflow").unwrap()).unwrap(), None);
-    // Every other stereo name has a network: a DEFOM-Stereo name goes on to the fetch (here a
-    // server that has no such file), never refused for its architecture.
+    // Every stereo name has a network here, so none is refused for its architecture.
     for w in dgstereo_weights::CATALOG.iter().filter(|w| w.role == Role::Stereo) {
-        let loadable = w.architecture.unloadable_reason().is_none();
-        assert_eq!(loadable, w.name != "igev-stereo-sceneflow", "{}", w.name);
+        assert_eq!(w.architecture.unloadable_reason(), None, "{}", w.name);
     }
+    // The IGEV-Stereo name goes on to its page: where to download the file and where to put it,
+    // without a request to any server.
+    let e = f.resolve_stereo(Path::new("igev-stereo-sceneflow"), "weights").unwrap_err();
+    let place = cache.path().join("igev-stereo-sceneflow/sceneflow.pth");
+    let text = e.to_string();
+    assert!(text.contains("drive.google.com/drive/folders/") && text.contains(&place.display().to_string()), "{text}");
+    assert!(server.requests().is_empty(), "{:?}", server.requests());
+    // A DEFOM-Stereo name goes on to the fetch (here a server that has no such file).
     let e = f.resolve_stereo(Path::new("defomstereo-vits-sceneflow"), "weights").unwrap_err();
     assert!(matches!(e.root(), Error::Fetch { .. }), "{e}");
     assert!(!server.requests().is_empty());

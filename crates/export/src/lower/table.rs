@@ -3,8 +3,8 @@
 
 use burn::backend::DType;
 use burn::backend::ir::{
-    ActivationOperationIr, BaseOperationIr, BoolOperationIr, FloatOperationIr, InterpolateModeIr, ModuleOperationIr,
-    NumericOperationIr, OperationIr, PadModeIr, ScalarIr,
+    ActivationOperationIr, BaseOperationIr, BoolOperationIr, FloatOperationIr, IntOperationIr, InterpolateModeIr,
+    ModuleOperationIr, NumericOperationIr, OperationIr, PadModeIr, ScalarIr,
 };
 use dgstereo_core::{Error, Result};
 
@@ -70,6 +70,7 @@ pub const LOWERED: &[&str] = &[
     "LeakyRelu",
     "Conv3d",
     "ConvTranspose3d",
+    "SliceAssign",
 ];
 
 fn unsupported(index: usize, operation: &OperationIr) -> Error {
@@ -126,7 +127,9 @@ pub(super) fn lower(l: &mut Lowering, index: usize, operation: &OperationIr) -> 
         OperationIr::Activation(ActivationOperationIr::Softmax(op)) => {
             l.node(node, "Softmax", vec![l.name(op.input.id)], vec![l.name(op.out.id)]).int("axis", op.axis as i64);
         }
-        OperationIr::Float(_, FloatOperationIr::IntoInt(op)) | OperationIr::Bool(BoolOperationIr::IntoFloat(op)) => {
+        OperationIr::Float(_, FloatOperationIr::IntoInt(op))
+        | OperationIr::Int(IntOperationIr::IntoFloat(op))
+        | OperationIr::Bool(BoolOperationIr::IntoFloat(op)) => {
             let to = onnx_dtype(op.out.dtype)? as i64;
             l.node(node, "Cast", vec![l.name(op.input.id)], vec![l.name(op.out.id)]).int("to", to);
         }
@@ -237,6 +240,7 @@ fn lower_base(l: &mut Lowering, index: usize, operation: &OperationIr, op: &Base
             let inputs = c.tensors.iter().map(|t| l.name(t.id)).collect();
             l.node(node, "Concat", inputs, vec![l.name(c.out.id)]).int("axis", c.dim as i64);
         }
+        BaseOperationIr::SliceAssign(s) => volume::slice_assign(l, index, s)?,
         BaseOperationIr::Slice(s) => {
             let (starts, ends): (Vec<i64>, Vec<i64>) =
                 s.ranges.iter().map(|r| slice_bounds(r.start, r.end, r.step)).unzip();
