@@ -71,6 +71,12 @@ pub const LOWERED: &[&str] = &[
     "Conv3d",
     "ConvTranspose3d",
     "SliceAssign",
+    "And",
+    "Or",
+    "Xor",
+    "Not",
+    "MaskWhere",
+    "MaskFill",
 ];
 
 fn unsupported(index: usize, operation: &OperationIr) -> Error {
@@ -94,6 +100,10 @@ pub(super) fn lower(l: &mut Lowering, index: usize, operation: &OperationIr) -> 
     let direct = match operation {
         OperationIr::Activation(ActivationOperationIr::Relu(_)) => Some("Relu"),
         OperationIr::Activation(ActivationOperationIr::Sigmoid(_)) => Some("Sigmoid"),
+        OperationIr::Bool(BoolOperationIr::And(_)) => Some("And"),
+        OperationIr::Bool(BoolOperationIr::Or(_)) => Some("Or"),
+        OperationIr::Bool(BoolOperationIr::Xor(_)) => Some("Xor"),
+        OperationIr::Bool(BoolOperationIr::Not(_)) => Some("Not"),
         OperationIr::Float(_, op) => match op {
             FloatOperationIr::Exp(_) => Some("Exp"),
             FloatOperationIr::Log(_) => Some("Log"),
@@ -129,7 +139,7 @@ pub(super) fn lower(l: &mut Lowering, index: usize, operation: &OperationIr) -> 
         }
         OperationIr::Float(_, FloatOperationIr::IntoInt(op))
         | OperationIr::Int(IntOperationIr::IntoFloat(op))
-        | OperationIr::Bool(BoolOperationIr::IntoFloat(op)) => {
+        | OperationIr::Bool(BoolOperationIr::IntoFloat(op) | BoolOperationIr::IntoInt(op)) => {
             let to = onnx_dtype(op.out.dtype)? as i64;
             l.node(node, "Cast", vec![l.name(op.input.id)], vec![l.name(op.out.id)]).int("to", to);
         }
@@ -241,6 +251,15 @@ fn lower_base(l: &mut Lowering, index: usize, operation: &OperationIr, op: &Base
             l.node(node, "Concat", inputs, vec![l.name(c.out.id)]).int("axis", c.dim as i64);
         }
         BaseOperationIr::SliceAssign(s) => volume::slice_assign(l, index, s)?,
+        // burn's mask_where takes `value` where the mask holds; ONNX's Where its second input.
+        BaseOperationIr::MaskWhere(m) => {
+            let inputs = vec![l.name(m.mask.id), l.name(m.value.id), l.name(m.tensor.id)];
+            l.node(node, "Where", inputs, vec![l.name(m.out.id)]);
+        }
+        BaseOperationIr::MaskFill(m) => {
+            let value = l.scalar(format!("n{index}_value"), m.tensor.dtype, m.value)?;
+            l.node(node, "Where", vec![l.name(m.mask.id), value, l.name(m.tensor.id)], vec![l.name(m.out.id)]);
+        }
         BaseOperationIr::Slice(s) => {
             let (starts, ends): (Vec<i64>, Vec<i64>) =
                 s.ranges.iter().map(|r| slice_bounds(r.start, r.end, r.step)).unzip();
