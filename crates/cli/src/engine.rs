@@ -78,7 +78,8 @@ pub struct ModelArgs {
     /// structure on small pairs; off for 1/4-resolution models and with --max-size), `off`, or pixels.
     #[arg(long, default_value = "auto")]
     pub min_size: MinSize,
-    /// Memory allowed for the materialised cost volume, e.g. `4GiB`, `512MiB` (`--corr auto`).
+    /// Memory allowed for the materialised cost volume, e.g. `4GiB`, `512MiB` (`--corr auto`);
+    /// IGEV-Stereo's geometry volume, which has no on-the-fly form, refuses inputs over it.
     #[arg(long, default_value = "4GiB")]
     pub memory_budget: String,
     /// Cost volume implementation.

@@ -51,6 +51,19 @@ impl GeometryVolume {
         self.max_disp / 4
     }
 
+    /// Bytes of the largest tensors the volume keeps alive together for a batch of `n` at an
+    /// `h x w` 1/4 grid, an estimate for the memory budget: the group-wise volume three times
+    /// (it, `corr_stem`'s output and the gated volume), the hourglass's widest activations (its
+    /// 16-channel first level at half the disparities and size, 2·D per 1/4 pixel, and its
+    /// 8-channel output at full size, 8·D), the lookup's stored geometry pyramid (8 channels, the
+    /// disparities and their half: 12·D) and the all-pairs correlation with its half
+    /// (1.5·`w` per pixel), all f32. 8 groups of 48 disparities at 1/4 of 384x448: 102 MB; of a 2160x3840 frame: 7.6 GB.
+    pub fn volume_bytes(&self, n: usize, h: usize, w: usize) -> usize {
+        let d = self.disparities();
+        let per_pixel = d * (3 * self.groups + 2 + 8 + 12) + w + w / 2;
+        4 * n * h * w * per_pixel
+    }
+
     /// Everything wrong with the options, keys relative to its table: `max_disp` must give a
     /// positive multiple of 8 disparities at 1/4 (the aggregation halves them three times), and
     /// `groups` must divide the match features' 96 channels.

@@ -29,7 +29,7 @@ use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
 use crate::consistency::{fill_rejected, mirror_disparity, mirror_rgb, rejected_pixels};
 use crate::convert::{disparity_map, image_tensor};
-use crate::cost_volume::corr_for;
+use crate::cost_volume::{check_geometry_budget, corr_for};
 use crate::options::{EngineConfig, PredictOptions, precision_name, split_precision};
 pub use crate::prior_maps::PriorMaps;
 use crate::weights::{default_weights_at, load_model};
@@ -360,6 +360,7 @@ impl Engine {
         // a pass of the same size (the next frame, the mirrored pass) reuses them.
         dgstereo_kernels::allocator::release_before_pass([l.height, l.width]);
         let corr = self.choose_corr(options, l.width, l.height);
+        check_geometry_budget(&self.model.config, options.memory_budget, l.width, l.height)?;
         let (lt, rt) = (image_tensor(&l, &self.device), image_tensor(&r, &self.device));
         let prior_start = Instant::now();
         let prior = match (given, &self.prior) {

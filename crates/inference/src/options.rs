@@ -69,7 +69,8 @@ pub struct PredictOptions {
     pub max_size: Option<usize>,
     /// Pairs whose longer side is under this are upscaled to it ([`MinSize`]).
     pub min_size: MinSize,
-    /// Bytes the materialised cost volume may take with [`CorrChoice::Auto`].
+    /// Bytes the materialised cost volume may take with [`CorrChoice::Auto`], and the most
+    /// IGEV-Stereo's geometry encoding volume may take ([`crate::cost_volume::check_geometry_budget`]).
     pub memory_budget: u64,
     /// Cost volume implementation.
     pub corr: CorrChoice,
