@@ -32,6 +32,7 @@ pub mod network;
 pub mod official_keys;
 pub mod profile;
 pub mod seeded;
+mod seeded_verify;
 pub mod stage_backward;
 mod superpixel_stage;
 pub mod verify;

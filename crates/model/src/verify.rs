@@ -103,7 +103,8 @@ pub fn read_reference(path: &Path) -> Result<ReferenceTensors> {
     Ok(out)
 }
 
-fn tensor4(reference: &ReferenceTensors, key: &str, path: &Path, device: &Device) -> Result<Tensor<4>> {
+/// The 4-D tensor `key` of `reference` (read from `path`) on `device`.
+pub(crate) fn tensor4(reference: &ReferenceTensors, key: &str, path: &Path, device: &Device) -> Result<Tensor<4>> {
     let (shape, values) = reference.get(key).ok_or_else(|| Error::format(path, format!("missing key '{key}'")))?;
     let shape: [usize; 4] = shape
         .as_slice()

@@ -14,17 +14,15 @@
 //! [`DISPARITY_TOLERANCE`] pixels, the rest within [`FEATURE_TOLERANCE`] of the tensor's largest
 //! magnitude.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
-use burn::tensor::{Device, Tensor};
-use dgstereo_core::tensor::{from_vec, to_vec};
+use burn::tensor::Device;
+use dgstereo_core::tensor::to_vec;
 use dgstereo_core::{Error, Result};
 
-use crate::official_keys::KeyShape;
-use crate::seeded::golden_state_dict;
-use crate::verify::{FEATURE_TOLERANCE, ReferenceTensors, VerifyLine, VerifyReport, read_reference};
-use crate::{ForwardOptions, Probe, Trace, checkpoint, checkpoint_config};
+use crate::Trace;
+use crate::seeded_verify::{SeededModel, load_seeded, metadata_count, traced_pass};
+use crate::verify::{FEATURE_TOLERANCE, ReferenceTensors, VerifyLine, VerifyReport};
 
 /// Tolerance on disparities (absolute, pixels).
 pub const DISPARITY_TOLERANCE: f32 = 1e-4;
@@ -69,20 +67,6 @@ fn is_disparity(key: &str) -> bool {
     key.starts_with("disparity.")
 }
 
-pub(crate) fn tensor4(reference: &ReferenceTensors, key: &str, path: &Path, device: &Device) -> Result<Tensor<4>> {
-    let (shape, values) = reference.get(key).ok_or_else(|| Error::format(path, format!("missing key '{key}'")))?;
-    let shape: [usize; 4] = shape
-        .as_slice()
-        .try_into()
-        .map_err(|_| Error::format(path, format!("{key}: expected 4 dimensions, found {shape:?}")))?;
-    Ok(from_vec(values.clone(), shape, device))
-}
-
-pub(crate) fn metadata_count(metadata: &BTreeMap<String, String>, name: &str, path: &Path) -> Result<usize> {
-    let text = metadata.get(name).ok_or_else(|| Error::format(path, format!("no metadata entry '{name}'")))?;
-    text.parse().map_err(|_| Error::format(path, format!("metadata entry '{name}' = '{text}' is not a count")))
-}
-
 /// Runs DEFOM-Stereo with the seeded weights of `reference` (configuration from their keys and
 /// shapes, loaded as an official checkpoint) on its inputs, for its `iters` and `scale_iters`,
 /// and compares every tensor it recorded.
@@ -92,22 +76,10 @@ pub(crate) fn metadata_count(metadata: &BTreeMap<String, String>, name: &str, pa
 /// holds; [`Error::Checkpoint`] when its keys match no configuration or do not load;
 /// [`Error::Shape`] when a tensor we produce has another shape than the reference's.
 pub fn verify_defom(reference: &Path, device: &Device) -> Result<VerifyReport> {
-    let (state, metadata) = golden_state_dict(reference)?;
-    let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
-    let (config, model) = checkpoint_config::model_from_keys(&keys, device)
-        .map_err(|p| Error::Checkpoint { path: reference.into(), message: p.to_string() })?;
-    let mut model = checkpoint::load_state_dict(model, &state, reference)?;
-    let iters = metadata_count(&metadata, "iters", reference)?;
+    let SeededModel { config, mut model, metadata, iters } = load_seeded(reference, device)?;
     let scale_iters = metadata_count(&metadata, "scale_iters", reference)?;
     model.scale_iters = scale_iters;
-
-    let refs = read_reference(reference)?;
-    let left = tensor4(&refs, "input.left", reference, device)?;
-    let right = tensor4(&refs, "input.right", reference, device)?;
-    let mut trace = BTreeMap::new();
-    let options =
-        ForwardOptions { all_iterations: true, probe: Probe::new(Some(&mut trace), None), ..ForwardOptions::default() };
-    model.forward_flow(left, right, None, iters, options)?;
+    let (refs, trace) = traced_pass(&model, reference, iters, device)?;
 
     let last = format!("disparity.iter{}", iters.saturating_sub(1));
     let (lines, unmatched, final_flow_error) = compare_trace(&refs, &trace, |k| traced_name(k, scale_iters), &last)?;

@@ -15,17 +15,15 @@
 //! [`DISPARITY_TOLERANCE`] pixels, the rest within [`crate::verify::FEATURE_TOLERANCE`] of the
 //! tensor's largest magnitude.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
 use burn::tensor::Device;
 use dgstereo_core::{Error, Result};
 
-use crate::official_keys::KeyShape;
-use crate::seeded::golden_state_dict;
-use crate::verify::{VerifyReport, read_reference};
-use crate::verify_defom::{compare_trace, metadata_count, tensor4};
-use crate::{ForwardOptions, Probe, checkpoint, checkpoint_config};
+use crate::checkpoint_config;
+use crate::seeded_verify::{SeededModel, load_seeded, traced_pass};
+use crate::verify::VerifyReport;
+use crate::verify_defom::compare_trace;
 
 pub use crate::verify_defom::DISPARITY_TOLERANCE;
 
@@ -75,24 +73,12 @@ pub fn traced_name(key: &str) -> Option<String> {
 /// holds; [`Error::Checkpoint`] when its keys match no configuration or do not load;
 /// [`Error::Shape`] when a tensor we produce has another shape than the reference's.
 pub fn verify_igev(reference: &Path, device: &Device) -> Result<VerifyReport> {
-    let (state, metadata) = golden_state_dict(reference)?;
-    let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
-    let (config, model) = checkpoint_config::model_from_keys(&keys, device)
-        .map_err(|p| Error::Checkpoint { path: reference.into(), message: p.to_string() })?;
+    let SeededModel { config, model, iters, .. } = load_seeded(reference, device)?;
     if config.preset != checkpoint_config::OfficialPreset::Igev {
         let message = format!("the keys are not an IGEV-Stereo state dict (they show {config})");
         return Err(Error::Checkpoint { path: reference.into(), message });
     }
-    let model = checkpoint::load_state_dict(model, &state, reference)?;
-    let iters = metadata_count(&metadata, "iters", reference)?;
-
-    let refs = read_reference(reference)?;
-    let left = tensor4(&refs, "input.left", reference, device)?;
-    let right = tensor4(&refs, "input.right", reference, device)?;
-    let mut trace = BTreeMap::new();
-    let options =
-        ForwardOptions { all_iterations: true, probe: Probe::new(Some(&mut trace), None), ..ForwardOptions::default() };
-    model.forward_flow(left, right, None, iters, options)?;
+    let (refs, trace) = traced_pass(&model, reference, iters, device)?;
 
     let last = format!("disparity.iter{}", iters.saturating_sub(1));
     let (lines, unmatched, final_flow_error) = compare_trace(&refs, &trace, traced_name, &last)?;
