@@ -30,6 +30,7 @@ use burn::tensor::Device;
 use dgstereo_core::{Error, Problem, Result};
 use dgstereo_encoder::NormKind;
 
+use crate::key_shapes::{dim, gru_levels};
 use crate::official_keys::{KeyShape, model_official_keys, pth_keys, redundant};
 use crate::{ModelConfig, RaftStereo, checkpoint, defom_config, igev_config};
 
@@ -171,21 +172,6 @@ pub fn correlation_split(channels: usize) -> Option<(usize, usize)> {
     (1..=channels).find(|&l| odd(l)).map(|l| (l, (channels / l - 1) / 2))
 }
 
-/// Axis `axis` of `key`'s shape; a missing key or axis is a problem (and 0).
-fn dim(keys: &BTreeMap<&str, &[usize]>, key: &str, axis: usize, problems: &mut Vec<String>) -> usize {
-    match keys.get(key) {
-        Some(s) if s.len() > axis => s[axis],
-        Some(s) => {
-            problems.push(format!("'{key}' has shape {s:?}"));
-            0
-        }
-        None => {
-            problems.push(format!("missing key '{key}'"));
-            0
-        }
-    }
-}
-
 /// The architecture the primary keys show, or the problems with them.
 fn architecture(keys: &BTreeMap<&str, &[usize]>) -> std::result::Result<ModelConfig, Vec<String>> {
     if igev_config::is_igev(keys) {
@@ -222,11 +208,7 @@ fn architecture(keys: &BTreeMap<&str, &[usize]>) -> std::result::Result<ModelCon
         dim(keys, "update_block.gru16.convz.weight", 0, &mut problems),
         dim(keys, "update_block.gru08.convz.weight", 0, &mut problems),
     ];
-    let levels = (0..).take_while(|i| keys.contains_key(format!("context_zqr_convs.{i}.weight").as_str())).count();
-    if !(1..=3).contains(&levels) {
-        problems.push(format!("{levels} 'context_zqr_convs.{{i}}.weight' keys (a model has 1, 2 or 3 GRU levels)"));
-    }
-    config.updater.n_gru_layers = levels;
+    config.updater.n_gru_layers = gru_levels(keys, &mut problems);
     let mask = dim(keys, "update_block.mask.2.weight", 0, &mut problems);
     match (2..=3).find(|n| 9 << (2 * n) == mask) {
         Some(n) => config.updater.n_downsample = n,

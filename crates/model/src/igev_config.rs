@@ -21,26 +21,13 @@ use dgstereo_costvolume::GeometryVolume;
 use dgstereo_encoder::{FeatureNetwork, NormKind};
 use dgstereo_updater::{MotionKind, UpsamplingKind};
 
+use crate::key_shapes::{dim, gru_levels};
 use crate::{InitialDisparity, ModelConfig};
 
 /// Whether a state dict is IGEV-Stereo's: the MobileNetV2 pyramid and the geometry volume's
 /// aggregation.
 pub fn is_igev(keys: &BTreeMap<&str, &[usize]>) -> bool {
     keys.contains_key("feature.conv_stem.weight") || keys.keys().any(|k| k.starts_with("cost_agg."))
-}
-
-/// Axis `axis` of `key`'s shape; a missing key or axis is a problem (and 0).
-fn dim(keys: &BTreeMap<&str, &[usize]>, key: &str, axis: usize, problems: &mut Vec<String>) -> usize {
-    match keys.get(key).and_then(|s| s.get(axis)) {
-        Some(&d) => d,
-        None => {
-            match keys.get(key) {
-                Some(s) => problems.push(format!("'{key}' has shape {s:?}")),
-                None => problems.push(format!("missing key '{key}'")),
-            }
-            0
-        }
-    }
 }
 
 /// The IGEV-Stereo architecture `keys` show, or the problems with them; `split` divides a
@@ -69,11 +56,7 @@ pub fn architecture(
         dim(keys, "update_block.gru08.convz.weight", 0, &mut problems),
         dim(keys, "update_block.gru04.convz.weight", 0, &mut problems),
     ];
-    let levels = (0..).take_while(|i| keys.contains_key(format!("context_zqr_convs.{i}.weight").as_str())).count();
-    if !(1..=3).contains(&levels) {
-        problems.push(format!("{levels} 'context_zqr_convs.{{i}}.weight' keys (a model has 1, 2 or 3 GRU levels)"));
-    }
-    config.updater.n_gru_layers = levels;
+    config.updater.n_gru_layers = gru_levels(keys, &mut problems);
     config.updater.n_downsample = 2;
     config.updater.motion = MotionKind::Disparity;
     config.updater.upsampling = UpsamplingKind::Superpixel;

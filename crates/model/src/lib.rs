@@ -28,6 +28,7 @@ pub mod igev_config;
 pub mod igev_keys;
 pub mod inference;
 pub mod initial_disparity;
+mod key_shapes;
 pub mod network;
 pub mod official_keys;
 pub mod profile;
