@@ -59,3 +59,36 @@ pub fn write_experiment(dir: &Path, file: &str, name: &str, train: &str, data: &
     std::fs::write(&path, format!("name = \"{name}\"\n{TINY_MODEL}{train}{data}{extra}")).unwrap();
     path
 }
+
+/// `dgstereo verify MODEL --reference G` on the golden `golden` (a path under `../shared`) for
+/// the test `test`: its output, and whether the command succeeded; `None` (with the skip notice)
+/// where `../shared` is missing outside CI.
+pub fn verify_on_golden(test: &str, model: &str, golden: &str) -> Option<Output> {
+    let shared = dgstereo_core::shared::shared_dir_for_test(test, golden)?;
+    Some(dgstereo(&["verify", model, "--reference", shared.join(golden).to_str().unwrap()]))
+}
+
+/// The checks every passing `verify` run gets: success, no line marked `FAIL`, and the last
+/// line's final disparity error within `tolerance` pixels. Returns its stdout.
+pub fn assert_verify_passed(out: &Output, model: &str, tolerance: f32) -> String {
+    let all = text(out);
+    println!("{all}");
+    assert!(out.status.success(), "{model} deviates from the reference:\n{all}");
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(stdout.lines().all(|l| !l.ends_with("FAIL")), "{stdout}");
+    let last = stdout.lines().last().unwrap_or_default();
+    let error: f32 =
+        last.strip_prefix("final flow max abs error: ").unwrap_or_else(|| panic!("{last}")).parse().unwrap();
+    assert!(error <= tolerance, "{last}");
+    stdout
+}
+
+/// The checks every refused `verify` run gets: failure without a panic, the file named on stderr.
+/// Returns its stderr.
+pub fn assert_verify_refused(out: &Output, file_name: &str) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "{}", text(out));
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains(file_name), "{stderr}");
+    stderr
+}
