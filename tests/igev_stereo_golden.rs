@@ -13,11 +13,12 @@ use std::path::PathBuf;
 
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, max_abs_diff};
+use dgstereo_costvolume::CorrelationImplementation;
 use dgstereo_model::checkpoint_config::{self, OfficialPreset, config_from_keys, model_from_keys};
 use dgstereo_model::official_keys::KeyShape;
 use dgstereo_model::seeded::golden_state_dict;
 use dgstereo_model::verify_igev::{DISPARITY_TOLERANCE, verify_igev};
-use dgstereo_model::{InitialDisparity, ModelConfig, checkpoint, verify};
+use dgstereo_model::{ForwardOptions, InitialDisparity, ModelConfig, checkpoint, verify};
 use dgstereo_suite::shared_dir_for_test;
 
 #[path = "support/official_pth.rs"]
@@ -130,4 +131,9 @@ fn an_official_igev_pth_file_loads_and_gives_the_reference_disparity() {
     let out = model.forward_flow(f("input.left"), f("input.right"), None, 4, Default::default()).unwrap();
     let error = max_abs_diff(out.flow_up.last().unwrap().clone().neg(), f("disparity.iter3"));
     assert!(error <= DISPARITY_TOLERANCE, "the .pth file's model is off by {error} px");
+    // The lookup's correlation half on the fly (`--corr alt`) gives the same disparity.
+    let alt = ForwardOptions { implementation: Some(CorrelationImplementation::Alt), ..Default::default() };
+    let out = model.forward_flow(f("input.left"), f("input.right"), None, 4, alt).unwrap();
+    let error = max_abs_diff(out.flow_up.last().unwrap().clone().neg(), f("disparity.iter3"));
+    assert!(error <= DISPARITY_TOLERANCE, "with the on-the-fly correlation the model is off by {error} px");
 }
