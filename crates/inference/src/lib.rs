@@ -23,8 +23,9 @@
 //! Beside the engine: [`working_size`] (the min/max size policy), [`cost_volume`] (materialised
 //! or on-the-fly volume within a memory budget), [`consistency`] (the left-right check),
 //! [`calibration`] (one [`Calibration`] from Middlebury, JSON or `K.txt` files), [`pointcloud`]
-//! (depth, coloured point clouds, PLY) and [`weights`] (bundled assets, default weights,
-//! loading a checkpoint).
+//! (depth, coloured point clouds, PLY), [`outputs`] (the files written for a pair, one
+//! [`outputs::SaveKind`] a file) and [`weights`] (bundled assets, default weights, loading a
+//! checkpoint).
 
 #![deny(missing_docs)]
 
@@ -34,6 +35,7 @@ pub mod convert;
 pub mod cost_volume;
 mod engine;
 pub mod options;
+pub mod outputs;
 pub mod pointcloud;
 mod prior_maps;
 pub mod specs;
