@@ -24,8 +24,8 @@
 //! or on-the-fly volume within a memory budget), [`consistency`] (the left-right check),
 //! [`calibration`] (one [`Calibration`] from Middlebury, JSON or `K.txt` files), [`pointcloud`]
 //! (depth, coloured point clouds, PLY), [`outputs`] (the files written for a pair, one
-//! [`outputs::SaveKind`] a file) and [`weights`] (bundled assets, default weights, loading a
-//! checkpoint).
+//! [`outputs::SaveKind`] a file), [`pair_files`] (one pair from its files to its outputs, its
+//! failure its own) and [`weights`] (bundled assets, default weights, loading a checkpoint).
 
 #![deny(missing_docs)]
 
@@ -36,6 +36,7 @@ pub mod cost_volume;
 mod engine;
 pub mod options;
 pub mod outputs;
+pub mod pair_files;
 pub mod pointcloud;
 mod prior_maps;
 pub mod specs;
