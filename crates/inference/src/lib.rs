@@ -25,7 +25,8 @@
 //! [`calibration`] (one [`Calibration`] from Middlebury, JSON or `K.txt` files), [`pointcloud`]
 //! (depth, coloured point clouds, PLY), [`outputs`] (the files written for a pair, one
 //! [`outputs::SaveKind`] a file), [`pair_files`] (one pair from its files to its outputs, its
-//! failure its own) and [`weights`] (bundled assets, default weights, loading a checkpoint).
+//! failure its own), [`timing`] (whole inference timed as a user waits for it) and [`weights`]
+//! (bundled assets, default weights, loading a checkpoint).
 
 #![deny(missing_docs)]
 
@@ -40,6 +41,7 @@ pub mod pair_files;
 pub mod pointcloud;
 mod prior_maps;
 pub mod specs;
+pub mod timing;
 pub mod weights;
 pub mod working_size;
 
