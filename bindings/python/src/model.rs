@@ -143,9 +143,7 @@ impl Engine {
         let result = py.detach(|| {
             guarded(|| {
                 let exported = dgstereo_export::export_onnx(engine.stereo_model(), height, width, iters)?;
-                let tmp = path.with_extension("onnx.tmp");
-                std::fs::write(&tmp, &exported.bytes).map_err(|e| dgstereo_core::Error::io(&tmp, e))?;
-                dgstereo_core::atomic_file::commit_file(&tmp, &path)?;
+                exported.write(&path)?;
                 Ok(exported)
             })
         });
