@@ -25,8 +25,9 @@
 //! [`calibration`] (one [`Calibration`] from Middlebury, JSON or `K.txt` files), [`pointcloud`]
 //! (depth, coloured point clouds, PLY), [`outputs`] (the files written for a pair, one
 //! [`outputs::SaveKind`] a file), [`pair_files`] (one pair from its files to its outputs, its
-//! failure its own), [`timing`] (whole inference timed as a user waits for it) and [`weights`]
-//! (bundled assets, default weights, loading a checkpoint).
+//! failure its own), [`timing`] (whole inference timed as a user waits for it), [`specs`] (what
+//! front ends read from their users' words alike) and [`weights`] (bundled assets, default
+//! weights, loading a checkpoint).
 
 #![deny(missing_docs)]
 
@@ -51,5 +52,7 @@ pub use dgstereo_data::{DisparityMap, Mask, RgbImage};
 pub use engine::{Engine, Prediction, PriorMaps, RunInfo, check_same_size};
 pub use options::{EngineConfig, PredictOptions};
 pub use pointcloud::{PlyEncoding, PointCloud};
-pub use specs::{error_chain, experiment_configs, parse_prior};
+pub use specs::{
+    ModelChoice, error_chain, experiment_configs, model_config_file, parse_byte_size, parse_prior, prior_with_weights,
+};
 pub use working_size::MinSize;
