@@ -51,6 +51,7 @@ pub mod run_identity;
 pub mod run_log;
 pub mod schedule;
 pub mod step_timing;
+pub mod timed_steps;
 pub mod trainer;
 pub mod validate;
 pub mod verify_step;
