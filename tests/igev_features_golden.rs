@@ -17,7 +17,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_encoder::official_keys::{IGEV_ENCODER_INVERSE_RENAMES, IGEV_ENCODER_RENAMES};
-use dgstereo_encoder::{EncoderConfig, Encoders, FeatureNetwork, PyramidEncoders};
+use dgstereo_encoder::{EncoderConfig, EncoderLayout, Encoders, PyramidEncoders};
 use dgstereo_model::official_keys::official_key_of_module_path;
 use dgstereo_model::seeded::golden_state_dict;
 use dgstereo_model::verify::{ReferenceTensors, read_reference};
@@ -95,7 +95,7 @@ fn reference(path: &Path) -> Reference {
 
 /// The IGEV encoders, built from the configuration variant and loaded with the seeded weights.
 fn encoders(path: &Path, device: &Device) -> PyramidEncoders {
-    let config = EncoderConfig { feature_network: FeatureNetwork::MobilenetPyramid, ..Default::default() };
+    let config = EncoderConfig { layout: EncoderLayout::MobilenetPyramid, ..Default::default() };
     let Encoders::Pyramid(encoders) = config.init([128; 3], 2, None, device).unwrap() else {
         panic!("the mobilenet pyramid builds the pyramid layout")
     };
@@ -215,7 +215,7 @@ fn igev_module_paths_map_back_to_the_official_keys() {
         keys.sort();
         keys
     };
-    let config = EncoderConfig { feature_network: FeatureNetwork::MobilenetPyramid, ..Default::default() };
+    let config = EncoderConfig { layout: EncoderLayout::MobilenetPyramid, ..Default::default() };
     let Encoders::Pyramid(encoders) = config.init([128; 3], 2, None, &device).unwrap() else { unreachable!() };
     let encoders = || encoders.collect(None, Some(Box::new(BurnToPyTorchAdapter)), false);
     let encoder_keys: Vec<_> = ours(&encoders, IGEV_ENCODER_INVERSE_RENAMES);

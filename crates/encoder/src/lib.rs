@@ -6,8 +6,10 @@
 //! The stage traits [`FeatureExtractor`] and [`ContextExtractor`] are what single-stage tools
 //! call; the normalisations ([`norm`]) are swappable by [`NormKind`].
 //!
-//! The layout (separate feature and context encoders, or one shared backbone) is this crate's
-//! choice: [`EncoderConfig::init`] builds an [`Encoders`] module with one `match`, and the model
+//! The layout (separate feature and context encoders, one shared backbone, or IGEV-Stereo's
+//! MobileNetV2 pyramid beside the context encoder) is one [`EncoderLayout`] variant, so options
+//! that belong to one layout cannot meet another's: [`EncoderConfig::init`] builds an
+//! [`Encoders`] module with one `match`, and the model
 //! calls [`Encoders::encode`], so a new layout touches this crate and the experiment files only.
 //! The layout is a module enum, so its variant name is part of each module path
 //! (`encoder.Separate.fnet...`); checkpoints keep the reference's keys (`fnet.`, `cnet.`,
@@ -31,7 +33,7 @@ pub mod residual;
 
 use burn::tensor::Tensor;
 
-pub use config::{EncoderConfig, FeatureNetwork};
+pub use config::{EncoderConfig, EncoderLayout};
 pub use context::ContextEncoder;
 pub use depth_block::{DepthFeatureBlock, DepthFeatureInput, InputNormalisation};
 pub use feature::{FeatureEncoder, SharedFeatureHead};

@@ -35,6 +35,7 @@ pub mod profile;
 pub mod seeded;
 mod seeded_verify;
 pub mod stage_backward;
+mod stored_config;
 mod superpixel_stage;
 pub mod verify;
 pub mod verify_defom;

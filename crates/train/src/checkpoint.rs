@@ -190,8 +190,8 @@ pub fn load_checkpoint(parts: TrainParts, path: &Path, device: &burn::tensor::De
     let step: usize = get("step")?.parse().map_err(|e| bad(format!("metadata 'step': {e}")))?;
     let ids: BTreeMap<String, u64> =
         serde_json::from_str(get("param_ids")?).map_err(|e| bad(format!("metadata 'param_ids': {e}")))?;
-    let saved_model: dgstereo_model::ModelConfig =
-        serde_json::from_str(get("model_config")?).map_err(|e| bad(format!("metadata 'model_config': {e}")))?;
+    let saved_model = dgstereo_model::ModelConfig::from_checkpoint_json(get("model_config")?)
+        .map_err(|e| bad(format!("metadata 'model_config': {e}")))?;
     if saved_model != parts.model {
         return Err(bad("the checkpoint was trained with another [model] configuration than the experiment's".into()));
     }

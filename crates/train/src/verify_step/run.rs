@@ -8,6 +8,7 @@ use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::tensor::to_vec;
 use dgstereo_core::{Error, Result};
+use dgstereo_model::encoder::EncoderLayout;
 use dgstereo_loss::LossConfig;
 use dgstereo_model::RaftStereo;
 use dgstereo_model::checkpoint::{load_pytorch, module_path_of_official_key};
@@ -215,7 +216,8 @@ fn recipe_lines(recipe: &TrainParts, reference: &TrainStepReference) -> Result<V
     same("model.correlation.levels", m.correlation.levels.to_string(), args.corr_levels.to_string());
     same("model.correlation.radius", m.correlation.radius.to_string(), args.corr_radius.to_string());
     same("model.encoder.context_norm", serde_name(&m.encoder.context_norm), args.context_norm);
-    same("model.encoder.shared_backbone", m.encoder.shared_backbone.to_string(), args.shared_backbone.to_string());
+    let layout = if args.shared_backbone { EncoderLayout::SharedBackbone } else { EncoderLayout::Separate };
+    same("model.encoder.layout", m.encoder.layout.name().into(), layout.name().into());
     same("model.precision", "float32".into(), if args.mixed_precision { "mixed" } else { "float32" }.into());
     same("model (depth prior)", if m.needs_prior() { "used" } else { "none" }.into(), "none".into());
     Ok(lines)
