@@ -321,3 +321,32 @@ fn command_modules_do_not_import_each_other() {
         .collect();
     assert!(offenders.is_empty(), "command modules importing each other:\n{}", offenders.join("\n"));
 }
+
+/// **Architecture Invariant:** a stage with several implementations has a trait that is its
+/// contract, and a test runs every implementation through one body generic over that trait
+/// (`fn conforms<...: Trait>`), so the trait has a user beyond the enum that delegates to it.
+#[test]
+fn every_stage_trait_has_a_conformance_test() {
+    let stages = [
+        ("fusion", "ImageFusion"),
+        ("costvolume", "CostVolume"),
+        ("loss", "DisparityLoss"),
+        ("prior", "PriorProvider"),
+        ("encoder", "StereoEncoder"),
+    ];
+    for (stage, contract) in stages {
+        let mut sources = Vec::new();
+        rust_files(&root().join(format!("crates/{stage}/src")), &mut sources);
+        let defined = sources.iter().any(|p| {
+            std::fs::read_to_string(p).unwrap_or_default().contains(&format!("pub trait {contract} {{"))
+        });
+        assert!(defined, "crates/{stage} does not define the trait {contract}");
+        let mut tests = Vec::new();
+        rust_files(&root().join(format!("crates/{stage}/tests")), &mut tests);
+        let generic = tests.iter().any(|p| {
+            let text = std::fs::read_to_string(p).unwrap_or_default();
+            text.contains("fn conforms<") && text.contains(&format!(": {contract}>"))
+        });
+        assert!(generic, "crates/{stage}/tests has no conformance test generic over {contract}");
+    }
+}

@@ -116,7 +116,7 @@ fn igev_feature_pyramid_stems_and_context_match() {
         r.assert_close(&format!("stem_2.call{call}"), stem_2x.clone());
         r.assert_close(&format!("stem_4.call{call}"), encoders.stem_4.forward(stem_2x));
     }
-    let context = dgstereo_encoder::ContextExtractor::context(&encoders.cnet, r.image("input.left"), 3);
+    let context = encoders.cnet.context(r.image("input.left"), 3);
     for (l, [hidden, context]) in context.levels.into_iter().enumerate() {
         r.assert_close(&format!("cnet.call0.{l}.0"), hidden);
         r.assert_close(&format!("cnet.call0.{l}.1"), context);

@@ -20,7 +20,7 @@ use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_costvolume::{CombinedGeometryVolume, GeometryEncoding, GeometryVolume};
 use dgstereo_model::seeded::golden_state_dict;
 use dgstereo_model::updater::{
-    GateContext, HeadOutput, MotionKind, MultiLevelUpdateBlock, Updater, UpdaterConfig, UpsamplingKind,
+    GateContext, HeadOutput, MotionKind, MultiLevelUpdateBlock, UpdaterConfig, UpsamplingKind,
 };
 use dgstereo_model::verify::{FEATURE_TOLERANCE, ReferenceTensors, read_reference};
 use dgstereo_suite::shared_dir_for_test;

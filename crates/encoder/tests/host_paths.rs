@@ -9,7 +9,7 @@ use dgstereo_core::tensor::max_abs_diff;
 use dgstereo_encoder::norm::Norm;
 use dgstereo_encoder::residual::ResidualBlock;
 use dgstereo_encoder::{
-    ContextEncoder, ContextExtractor, EncoderInputs, Encoders, FeatureEncoder, FeatureExtractor, NormKind,
+    ContextEncoder, EncoderInputs, Encoders, FeatureEncoder, NormKind, StereoEncoder,
     SharedBackbone, SharedFeatureHead,
 };
 

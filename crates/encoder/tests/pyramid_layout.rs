@@ -4,7 +4,7 @@
 use burn::tensor::{Distribution, Tensor};
 use dgstereo_core::tensor::max_abs_diff;
 use dgstereo_core::{Probe, default_device};
-use dgstereo_encoder::{DepthFeatureInput, EncoderConfig, EncoderInputs, EncoderLayout, Encoders};
+use dgstereo_encoder::{DepthFeatureInput, EncoderConfig, EncoderInputs, EncoderLayout, Encoders, StereoEncoder};
 
 fn pyramid_config() -> EncoderConfig {
     EncoderConfig { layout: EncoderLayout::MobilenetPyramid, ..Default::default() }
