@@ -224,7 +224,7 @@ fn unknown_keys_name_the_file_and_the_key() {
         ("top.toml", "modle = 3\n"),
         ("loss.toml", "base = \"main.toml\"\n[loss]\ntaux = 0.9\n"),
         ("nested.toml", "[model.updater]\nhidden_dim = [1, 2, 3]\n"),
-        // Accepted by serde next to a variant without fields; still an error.
+        // Keys beside a kind without fields.
         ("none.toml", "[prior]\nkind = \"none\"\nweights = \"x.pth\"\n"),
         ("fusion.toml", "[model.fusion]\nkind = \"none\"\ntarget = \"both\"\n"),
         ("bad_base.toml", "[loss]\nkind = \"edge-aware\"\ntua = 1.0\n"),
