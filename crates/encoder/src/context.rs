@@ -6,11 +6,11 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_kernels::{Numerics, conv2d_forward};
 
+use crate::ContextFeatures;
 use crate::depth_block::DepthFeatureBlock;
 use crate::feature::trunk_strides;
 use crate::norm::{Norm, NormKind};
 use crate::residual::{ResidualBlock, forward_layer, make_layer};
-use crate::ContextFeatures;
 
 /// A head of the 1/4 and 1/8 levels: a residual block and a 3x3 convolution
 /// (`outputsXX.j.0` and `outputsXX.j.1` in the reference).

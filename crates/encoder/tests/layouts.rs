@@ -21,7 +21,8 @@ fn conforms<E: StereoEncoder>(encoder: &E, name: &str) {
     let device = default_device();
     let image = || Tensor::<4>::random([1, 3, H, W], Distribution::Uniform(0.0, 255.0), &device);
     let left = image();
-    let inputs = EncoderInputs { context_left: left.clone(), features_left: left, features_right: image(), depth: None };
+    let inputs =
+        EncoderInputs { context_left: left.clone(), features_left: left, features_right: image(), depth: None };
     let encoded = encoder.encode(inputs, LEVELS, &mut Probe::none());
     if encoder.takes_depth_features() {
         match encoded {

@@ -248,7 +248,8 @@ fn the_encoder_layout_is_one_key() {
         ("pyramid.toml", "[model.encoder]\nfeature_network = \"mobilenet-pyramid\"\n"),
         ("layout.toml", "[model.encoder]\nlayout = \"shared-backbone\"\n"),
     ]);
-    for (name, key) in [("shared.toml", "model.encoder.shared_backbone"), ("pyramid.toml", "model.encoder.feature_network")]
+    for (name, key) in
+        [("shared.toml", "model.encoder.shared_backbone"), ("pyramid.toml", "model.encoder.feature_network")]
     {
         let message = files.error(name);
         names(&message, name, key);

@@ -4,7 +4,9 @@
 use burn::tensor::{Distribution, Tensor};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::to_vec;
-use dgstereo_prior::{CachedPrior, Prior, PriorConfig, PriorInput, PriorProvider, SimulatedPrior, SimulatedPriorConfig};
+use dgstereo_prior::{
+    CachedPrior, Prior, PriorConfig, PriorInput, PriorProvider, SimulatedPrior, SimulatedPriorConfig,
+};
 
 const N: usize = 2;
 const H: usize = 16;
@@ -25,7 +27,10 @@ fn conforms<P: PriorProvider>(provider: &P, gives_a_prior: bool, name: &str) {
         for (side, map) in [("left", prior.left), ("right", prior.right)] {
             assert_eq!(map.dims(), [N, 1, H, W], "{name}, {side}");
             let values = to_vec(map);
-            assert!(values.iter().all(|v| v.is_finite() && *v >= 0.0), "{name}, {side}: a value is negative or not finite");
+            assert!(
+                values.iter().all(|v| v.is_finite() && *v >= 0.0),
+                "{name}, {side}: a value is negative or not finite"
+            );
         }
     }
 }

@@ -32,8 +32,8 @@ pub mod motion;
 pub mod superpixel;
 
 use burn::tensor::{FloatDType, Tensor};
-use dgstereo_core::tensor::cast_float;
 use dgstereo_core::Problem;
+use dgstereo_core::tensor::cast_float;
 use serde::{Deserialize, Serialize};
 
 pub use block::{MaskFeatureHead, MultiLevelUpdateBlock};
