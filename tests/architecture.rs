@@ -337,9 +337,9 @@ fn every_stage_trait_has_a_conformance_test() {
     for (stage, contract) in stages {
         let mut sources = Vec::new();
         rust_files(&root().join(format!("crates/{stage}/src")), &mut sources);
-        let defined = sources.iter().any(|p| {
-            std::fs::read_to_string(p).unwrap_or_default().contains(&format!("pub trait {contract} {{"))
-        });
+        let defined = sources
+            .iter()
+            .any(|p| std::fs::read_to_string(p).unwrap_or_default().contains(&format!("pub trait {contract} {{")));
         assert!(defined, "crates/{stage} does not define the trait {contract}");
         let mut tests = Vec::new();
         rust_files(&root().join(format!("crates/{stage}/tests")), &mut tests);
@@ -349,4 +349,30 @@ fn every_stage_trait_has_a_conformance_test() {
         });
         assert!(generic, "crates/{stage}/tests has no conformance test generic over {contract}");
     }
+}
+
+/// **Architecture Invariant:** every difference between an official checkpoint key and our
+/// module path is written once, in `crates/model/src/official_keys/renames.rs`: code elsewhere
+/// that renames keys takes its patterns from `official_keys` (Depth Anything V2's own
+/// checkpoints, another family, are the prior crate's, which sits below the model crate).
+#[test]
+fn key_renames_come_from_the_official_key_tables() {
+    let mut files = Vec::new();
+    for dir in ["crates", "src", "tests", "benches", "bindings"] {
+        rust_files(&root().join(dir), &mut files);
+    }
+    let tables = root().join("crates/model/src/official_keys");
+    let own_family = root().join("crates/prior/src/depth_anything/checkpoint.rs");
+    let offenders: Vec<String> = files
+        .iter()
+        .filter(|path| !path.starts_with(&tables) && **path != own_family)
+        .filter(|path| {
+            let text = std::fs::read_to_string(path).unwrap_or_default();
+            let renames = text.contains("KeyRemapper::from_patterns(") || text.contains("with_key_remapping(");
+            let from_tables = text.contains("Family") || text.contains("official_keys::");
+            renames && !from_tables
+        })
+        .map(|path| relative(path))
+        .collect();
+    assert!(offenders.is_empty(), "key renames not taken from official_keys: {offenders:?}");
 }

@@ -33,7 +33,6 @@ pub mod feature;
 pub mod layout;
 pub mod mobilenet;
 pub mod norm;
-pub mod official_keys;
 pub mod pyramid;
 pub mod residual;
 

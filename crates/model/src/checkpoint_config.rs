@@ -31,7 +31,7 @@ use dgstereo_core::{Error, Problem, Result};
 use dgstereo_encoder::{EncoderLayout, NormKind};
 
 use crate::key_shapes::{dim, gru_levels};
-use crate::official_keys::{KeyShape, model_official_keys, pth_keys, redundant};
+use crate::official_keys::{KeyShape, ignored_by_loader, model_official_keys, pth_keys};
 use crate::{ModelConfig, RaftStereo, checkpoint, defom_config, igev_config};
 
 /// The most disagreeing keys an error lists.
@@ -76,7 +76,11 @@ impl OfficialPreset {
             && e.trunk_dims == [64, 96, 128];
         if !standard {
             Self::Custom
-        } else if e.layout == EncoderLayout::SharedBackbone && u.n_downsample == 3 && u.n_gru_layers == 2 && e.context_norm == NormKind::Batch {
+        } else if e.layout == EncoderLayout::SharedBackbone
+            && u.n_downsample == 3
+            && u.n_gru_layers == 2
+            && e.context_norm == NormKind::Batch
+        {
             Self::Realtime
         } else if e.layout != EncoderLayout::Separate || u.n_downsample != 2 || u.n_gru_layers != 3 {
             Self::Custom
@@ -256,7 +260,7 @@ fn architecture(keys: &BTreeMap<&str, &[usize]>) -> std::result::Result<ModelCon
 /// file, keys the model lacks and shapes that differ, redundant keys ignored.
 pub fn disagreements(expected: &[KeyShape], file: &[KeyShape]) -> Vec<String> {
     let file: BTreeMap<&str, &Vec<usize>> =
-        file.iter().filter(|(k, _)| !redundant(k)).map(|(k, s)| (k.as_str(), s)).collect();
+        file.iter().filter(|(k, _)| !ignored_by_loader(k)).map(|(k, s)| (k.as_str(), s)).collect();
     let model: BTreeMap<&str, &Vec<usize>> = expected.iter().map(|(k, s)| (k.as_str(), s)).collect();
     let mut out = Vec::new();
     for (k, s) in &model {

@@ -292,17 +292,22 @@ fn unequal_hidden_widths_run() {
     builds_and_runs(&config, [64, 64], 2).expect("runs");
 }
 
-/// Saved checkpoints keep the reference's top-level keys (`fnet.`, `cnet.`, `conv2.`) for both
-/// encoder layouts, load back into the same layout, and are readable by others (0644).
+/// Saved checkpoints keep the reference's top-level keys (`fnet.`, `cnet.`, `conv2.`, IGEV-Stereo's
+/// `feature.`, `stem_2.`, `stem_4.`) for every encoder layout, load back into the same layout,
+/// and are readable by others (0644).
 #[test]
 fn saved_keys_keep_the_reference_names() {
     let device = default_device();
-    for layout in [EncoderLayout::Separate, EncoderLayout::SharedBackbone] {
+    for layout in EncoderLayout::ALL {
         let mut config = ModelConfig::default();
         config.encoder.layout = layout;
         config.encoder.trunk_dims = [16, 16, 24];
         let model = config.init(&device).unwrap();
-        let path = std::env::temp_dir().join(format!("config-space-keys-{}-{}.safetensors", std::process::id(), layout.name()));
+        let path = std::env::temp_dir().join(format!(
+            "config-space-keys-{}-{}.safetensors",
+            std::process::id(),
+            layout.name()
+        ));
         dgstereo_model::checkpoint::save_safetensors(&model, &path, &[]).unwrap();
         // Written through a temporary file that is gone, and readable by others as any output.
         assert!(!path.with_extension("safetensors.tmp").exists(), "the temporary file is left behind");
@@ -318,10 +323,12 @@ fn saved_keys_keep_the_reference_names() {
             file.names().iter().map(|k| k.split('.').next().unwrap_or_default().to_string()).collect();
         tops.sort();
         tops.dedup();
-        let expected: &[&str] = if layout == EncoderLayout::SharedBackbone {
-            &["cnet", "context_zqr_convs", "conv2", "update_block"]
-        } else {
-            &["cnet", "context_zqr_convs", "fnet", "update_block"]
+        let expected: &[&str] = match layout {
+            EncoderLayout::Separate => &["cnet", "context_zqr_convs", "fnet", "update_block"],
+            EncoderLayout::SharedBackbone => &["cnet", "context_zqr_convs", "conv2", "update_block"],
+            EncoderLayout::MobilenetPyramid => {
+                &["cnet", "context_zqr_convs", "feature", "stem_2", "stem_4", "update_block"]
+            }
         };
         assert_eq!(tops, expected);
         dgstereo_model::checkpoint::load_safetensors(config.init(&device).unwrap(), &path).unwrap();

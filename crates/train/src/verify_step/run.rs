@@ -8,10 +8,12 @@ use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::tensor::to_vec;
 use dgstereo_core::{Error, Result};
-use dgstereo_model::encoder::EncoderLayout;
 use dgstereo_loss::LossConfig;
 use dgstereo_model::RaftStereo;
-use dgstereo_model::checkpoint::{load_pytorch, module_path_of_official_key};
+use dgstereo_model::checkpoint::load_pytorch;
+use dgstereo_model::encoder::EncoderLayout;
+use dgstereo_model::official_keys::Family;
+use dgstereo_model::official_keys::renames::alias_of_ignored;
 use serde::Deserialize;
 
 use super::alteration::{Alteration, optimizer};
@@ -249,7 +251,8 @@ fn named_values(
     names: &[String],
     grads: Option<&GradientsParams>,
 ) -> BTreeMap<String, ReferenceTensor> {
-    let wanted: BTreeMap<String, String> = names.iter().map(|n| (module_path_of_official_key(n), n.clone())).collect();
+    let path = |n: &str| alias_of_ignored(&Family::RaftStereo.module_path_of_official_key(n));
+    let wanted: BTreeMap<String, String> = names.iter().map(|n| (path(n), n.clone())).collect();
     let mut collector = Collector { wanted, grads, path: Vec::new(), found: BTreeMap::new() };
     model.visit(&mut collector);
     collector.found
