@@ -39,7 +39,7 @@ fn conforms<E: StereoEncoder>(encoder: &E, name: &str) {
     assert_eq!(encoded.context.levels.len(), LEVELS, "{name}");
     for (i, heads) in encoded.context.levels.iter().enumerate() {
         for head in heads {
-            assert_eq!(head.dims()[2..], [H / 4 >> i, W / 4 >> i], "{name}, level {i}");
+            assert_eq!(head.dims()[2..], [(H / 4) >> i, (W / 4) >> i], "{name}, level {i}");
             assert!(finite(head), "{name}, level {i}: a context value is not finite");
         }
     }
