@@ -352,27 +352,33 @@ fn every_stage_trait_has_a_conformance_test() {
 }
 
 /// **Architecture Invariant:** every difference between an official checkpoint key and our
-/// module path is written once, in `crates/model/src/official_keys/renames.rs`: code elsewhere
-/// that renames keys takes its patterns from `official_keys` (Depth Anything V2's own
-/// checkpoints, another family, are the prior crate's, which sits below the model crate).
+/// module path is written once: the tables in `crates/model/src/official_keys/renames.rs` and
+/// Depth Anything V2's DPT names in the prior crate's loader (its own fields, below the model
+/// crate), both in core's notation. No other file holds a rename, and code that renames keys
+/// takes its patterns from `official_keys` or from a table in that notation.
 #[test]
 fn key_renames_come_from_the_official_key_tables() {
     let mut files = Vec::new();
     for dir in ["crates", "src", "tests", "benches", "bindings"] {
         rust_files(&root().join(dir), &mut files);
     }
-    let tables = root().join("crates/model/src/official_keys");
-    let own_family = root().join("crates/prior/src/depth_anything/checkpoint.rs");
-    let offenders: Vec<String> = files
-        .iter()
-        .filter(|path| !path.starts_with(&tables) && **path != own_family)
-        .filter(|path| {
-            let text = std::fs::read_to_string(path).unwrap_or_default();
-            let renames = text.contains("KeyRemapper::from_patterns(") || text.contains("with_key_remapping(");
-            let from_tables = text.contains("Family") || text.contains("official_keys::");
-            renames && !from_tables
-        })
-        .map(|path| relative(path))
-        .collect();
-    assert!(offenders.is_empty(), "key renames not taken from official_keys: {offenders:?}");
+    let tables = [
+        root().join("crates/model/src/official_keys/renames.rs"),
+        root().join("crates/prior/src/depth_anything/checkpoint.rs"),
+        root().join("crates/core/src/key_notation.rs"),
+    ];
+    let this_file = root().join("tests/architecture.rs");
+    let mut offenders = Vec::new();
+    for path in files.iter().filter(|p| !tables.contains(p) && **p != this_file) {
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        if text.contains(&["Rename", "::new("].concat()) {
+            offenders.push(format!("{}: a rename table", relative(path)));
+        }
+        let renames = text.contains("KeyRemapper::from_patterns(") || text.contains("with_key_remapping(");
+        let from_tables = text.contains("Family") || text.contains("official_keys") || text.contains("key_notation");
+        if renames && !from_tables {
+            offenders.push(format!("{}: renames keys by patterns of its own", relative(path)));
+        }
+    }
+    assert!(offenders.is_empty(), "key renames outside the tables: {offenders:?}");
 }

@@ -5,14 +5,15 @@
 //! [`renames`] (one table per model family and the one rule for the keys the loader ignores);
 //! loading (official key to our path) and listing or saving in the official layout (our path
 //! to the official key) both derive from it ([`notation`]), so the two directions cannot
-//! drift apart. Our own safetensors files keep the reference's top-level keys for the encoder
+//! drift apart. The notation is core's (`dgstereo_core::key_notation`), shared with the prior
+//! crate, whose Depth Anything V2 table (the DPT heads' `Sequential` indices) the RAFT-Stereo
+//! family reads for DEFOM-Stereo's monocular network. Our own safetensors files keep the reference's top-level keys for the encoder
 //! layout's modules ([`TO_FILE`], [`from_file`]).
 //!
 //! [`pth_keys`] lists a `.pth` file's tensors as the file names them, without the
 //! `DataParallel` prefix `module.`. [`model_official_keys`] lists the keys an official
 //! checkpoint of a model's architecture holds, derived from the model's paths.
 
-pub mod notation;
 pub mod renames;
 
 use std::path::Path;
@@ -20,8 +21,11 @@ use std::path::Path;
 use burn::store::{BurnToPyTorchAdapter, KeyRemapper, ModuleSnapshot, ModuleStore, PytorchStore};
 use dgstereo_core::{Error, Result};
 
-pub use notation::Rename;
+pub use dgstereo_core::key_notation::Rename;
+use dgstereo_core::key_notation::{self as notation, apply};
 pub use renames::{ENCODER_MODULES, IGEV_STEREO, RAFT_STEREO, ignored_by_loader};
+
+use dgstereo_prior::depth_anything::checkpoint::KEY_RENAMES as DEPTH_ANYTHING_V2;
 
 use crate::RaftStereo;
 
@@ -31,7 +35,7 @@ pub type KeyShape = (String, Vec<usize>);
 /// A family of official checkpoints, which decides the renames between their keys and our paths.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Family {
-    /// RAFT-Stereo and DEFOM-Stereo ([`RAFT_STEREO`]).
+    /// RAFT-Stereo and DEFOM-Stereo ([`RAFT_STEREO`], then Depth Anything V2's DPT names).
     RaftStereo,
     /// IGEV-Stereo ([`IGEV_STEREO`], then [`RAFT_STEREO`]).
     IgevStereo,
@@ -47,8 +51,8 @@ impl Family {
     /// The family's renames, in the order loading applies them.
     pub fn renames(self) -> Vec<Rename> {
         match self {
-            Self::RaftStereo => RAFT_STEREO.to_vec(),
-            Self::IgevStereo => IGEV_STEREO.iter().chain(RAFT_STEREO).copied().collect(),
+            Self::RaftStereo => RAFT_STEREO.iter().chain(DEPTH_ANYTHING_V2).copied().collect(),
+            Self::IgevStereo => IGEV_STEREO.iter().chain(RAFT_STEREO).chain(DEPTH_ANYTHING_V2).copied().collect(),
         }
     }
 
@@ -81,10 +85,6 @@ impl Family {
 
 fn remapper(patterns: Vec<(String, String)>) -> KeyRemapper {
     KeyRemapper::from_patterns(patterns).expect("the renames' notation makes valid patterns")
-}
-
-fn apply(remapper: &KeyRemapper, key: &str) -> String {
-    remapper.patterns.iter().fold(key.to_string(), |k, (pattern, to)| pattern.replace_all(&k, to.as_str()).into_owned())
 }
 
 /// The pattern and replacement that turn a module path into its key in our files: the encoder

@@ -12,9 +12,10 @@
 //! also carry the variants of enum modules (`encoder.Separate.fnet`, `conv.Plain`), which the
 //! PyTorch loader skips and the official keys lack.
 
-use super::notation::Rename;
+use dgstereo_core::key_notation::Rename;
 
-/// RAFT-Stereo's renames, DEFOM-Stereo's (its monocular network and DPT heads) among them.
+/// RAFT-Stereo's renames, DEFOM-Stereo's monocular network among them (its DPT heads' names are
+/// the prior crate's Depth Anything V2 table, which the family reads after this one).
 pub const RAFT_STEREO: &[Rename] = &[
     Rename::new("{outputs08|outputs16}.{#}.0.", "{outputs08|outputs16}.{#}.block."),
     Rename::new("{outputs08|outputs16}.{#}.1.", "{outputs08|outputs16}.{#}.conv."),
@@ -25,14 +26,8 @@ pub const RAFT_STEREO: &[Rename] = &[
     Rename::new("update_block.mask.2.", "update_block.mask.conv2."),
     // The encoder layout's modules, at the reference's top level.
     Rename::new("^{fnet|cnet|conv2}.", "^encoder.{fnet|cnet|conv2}."),
-    // DEFOM-Stereo's Depth Anything V2, and the PyTorch names of its DPT heads.
+    // DEFOM-Stereo's Depth Anything V2.
     Rename::new("^defomencoder.depth_anything.", "^monocular."),
-    Rename::new(".{depth_head|depth_feat}.resize_layers.0.", ".{depth_head|depth_feat}.upsample_4x."),
-    Rename::new(".{depth_head|depth_feat}.resize_layers.1.", ".{depth_head|depth_feat}.upsample_2x."),
-    Rename::new(".{depth_head|depth_feat}.resize_layers.3.", ".{depth_head|depth_feat}.downsample_2x."),
-    Rename::new(".output_conv2.0.", ".output_conv2_hidden."),
-    Rename::new(".output_conv2.2.", ".output_conv2_out."),
-    Rename::new(".resConfUnit{1|2}.", ".res_conf_unit{1|2}."),
 ];
 
 /// IGEV-Stereo's renames, read before RAFT-Stereo's (which then move `cnet` under `encoder` and

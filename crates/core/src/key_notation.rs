@@ -1,5 +1,7 @@
 //! The notation of a rename between an official state-dict key and our module path, written
-//! once and read in both directions.
+//! once and read in both directions: the model crate's tables of official keys
+//! (`dgstereo_model::official_keys::renames`) and the prior crate's Depth Anything V2 table are
+//! written in it.
 //!
 //! Each side is a key fragment: names, digits and dots are literal, a leading `^` and a trailing
 //! `$` anchor it at the key's start and end, and a brace holds a part both sides share: `{#}` a
@@ -64,6 +66,11 @@ fn compile(from: &str, to: &str) -> (String, String) {
 /// `literal` with its dots escaped (the notation's literals are names, digits and dots).
 fn escape(literal: &str) -> String {
     literal.replace('.', r"\.")
+}
+
+/// `key` with every pattern of `remapper` applied in order.
+pub fn apply(remapper: &burn::store::KeyRemapper, key: &str) -> String {
+    remapper.patterns.iter().fold(key.to_string(), |k, (pattern, to)| pattern.replace_all(&k, to.as_str()).into_owned())
 }
 
 /// The patterns that turn an official key into our module path: the table's renames in order.
