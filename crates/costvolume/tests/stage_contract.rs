@@ -48,10 +48,13 @@ fn every_volume_keeps_the_stage_contract() {
         let built = config.build_with(implementation, left.clone(), right.clone());
         conforms(&built, channels, &format!("{implementation:?}"));
     }
-    // IGEV-Stereo's: 4 groups over 16 disparities.
+    // IGEV-Stereo's: 4 groups over 16 disparities, with either correlation.
     let volume = Tensor::<5>::random([N, 4, 16, H, W], Distribution::Uniform(-1.0, 1.0), &default_device());
-    let geometry = CombinedGeometryVolume::new(left, right, volume, LEVELS, RADIUS);
-    let channels = geometry.channels();
-    conforms(&geometry, channels, "geometry");
-    conforms(&Correlation::Geometry(geometry), channels, "Correlation::Geometry");
+    for implementation in [CorrelationImplementation::Reg, CorrelationImplementation::Alt] {
+        let geometry =
+            CombinedGeometryVolume::new(left.clone(), right.clone(), volume.clone(), LEVELS, RADIUS, implementation);
+        let channels = geometry.channels();
+        conforms(&geometry, channels, &format!("geometry, {implementation:?}"));
+        conforms(&Correlation::Geometry(geometry), channels, &format!("Correlation::Geometry, {implementation:?}"));
+    }
 }

@@ -248,7 +248,7 @@ impl RaftStereo {
         let implementation = implementation.unwrap_or(self.correlation.implementation);
         let (corr_fn, initial) = match (&self.geometry, &pyramid) {
             (Some(geometry), Some(pyramid)) => {
-                let (corr_fn, logits) = self.geometry_volume(geometry, &pyramid.levels, fmap2, probe);
+                let (corr_fn, logits) = self.geometry_volume(geometry, &pyramid.levels, fmap2, implementation, probe);
                 (corr_fn, self.geometry_initial(&logits, pyramid, probe)?.or(initial))
             }
             _ => (self.correlation_volume(fmap1, fmap2, implementation, probe), initial),
