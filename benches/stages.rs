@@ -21,9 +21,8 @@ use criterion::{BenchmarkId, Criterion, criterion_group};
 use dgstereo_core::{Probe, default_device};
 use dgstereo_costvolume::{CorrelationConfig, CorrelationImplementation, CorrelationPyramid, OnTheFlyCorrelation};
 use dgstereo_kernels::{Path, UpdateLoop, with_path};
-use dgstereo_model::encoder::{ContextExtractor, FeatureExtractor};
 use dgstereo_model::fusion::{FusionConfig, ImageFusion};
-use dgstereo_model::updater::{GateContext, Updater, convex_upsample};
+use dgstereo_model::updater::{GateContext, convex_upsample};
 use dgstereo_model::{ForwardOptions, ModelConfig, RaftStereo};
 
 /// Full-resolution sizes (padded to a multiple of 32) and their names.
@@ -156,7 +155,7 @@ fn update(c: &mut Criterion) {
         });
         group.bench_function(BenchmarkId::new("mask head + convex upsample", name), |b| {
             b.iter(|| {
-                let mask = Updater::upsample_mask(block, &hidden);
+                let mask = block.upsample_mask(&hidden);
                 black_box(convex_upsample(flow.clone().narrow(1, 0, 1), mask, 4))
             })
         });

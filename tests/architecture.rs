@@ -350,3 +350,64 @@ fn command_modules_do_not_import_each_other() {
         .collect();
     assert!(offenders.is_empty(), "command modules importing each other:\n{}", offenders.join("\n"));
 }
+
+/// **Architecture Invariant:** a stage with several implementations has a trait that is its
+/// contract, and a test runs every implementation through one body generic over that trait
+/// (`fn conforms<...: Trait>`), so the trait has a user beyond the enum that delegates to it.
+#[test]
+fn every_stage_trait_has_a_conformance_test() {
+    let stages = [
+        ("fusion", "ImageFusion"),
+        ("costvolume", "CostVolume"),
+        ("loss", "DisparityLoss"),
+        ("prior", "PriorProvider"),
+        ("encoder", "StereoEncoder"),
+    ];
+    for (stage, contract) in stages {
+        let mut sources = Vec::new();
+        rust_files(&root().join(format!("crates/{stage}/src")), &mut sources);
+        let defined = sources
+            .iter()
+            .any(|p| std::fs::read_to_string(p).unwrap_or_default().contains(&format!("pub trait {contract} {{")));
+        assert!(defined, "crates/{stage} does not define the trait {contract}");
+        let mut tests = Vec::new();
+        rust_files(&root().join(format!("crates/{stage}/tests")), &mut tests);
+        let generic = tests.iter().any(|p| {
+            let text = std::fs::read_to_string(p).unwrap_or_default();
+            text.contains("fn conforms<") && text.contains(&format!(": {contract}>"))
+        });
+        assert!(generic, "crates/{stage}/tests has no conformance test generic over {contract}");
+    }
+}
+
+/// **Architecture Invariant:** every difference between an official checkpoint key and our
+/// module path is written once: the tables in `crates/model/src/official_keys/renames.rs` and
+/// Depth Anything V2's DPT names in the prior crate's loader (its own fields, below the model
+/// crate), both in core's notation. No other file holds a rename, and code that renames keys
+/// takes its patterns from `official_keys` or from a table in that notation.
+#[test]
+fn key_renames_come_from_the_official_key_tables() {
+    let mut files = Vec::new();
+    for dir in ["crates", "src", "tests", "benches", "bindings"] {
+        rust_files(&root().join(dir), &mut files);
+    }
+    let tables = [
+        root().join("crates/model/src/official_keys/renames.rs"),
+        root().join("crates/prior/src/depth_anything/checkpoint.rs"),
+        root().join("crates/core/src/key_notation.rs"),
+    ];
+    let this_file = root().join("tests/architecture.rs");
+    let mut offenders = Vec::new();
+    for path in files.iter().filter(|p| !tables.contains(p) && **p != this_file) {
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        if text.contains(&["Rename", "::new("].concat()) {
+            offenders.push(format!("{}: a rename table", relative(path)));
+        }
+        let renames = text.contains("KeyRemapper::from_patterns(") || text.contains("with_key_remapping(");
+        let from_tables = text.contains("Family") || text.contains("official_keys") || text.contains("key_notation");
+        if renames && !from_tables {
+            offenders.push(format!("{}: renames keys by patterns of its own", relative(path)));
+        }
+    }
+    assert!(offenders.is_empty(), "key renames outside the tables: {offenders:?}");
+}

@@ -16,15 +16,12 @@ use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Tensor, TensorData};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
-use dgstereo_encoder::official_keys::{IGEV_ENCODER_INVERSE_RENAMES, IGEV_ENCODER_RENAMES};
-use dgstereo_encoder::{EncoderConfig, Encoders, FeatureNetwork, PyramidEncoders};
-use dgstereo_model::official_keys::official_key_of_module_path;
+use dgstereo_encoder::{EncoderConfig, EncoderLayout, Encoders, PyramidEncoders};
+use dgstereo_model::official_keys::{Family, ignored_by_loader};
 use dgstereo_model::seeded::golden_state_dict;
 use dgstereo_model::verify::{ReferenceTensors, read_reference};
 use dgstereo_suite::shared_dir_for_test;
-use dgstereo_updater::superpixel::{
-    SUPERPIXEL_INVERSE_RENAMES, SUPERPIXEL_RENAMES, SuperpixelUpsampler, context_upsample,
-};
+use dgstereo_updater::superpixel::{SuperpixelUpsampler, context_upsample};
 
 const GOLDEN: &str = "golden/igev_stereo_seeded.activations.safetensors";
 /// Tolerance on features, relative to the reference tensor's largest magnitude.
@@ -36,19 +33,21 @@ fn golden(test: &str) -> Option<PathBuf> {
     Some(shared_dir_for_test(test, GOLDEN)?.join(GOLDEN))
 }
 
-/// `module` with the golden's seeded tensors whose keys start with one of `prefixes`, renamed by
-/// `renames`; every parameter must come from the file and every tensor must land (the
-/// reference's redundant `downsample.1.*` and `num_batches_tracked` aside).
-fn load<M: ModuleSnapshot>(mut module: M, golden: &Path, prefixes: &[&str], renames: &[(&str, &str)]) -> M {
+/// `module`, which the model holds at `place` (`encoder.`), with the golden's seeded tensors whose
+/// keys start with one of `prefixes`, renamed by IGEV-Stereo's table; every parameter must come
+/// from the file and every tensor must land (the keys the loader ignores aside).
+fn load<M: ModuleSnapshot>(mut module: M, golden: &Path, prefixes: &[&str], place: &str) -> M {
     let (state, _) = golden_state_dict(golden).unwrap();
     let tensors: Vec<PackTensor> = state
         .iter()
         .filter(|t| prefixes.iter().any(|p| t.key.starts_with(p)))
-        .filter(|t| !t.key.contains("downsample.1.") && !t.key.ends_with("num_batches_tracked"))
+        .filter(|t| !ignored_by_loader(&t.key))
         .map(|t| bridge::from_data(TensorData::new(t.values.clone(), t.shape.clone()), t.key.clone(), None))
         .collect();
     let count = tensors.len();
-    let (tensors, _) = KeyRemapper::from_patterns(renames.to_vec()).unwrap().remap(tensors);
+    let mut renames = Family::IgevStereo.load_patterns();
+    renames.push((format!("^{}", place.replace('.', r"\.")), String::new()));
+    let (tensors, _) = KeyRemapper::from_patterns(renames).unwrap().remap(tensors);
     let result = module.apply(tensors, None, Some(Box::new(PyTorchToBurnAdapter)), true);
     assert!(result.errors.is_empty(), "{:?}", result.errors);
     assert!(result.missing.is_empty(), "parameters not in the file: {:?}", result.missing);
@@ -95,11 +94,11 @@ fn reference(path: &Path) -> Reference {
 
 /// The IGEV encoders, built from the configuration variant and loaded with the seeded weights.
 fn encoders(path: &Path, device: &Device) -> PyramidEncoders {
-    let config = EncoderConfig { feature_network: FeatureNetwork::MobilenetPyramid, ..Default::default() };
+    let config = EncoderConfig { layout: EncoderLayout::MobilenetPyramid, ..Default::default() };
     let Encoders::Pyramid(encoders) = config.init([128; 3], 2, None, device).unwrap() else {
         panic!("the mobilenet pyramid builds the pyramid layout")
     };
-    load(encoders, path, &["feature.", "stem_2.", "stem_4.", "cnet."], IGEV_ENCODER_RENAMES)
+    load(encoders, path, &["feature.", "stem_2.", "stem_4.", "cnet."], "encoder.")
 }
 
 #[test]
@@ -116,7 +115,7 @@ fn igev_feature_pyramid_stems_and_context_match() {
         r.assert_close(&format!("stem_2.call{call}"), stem_2x.clone());
         r.assert_close(&format!("stem_4.call{call}"), encoders.stem_4.forward(stem_2x));
     }
-    let context = dgstereo_encoder::ContextExtractor::context(&encoders.cnet, r.image("input.left"), 3);
+    let context = encoders.cnet.context(r.image("input.left"), 3);
     for (l, [hidden, context]) in context.levels.into_iter().enumerate() {
         r.assert_close(&format!("cnet.call0.{l}.0"), hidden);
         r.assert_close(&format!("cnet.call0.{l}.1"), context);
@@ -145,7 +144,7 @@ fn igev_superpixel_upsampling_matches() {
     let Some(path) = golden("igev_superpixel_upsampling_matches") else { return };
     let r = reference(&path);
     let prefixes = ["spx.", "spx_2.", "spx_4.", "spx_2_gru.", "spx_gru."];
-    let up = load(SuperpixelUpsampler::new(&r.device), &path, &prefixes, SUPERPIXEL_RENAMES);
+    let up = load(SuperpixelUpsampler::new(&r.device), &path, &prefixes, "superpixel.");
     let stem_2x: Tensor<4> = r.get("stem_2.call0");
     let features = Tensor::cat(vec![r.get("feature.call0.0"), r.get("stem_4.call0")], 1);
 
@@ -182,9 +181,9 @@ fn igev_superpixel_upsampling_matches() {
     }
 }
 
-/// Our module paths, through RAFT-Stereo's inverse renames and then IGEV's, are the official
-/// keys of these modules, each once (the redundant `downsample.1.*` and `num_batches_tracked`
-/// aside): the listing of an IGEV checkpoint's keys can be derived from the modules.
+/// Our module paths, at their place in the model, through IGEV-Stereo's table are the official
+/// keys of these modules, each once (the keys the loader ignores aside): the listing of an IGEV
+/// checkpoint's keys can be derived from the modules.
 #[test]
 fn igev_module_paths_map_back_to_the_official_keys() {
     let Some(path) = golden("igev_module_paths_map_back_to_the_official_keys") else { return };
@@ -194,36 +193,26 @@ fn igev_module_paths_map_back_to_the_official_keys() {
         let mut keys: Vec<(String, Vec<usize>)> = state
             .iter()
             .filter(|t| prefixes.iter().any(|p| t.key.starts_with(p)))
-            .filter(|t| !t.key.contains("downsample.1.") && !t.key.ends_with("num_batches_tracked"))
+            .filter(|t| !ignored_by_loader(&t.key))
             .map(|t| (t.key.clone(), t.shape.clone()))
             .collect();
         keys.sort();
         keys
     };
-    let ours = |module: &dyn Fn() -> Vec<PackTensor>, inverse: &[(&str, &str)]| {
-        let inverse = KeyRemapper::from_patterns(inverse.to_vec()).unwrap();
+    let ours = |module: &dyn Fn() -> Vec<PackTensor>, place: &str| {
         let mut keys: Vec<(String, Vec<usize>)> = module()
             .iter()
-            .map(|t| {
-                let mut key = official_key_of_module_path(&t.name);
-                for (pattern, replacement) in inverse.patterns.iter() {
-                    key = pattern.replace_all(&key, replacement.as_str()).into_owned();
-                }
-                (key, t.shape.to_vec())
-            })
+            .map(|t| (Family::IgevStereo.official_key_of_module_path(&format!("{place}{}", t.name)), t.shape.to_vec()))
             .collect();
         keys.sort();
         keys
     };
-    let config = EncoderConfig { feature_network: FeatureNetwork::MobilenetPyramid, ..Default::default() };
+    let config = EncoderConfig { layout: EncoderLayout::MobilenetPyramid, ..Default::default() };
     let Encoders::Pyramid(encoders) = config.init([128; 3], 2, None, &device).unwrap() else { unreachable!() };
     let encoders = || encoders.collect(None, Some(Box::new(BurnToPyTorchAdapter)), false);
-    let encoder_keys: Vec<_> = ours(&encoders, IGEV_ENCODER_INVERSE_RENAMES);
+    let encoder_keys: Vec<_> = ours(&encoders, "encoder.");
     assert_eq!(encoder_keys, official(&["feature.", "stem_2.", "stem_4.", "cnet."]));
     let up = SuperpixelUpsampler::new(&device);
     let up = || up.collect(None, Some(Box::new(BurnToPyTorchAdapter)), false);
-    assert_eq!(
-        ours(&up, SUPERPIXEL_INVERSE_RENAMES),
-        official(&["spx.", "spx_2.", "spx_4.", "spx_2_gru.", "spx_gru."])
-    );
+    assert_eq!(ours(&up, "superpixel."), official(&["spx.", "spx_2.", "spx_4.", "spx_2_gru.", "spx_gru."]));
 }

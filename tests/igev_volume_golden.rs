@@ -18,9 +18,10 @@ use burn::tensor::{Device, Int, Tensor, TensorData};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_costvolume::{CombinedGeometryVolume, CorrelationImplementation, GeometryEncoding, GeometryVolume};
+use dgstereo_model::official_keys::Family;
 use dgstereo_model::seeded::golden_state_dict;
 use dgstereo_model::updater::{
-    GateContext, HeadOutput, MotionKind, MultiLevelUpdateBlock, Updater, UpdaterConfig, UpsamplingKind,
+    GateContext, HeadOutput, MotionKind, MultiLevelUpdateBlock, UpdaterConfig, UpsamplingKind,
 };
 use dgstereo_model::verify::{FEATURE_TOLERANCE, ReferenceTensors, read_reference};
 use dgstereo_suite::shared_dir_for_test;
@@ -31,14 +32,14 @@ fn golden(test: &str) -> Option<PathBuf> {
     Some(shared_dir_for_test(test, GOLDEN)?.join(GOLDEN))
 }
 
-/// The seeded tensors `select` keeps, under the names it gives them, with `renames` applied,
-/// loaded into `module`: every tensor must be used and, if `strict`, every parameter come from
-/// the file.
+/// The seeded tensors `select` keeps, under the names it gives them, renamed by IGEV-Stereo's
+/// table and with the module's place in the model (`geometry.`) taken off, loaded into
+/// `module`: every tensor must be used and, if `strict`, every parameter come from the file.
 fn load<M: ModuleSnapshot + Module>(
     mut module: M,
     path: &Path,
     select: impl Fn(&str) -> Option<String>,
-    renames: &[(&str, &str)],
+    place: &str,
     strict: bool,
 ) -> M {
     let (state, _) = golden_state_dict(path).unwrap();
@@ -48,7 +49,9 @@ fn load<M: ModuleSnapshot + Module>(
         .filter_map(|t| Some((select(&t.key)?, t)))
         .map(|(key, t)| bridge::from_data(TensorData::new(t.values.clone(), t.shape.clone()), key, None))
         .collect();
-    let (tensors, _) = KeyRemapper::from_patterns(renames.to_vec()).unwrap().remap(tensors);
+    let mut renames = Family::IgevStereo.load_patterns();
+    renames.push((format!("^{}", place.replace('.', r"\.")), String::new()));
+    let (tensors, _) = KeyRemapper::from_patterns(renames).unwrap().remap(tensors);
     let result = module.apply(tensors, None, Some(Box::new(PyTorchToBurnAdapter)), true);
     assert!(result.errors.is_empty(), "{:?}", result.errors);
     assert!(result.unused.is_empty(), "unused {:?}", result.unused);
@@ -61,13 +64,11 @@ fn under(prefix: &str) -> impl Fn(&str) -> Option<String> + '_ {
     move |key| key.strip_prefix(prefix).map(str::to_string)
 }
 
-/// The geometry encoding volume's modules, at the reference's top level, with the official
-/// names of the feature gates' two layers.
+/// The geometry encoding volume's modules, at the reference's top level.
 fn geometry_volume(path: &Path, device: &Device) -> GeometryEncoding {
     let top = ["conv.", "desc.", "corr_stem.", "corr_feature_att.", "cost_agg.", "classifier."];
     let select = |key: &str| top.iter().any(|p| key.starts_with(p)).then(|| key.to_string());
-    let renames = [(r"feat_att\.0\.", "reduce."), (r"feat_att\.1\.", "expand.")];
-    load(GeometryVolume::default().init(device), path, select, &renames, true)
+    load(GeometryVolume::default().init(device), path, select, "geometry.", true)
 }
 
 fn tensor<const D: usize>(refs: &ReferenceTensors, key: &str, device: &Device) -> Tensor<D> {
@@ -146,13 +147,8 @@ fn the_update_block_matches_the_reference_on_the_recorded_volume() {
         UpdaterConfig { motion: MotionKind::Disparity, upsampling: UpsamplingKind::Superpixel, ..Default::default() };
     let block = MultiLevelUpdateBlock::new(&config, combined.channels(), HeadOutput::Delta, &device);
     // The reference's GRUs are named by their level (`gru04` at 1/4); ours by RAFT-Stereo's.
-    let renames = [
-        (r"^gru16\.", "gru32."),
-        (r"^gru08\.", "gru16."),
-        (r"^gru04\.", "gru08."),
-        (r"^mask_feat_4\.0\.", "mask_feat_4.conv."),
-    ];
-    let block = load(block, &path, under("update_block."), &renames, true);
+    let in_block = |key: &str| key.starts_with("update_block.").then(|| key.to_string());
+    let block = load(block, &path, in_block, "update_block.", true);
 
     let mut hidden: Vec<Tensor<4>> =
         (0..3).map(|i| tanh(tensor(&refs, &format!("cnet.call0.{i}.0"), &device))).collect();
@@ -161,7 +157,7 @@ fn the_update_block_matches_the_reference_on_the_recorded_volume() {
             let conv = burn::nn::conv::Conv2dConfig::new([128, 384], [3, 3])
                 .with_padding(burn::nn::PaddingConfig2d::Explicit(1, 1, 1, 1))
                 .init(&device);
-            let conv = load(conv, &path, under(&format!("context_zqr_convs.{i}.")), &[], true);
+            let conv = load(conv, &path, under(&format!("context_zqr_convs.{i}.")), "", true);
             GateContext::from_zqr(conv.forward(relu(tensor(&refs, &format!("cnet.call0.{i}.1"), &device))))
         })
         .collect();

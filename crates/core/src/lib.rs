@@ -6,7 +6,8 @@
 //! here is what more than one stage needs: the device and precision choice, the error type, the
 //! input padder that makes any image size a multiple of 32, a few tensor helpers, the locator of
 //! the shared reference data, the atomic replacement of output files, the stage clock of the profiler and the probe through which a
-//! forward pass reports its intermediate tensors and stage times. The kernels live in
+//! forward pass reports its intermediate tensors and stage times, and the notation of
+//! checkpoint-key renames that the prior and model crates write their tables in. The kernels live in
 //! `dgstereo-kernels`, which depends on this crate.
 #![deny(missing_docs)]
 
@@ -15,6 +16,7 @@ pub mod batch_norm;
 pub mod conv_blocks;
 pub mod device;
 pub mod error;
+pub mod key_notation;
 pub mod layers;
 pub mod padding;
 pub mod probe;

@@ -13,6 +13,11 @@
 //! elsewhere. This crate is the stage: its configuration, its trait and the choice between the
 //! two.
 //!
+//! Design decision: [`CostVolume`] is the stage's contract. Each volume implements it (the two
+//! lookups and IGEV-Stereo's [`CombinedGeometryVolume`]), [`Correlation`], the volume a
+//! configuration built, implements it by delegating with one `match`, and the model calls it
+//! there; `tests/stage_contract.rs` runs every volume through one body generic over the trait.
+//!
 //! DEFOM-Stereo adds a second lookup of the same volume ([`ScaleLookup`]): its level 0 sampled
 //! around the matches of scaled disparities, `x - s·d` for each scale `s`, for the update block
 //! that rescales the disparity.
@@ -270,18 +275,23 @@ impl CostVolume for OnTheFlyCorrelation {
     }
 }
 
+impl CostVolume for CombinedGeometryVolume {
+    /// The lookup at the match `coords_x`: the geometry volume read at the disparity of the
+    /// match, each pixel's column less the match's.
+    fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
+        let [n, _, h, w] = coords_x.dims();
+        let columns = Tensor::<1, burn::tensor::Int>::arange(0..w as i64, &coords_x.device()).float();
+        let coords0 = columns.reshape([1, 1, 1, w]).expand([n, 1, h, w]);
+        CombinedGeometryVolume::lookup(self, coords0.clone(), coords0 - coords_x)
+    }
+}
+
 impl CostVolume for Correlation {
     fn lookup(&self, coords_x: Tensor<4>) -> Tensor<4> {
         match self {
-            Self::Reg(c) => c.lookup(coords_x),
-            Self::Alt(c) => c.lookup(coords_x),
-            Self::Geometry(c) => {
-                // The disparity of a match: each pixel's column less the match's.
-                let [n, _, h, w] = coords_x.dims();
-                let columns = Tensor::<1, burn::tensor::Int>::arange(0..w as i64, &coords_x.device()).float();
-                let coords0 = columns.reshape([1, 1, 1, w]).expand([n, 1, h, w]);
-                c.lookup(coords0.clone(), coords0 - coords_x)
-            }
+            Self::Reg(c) => CostVolume::lookup(c, coords_x),
+            Self::Alt(c) => CostVolume::lookup(c, coords_x),
+            Self::Geometry(c) => CostVolume::lookup(c, coords_x),
         }
     }
 }

@@ -10,16 +10,35 @@ use crate::layout::{Encoders, PyramidEncoders, SeparateEncoders, SharedBackbone}
 use crate::norm::NormKind;
 use crate::pyramid::{MobileNetPyramid, stem_2, stem_4};
 
-/// Which network gives the matching features.
+/// Which encoders the network has. Each variant is a whole layout, so options that exist only
+/// together (a shared trunk, a pyramid's own feature network) cannot be combined wrongly.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
-pub enum FeatureNetwork {
-    /// RAFT-Stereo's residual feature encoder (`fnet`), or the shared backbone's head.
+pub enum EncoderLayout {
+    /// RAFT-Stereo's separate residual feature encoder (`fnet`) and context encoder (`cnet`).
     #[default]
-    Residual,
-    /// IGEV-Stereo's MobileNetV2 pyramid with its image stems (`feature`, `stem_2`, `stem_4`):
-    /// four levels, the finest (1/4, 96 channels) the matching features.
+    Separate,
+    /// RAFT-Stereo's shared backbone (its realtime model): the context encoder's trunk also
+    /// feeds the feature head (`conv2`).
+    SharedBackbone,
+    /// IGEV-Stereo's MobileNetV2 pyramid with its image stems (`feature`, `stem_2`, `stem_4`)
+    /// beside RAFT-Stereo's context encoder: four levels, the finest (1/4, 96 channels) the
+    /// matching features.
     MobilenetPyramid,
+}
+
+impl EncoderLayout {
+    /// Every layout, in the enum's order (a test compares it with the names serde accepts).
+    pub const ALL: [Self; 3] = [Self::Separate, Self::SharedBackbone, Self::MobilenetPyramid];
+
+    /// The layout's name as the TOML key `layout` writes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Separate => "separate",
+            Self::SharedBackbone => "shared-backbone",
+            Self::MobilenetPyramid => "mobilenet-pyramid",
+        }
+    }
 }
 
 /// Encoder options of RAFT-Stereo.
@@ -29,25 +48,21 @@ pub struct EncoderConfig {
     /// Normalisation of the context encoder (`context_norm`: batch, group, instance, none).
     #[serde(default)]
     pub context_norm: NormKind,
-    /// One trunk for context and features (`shared_backbone`).
+    /// Which encoders (`layout`: `separate`, `shared-backbone`, `mobilenet-pyramid`).
     #[serde(default)]
-    pub shared_backbone: bool,
-    /// Channels of the matching features (256).
+    pub layout: EncoderLayout,
+    /// Channels of the matching features (256; the MobileNetV2 pyramid's are fixed).
     #[serde(default = "default_feature_dim")]
     pub feature_dim: usize,
-    /// Widths of the residual trunk's three stages in both encoders (`[64, 96, 128]`); smaller
-    /// widths make a CPU-trainable model, but official checkpoints need the reference's.
+    /// Widths of the residual trunk's three stages in both encoders (`[64, 96, 128]`; with
+    /// `layout = "mobilenet-pyramid"` the context encoder's alone); smaller widths make a
+    /// CPU-trainable model, but official checkpoints need the reference's.
     #[serde(default = "default_trunk_dims")]
     pub trunk_dims: [usize; 3],
     /// Whether the encoders add a monocular network's features to their trunks, on
     /// ImageNet-normalised images (`added`: DEFOM-Stereo), or read the image alone (`none`).
     #[serde(default)]
     pub depth_features: DepthFeatureInput,
-    /// The network of the matching features (`residual`: RAFT-Stereo's; `mobilenet-pyramid`:
-    /// IGEV-Stereo's, whose `feature_dim` is fixed and whose `trunk_dims` are the context
-    /// encoder's alone).
-    #[serde(default)]
-    pub feature_network: FeatureNetwork,
 }
 
 fn default_feature_dim() -> usize {
@@ -62,11 +77,10 @@ impl Default for EncoderConfig {
     fn default() -> Self {
         Self {
             context_norm: NormKind::Batch,
-            shared_backbone: false,
+            layout: EncoderLayout::Separate,
             feature_dim: 256,
             trunk_dims: default_trunk_dims(),
             depth_features: DepthFeatureInput::None,
-            feature_network: FeatureNetwork::Residual,
         }
     }
 }
@@ -74,7 +88,7 @@ impl Default for EncoderConfig {
 impl EncoderConfig {
     /// Everything wrong with the options, keys relative to the encoder table: zero widths, trunk
     /// widths that the group norm (`channels / 8` groups) cannot split, and monocular features
-    /// with the shared backbone (DEFOM-Stereo's encoders are separate).
+    /// in a layout other than the separate encoders (DEFOM-Stereo's encoders are separate).
     pub fn problems(&self) -> Vec<dgstereo_core::Problem> {
         let mut problems = Vec::new();
         let mut add = |key: &str, reason: String| problems.push(dgstereo_core::Problem::new(key, reason));
@@ -95,25 +109,14 @@ impl EncoderConfig {
                 ),
             );
         }
-        if self.depth_features == DepthFeatureInput::Added && self.shared_backbone {
+        if self.depth_features == DepthFeatureInput::Added && self.layout != EncoderLayout::Separate {
             add(
                 "depth_features",
-                "\"added\" needs separate feature and context encoders (shared_backbone = false)".into(),
+                format!(
+                    "\"added\" needs separate feature and context encoders (layout = \"separate\"), not layout = \"{}\"",
+                    self.layout.name()
+                ),
             );
-        }
-        if self.feature_network == FeatureNetwork::MobilenetPyramid {
-            if self.shared_backbone {
-                add(
-                    "feature_network",
-                    "\"mobilenet-pyramid\" has its own feature network: it needs shared_backbone = false".into(),
-                );
-            }
-            if self.depth_features == DepthFeatureInput::Added {
-                add(
-                    "feature_network",
-                    "\"mobilenet-pyramid\" adds no monocular features (depth_features = \"none\")".into(),
-                );
-            }
         }
         problems
     }
@@ -127,14 +130,14 @@ impl EncoderConfig {
         dgstereo_core::Problem::first(self.problems())
     }
 
-    /// Builds the layout: separate feature and context encoders, or one shared backbone.
+    /// Builds the layout ([`EncoderLayout`]) with one `match`.
     /// `context_dims` are the GRU's hidden widths (coarsest first), `n_downsample` the `log2` of
     /// the encoders' output stride, `depth_channels` the width of the monocular features the
     /// encoders add (with `depth_features = "added"`).
     ///
     /// # Errors
     /// [`dgstereo_core::Error::Config`] keyed `depth_features` when they add features and
-    /// `depth_channels` is `None`, keyed `feature_network` when the MobileNetV2 pyramid (fixed
+    /// `depth_channels` is `None`, keyed `layout` when the MobileNetV2 pyramid (fixed
     /// at stride 4) meets another `n_downsample` than 2.
     pub fn init(
         &self,
@@ -157,34 +160,81 @@ impl EncoderConfig {
         // the order fresh weights are drawn in.
         let trunk = self.trunk_dims;
         let cnet = |depth| ContextEncoder::new(context_dims, trunk, self.context_norm, n_downsample, depth, device);
-        if self.feature_network == FeatureNetwork::MobilenetPyramid {
-            if n_downsample != 2 {
-                return Err(dgstereo_core::Error::config(
-                    "feature_network",
-                    format!(
-                        "\"mobilenet-pyramid\" gives features at 1/4: it needs n_downsample = 2, not {n_downsample}"
-                    ),
-                ));
-            }
-            // The official constructor's order: `cnet`, then `feature`, `stem_2`, `stem_4`.
-            let cnet = cnet(None);
-            return Ok(Encoders::Pyramid(PyramidEncoders {
-                cnet,
-                feature: MobileNetPyramid::new(device),
-                stem_2: stem_2(device),
-                stem_4: stem_4(device),
-            }));
-        }
-        Ok(match self.shared_backbone {
-            false => Encoders::Separate(SeparateEncoders {
+        Ok(match self.layout {
+            EncoderLayout::Separate => Encoders::Separate(SeparateEncoders {
                 fnet: FeatureEncoder::new(self.feature_dim, trunk, NormKind::Instance, n_downsample, depth, device),
                 cnet: cnet(depth),
                 normalisation: self.depth_features.normalisation(),
             }),
-            true => Encoders::Shared(SharedBackbone {
+            EncoderLayout::SharedBackbone => Encoders::Shared(SharedBackbone {
                 cnet: cnet(None),
                 conv2: SharedFeatureHead::new(trunk[2], self.feature_dim, device),
             }),
+            EncoderLayout::MobilenetPyramid => {
+                if n_downsample != 2 {
+                    return Err(dgstereo_core::Error::config(
+                        "layout",
+                        format!(
+                            "\"mobilenet-pyramid\" gives features at 1/4: it needs n_downsample = 2, not {n_downsample}"
+                        ),
+                    ));
+                }
+                // The official constructor's order: `cnet`, then `feature`, `stem_2`, `stem_4`.
+                let cnet = cnet(None);
+                Encoders::Pyramid(PyramidEncoders {
+                    cnet,
+                    feature: MobileNetPyramid::new(device),
+                    stem_2: stem_2(device),
+                    stem_4: stem_4(device),
+                })
+            }
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use serde::Deserialize;
+    use serde::de::value::{Error, MapDeserializer, StrDeserializer};
+
+    use super::*;
+
+    /// `ALL` lists every layout serde accepts, once, in the enum's order, named as TOML writes it.
+    #[test]
+    fn every_layout_is_listed() {
+        let accepted = dgstereo_core::serde_names::accepted_names::<EncoderLayout>().unwrap();
+        let listed: Vec<&str> = EncoderLayout::ALL.iter().map(|l| l.name()).collect();
+        assert_eq!(listed, accepted);
+        for layout in EncoderLayout::ALL {
+            assert_eq!(EncoderLayout::deserialize(StrDeserializer::<Error>::new(layout.name())), Ok(layout));
+        }
+    }
+
+    /// A table that still names the layout by `shared_backbone` or `feature_network` is refused
+    /// by the key, and the message lists `layout`, the key that says it; nothing is defaulted.
+    #[test]
+    fn the_keys_layout_replaces_are_refused_naming_layout() {
+        for key in ["shared_backbone", "feature_network"] {
+            let table = MapDeserializer::<_, Error>::new(std::iter::once((key, "true")));
+            let message = EncoderConfig::deserialize(table).expect_err(key).to_string();
+            assert!(message.contains(key) && message.contains("`layout`"), "{message}");
+        }
+    }
+
+    /// Monocular features need the separate encoders: every other layout is refused by
+    /// `depth_features`, naming the layout.
+    #[test]
+    fn added_depth_features_need_the_separate_layout() {
+        for layout in EncoderLayout::ALL {
+            let config = EncoderConfig { layout, depth_features: DepthFeatureInput::Added, ..Default::default() };
+            let problems = config.problems();
+            match layout {
+                EncoderLayout::Separate => assert!(problems.is_empty(), "{problems:?}"),
+                _ => assert!(
+                    problems.iter().any(|p| p.key == "depth_features" && p.reason.contains(layout.name())),
+                    "{problems:?}"
+                ),
+            }
+        }
     }
 }

@@ -6,11 +6,11 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_kernels::{Numerics, conv2d_forward};
 
+use crate::ContextFeatures;
 use crate::depth_block::DepthFeatureBlock;
 use crate::feature::trunk_strides;
 use crate::norm::{Norm, NormKind};
 use crate::residual::{ResidualBlock, forward_layer, make_layer};
-use crate::{ContextExtractor, ContextFeatures};
 
 /// A head of the 1/4 and 1/8 levels: a residual block and a 3x3 convolution
 /// (`outputsXX.j.0` and `outputsXX.j.1` in the reference).
@@ -168,14 +168,14 @@ impl ContextEncoder {
         let numerics = self.numerics();
         self.heads(self.trunk(image, numerics), levels, numerics, depth)
     }
-}
 
-impl ContextExtractor for ContextEncoder {
+    /// The context of `levels` levels of `image` (`[N, 3, H, W]`, normalised to -1..1).
+    ///
     /// With fixed norms the training forward takes Winograd in every layer that suits it
     /// ([`Self::numerics`]): no norm of this encoder, and none after it, magnifies the change of
     /// rounding. With instance or group norms it keeps the plain products, as the feature
     /// encoder does.
-    fn context(&self, image: Tensor<4>, levels: usize) -> ContextFeatures {
+    pub fn context(&self, image: Tensor<4>, levels: usize) -> ContextFeatures {
         self.context_with_depth(image, levels, None)
     }
 }

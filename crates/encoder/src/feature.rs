@@ -6,7 +6,6 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::layers::{ConvInit, conv2d};
 use dgstereo_kernels::{Numerics, conv2d_forward};
 
-use crate::FeatureExtractor;
 use crate::depth_block::DepthFeatureBlock;
 use crate::norm::{Norm, NormKind};
 use crate::residual::{ResidualBlock, forward_layer, make_layer};
@@ -80,10 +79,10 @@ impl FeatureEncoder {
         }
         conv2d_forward(&self.conv2, x, numerics)
     }
-}
 
-impl FeatureExtractor for FeatureEncoder {
-    fn features(&self, images: Tensor<4>) -> Tensor<4> {
+    /// Matching features of `images` (`[N, 3, H, W]`, normalised to -1..1) without monocular
+    /// features, `[N, C, H/f, W/f]`.
+    pub fn features(&self, images: Tensor<4>) -> Tensor<4> {
         self.features_with_depth(images, None)
     }
 }

@@ -1,4 +1,6 @@
-//! The encoder layouts: separate feature and context encoders, or a shared backbone.
+//! The encoder layouts: separate feature and context encoders, a shared backbone, or
+//! IGEV-Stereo's feature pyramid beside the context encoder. Each implements [`StereoEncoder`];
+//! [`Encoders`] is the one a configuration built, and delegates with one `match`.
 
 use burn::module::Module;
 use burn::tensor::Tensor;
@@ -10,7 +12,7 @@ use crate::context::ContextEncoder;
 use crate::depth_block::InputNormalisation;
 use crate::feature::{FeatureEncoder, SharedFeatureHead};
 use crate::pyramid::{FeaturePyramid, MobileNetPyramid, feature_pyramid};
-use crate::{ContextExtractor, ContextFeatures};
+use crate::{ContextFeatures, StereoEncoder};
 
 /// What the encoders give the rest of the network.
 ///
@@ -94,29 +96,12 @@ pub enum Encoders {
 }
 
 impl Encoders {
-    /// The context encoder (either layout has one).
+    /// The context encoder (every layout has one).
     pub fn context_encoder(&self) -> &ContextEncoder {
         match self {
             Self::Separate(e) => &e.cnet,
             Self::Shared(e) => &e.cnet,
             Self::Pyramid(e) => &e.cnet,
-        }
-    }
-
-    /// How images in 0..255 become the encoders' input (the monocular network of DEFOM-Stereo
-    /// reads them so normalised too).
-    pub fn normalisation(&self) -> InputNormalisation {
-        match self {
-            Self::Separate(e) => e.normalisation,
-            Self::Shared(_) | Self::Pyramid(_) => InputNormalisation::SignedUnit,
-        }
-    }
-
-    /// Whether the encoders add a monocular network's features (and so need them).
-    pub fn takes_depth_features(&self) -> bool {
-        match self {
-            Self::Separate(e) => e.fnet.convd.is_some() || e.cnet.conv08.is_some(),
-            Self::Shared(_) | Self::Pyramid(_) => false,
         }
     }
 
@@ -129,71 +114,128 @@ impl Encoders {
         }
     }
 
-    /// Features of both views and the context of `levels` GRU levels, timed on `probe` as the
-    /// `feature encoder` and `context encoder` stages.
-    ///
-    /// The shared backbone runs its trunk on `context_left` and `features_right` (as the
-    /// reference, whose trunk sees the image pair once); `features_left` is unused there.
-    ///
-    /// # Errors
-    /// [`Error::Config`] keyed `encoder.depth_features` when the encoders add monocular features
-    /// and `inputs.depth` is `None`, or do not and it is given.
-    pub fn encode(&self, inputs: EncoderInputs, levels: usize, probe: &mut Probe<'_>) -> Result<Encoded> {
-        let EncoderInputs { context_left, features_left, features_right, depth } = inputs;
-        if depth.is_some() != self.takes_depth_features() {
-            let reason = if depth.is_some() {
-                "the encoders add no monocular features, but some were given"
-            } else {
-                "the encoders add monocular features (depth_features = \"added\"), but none were given"
-            };
-            return Err(Error::config("encoder.depth_features", reason));
+    /// The layout as the trait object the variant is.
+    fn layout(&self) -> &dyn StereoEncoder {
+        match self {
+            Self::Separate(e) => e,
+            Self::Shared(e) => e,
+            Self::Pyramid(e) => e,
         }
+    }
+}
+
+impl StereoEncoder for Encoders {
+    fn normalisation(&self) -> InputNormalisation {
+        self.layout().normalisation()
+    }
+
+    fn takes_depth_features(&self) -> bool {
+        self.layout().takes_depth_features()
+    }
+
+    fn encode(&self, inputs: EncoderInputs, levels: usize, probe: &mut Probe<'_>) -> Result<Encoded> {
+        self.layout().encode(inputs, levels, probe)
+    }
+}
+
+/// Refuses monocular features given to a layout that does not add them, or missing where it
+/// does.
+fn check_depth(layout: &dyn StereoEncoder, depth: &Option<MonocularFeatures>) -> Result<()> {
+    if depth.is_some() == layout.takes_depth_features() {
+        return Ok(());
+    }
+    let reason = if depth.is_some() {
+        "the encoders add no monocular features, but some were given"
+    } else {
+        "the encoders add monocular features (depth_features = \"added\"), but none were given"
+    };
+    Err(Error::config("encoder.depth_features", reason))
+}
+
+impl StereoEncoder for SeparateEncoders {
+    fn normalisation(&self) -> InputNormalisation {
+        self.normalisation
+    }
+
+    fn takes_depth_features(&self) -> bool {
+        self.fnet.convd.is_some() || self.cnet.conv08.is_some()
+    }
+
+    fn encode(&self, inputs: EncoderInputs, levels: usize, probe: &mut Probe<'_>) -> Result<Encoded> {
+        check_depth(self, &inputs.depth)?;
+        let EncoderInputs { context_left, features_left, features_right, depth } = inputs;
+        let normalise = |x: Tensor<4>| self.normalisation.apply(x);
+        let (context_depth, left_depth, right_depth) = match depth {
+            Some(MonocularFeatures { context, left, right, .. }) => (Some(context), Some(left), Some(right)),
+            None => (None, None, None),
+        };
+        let context = probe.time("context encoder", || {
+            self.cnet.context_with_depth(normalise(context_left), levels, context_depth.as_deref())
+        });
+        // One image at a time (the reference batches the pair): the result is the same, as every
+        // layer acts per image, and the full-resolution activations of the stem and layer1, the
+        // process's peak memory, are half as large.
+        let fnet = &self.fnet;
+        let fmap1 = probe.time("feature encoder", || fnet.features_with_depth(normalise(features_left), left_depth));
+        let fmap2 = probe.time("feature encoder", || fnet.features_with_depth(normalise(features_right), right_depth));
+        Ok(Encoded { fmap1, fmap2, context, pyramid: None })
+    }
+}
+
+impl StereoEncoder for SharedBackbone {
+    fn normalisation(&self) -> InputNormalisation {
+        InputNormalisation::SignedUnit
+    }
+
+    fn takes_depth_features(&self) -> bool {
+        false
+    }
+
+    /// The trunk runs on `context_left` and `features_right` (as the reference, whose trunk sees
+    /// the image pair once); `features_left` is unused.
+    fn encode(&self, inputs: EncoderInputs, levels: usize, probe: &mut Probe<'_>) -> Result<Encoded> {
+        check_depth(self, &inputs.depth)?;
+        let EncoderInputs { context_left, features_right, .. } = inputs;
+        let Self { cnet, conv2 } = self;
         let normalise = |x: Tensor<4>| self.normalisation().apply(x);
-        Ok(match self {
-            Self::Separate(SeparateEncoders { fnet, cnet, .. }) => {
-                let (context_depth, left_depth, right_depth) = match depth {
-                    Some(MonocularFeatures { context, left, right, .. }) => (Some(context), Some(left), Some(right)),
-                    None => (None, None, None),
-                };
-                let context = probe.time("context encoder", || {
-                    cnet.context_with_depth(normalise(context_left), levels, context_depth.as_deref())
-                });
-                // One image at a time (the reference batches the pair): the result is the same,
-                // as every layer acts per image, and the full-resolution activations of the
-                // stem and layer1, the process's peak memory, are half as large.
-                let fmap1 =
-                    probe.time("feature encoder", || fnet.features_with_depth(normalise(features_left), left_depth));
-                let fmap2 =
-                    probe.time("feature encoder", || fnet.features_with_depth(normalise(features_right), right_depth));
-                Encoded { fmap1, fmap2, context, pyramid: None }
-            }
-            Self::Shared(SharedBackbone { cnet, conv2 }) => {
-                // The trunk sees both images; the context heads only the left.
-                let n = context_left.dims()[0];
-                // The heads feed only the GRUs, so they take the context encoder's numerics; the
-                // trunk feeds `conv2`'s instance norm and keeps the plain products.
-                let trunk = probe.time("context encoder", || {
-                    cnet.trunk(normalise(Tensor::cat(vec![context_left, features_right], 0)), Numerics::Sensitive)
-                });
-                let context = probe.time("context encoder", || {
-                    cnet.heads(trunk.clone().narrow(0, 0, n), levels, cnet.numerics(), None)
-                });
-                let feats = probe.time("feature encoder", || conv2.forward(trunk));
-                Encoded { fmap1: feats.clone().narrow(0, 0, n), fmap2: feats.narrow(0, n, n), context, pyramid: None }
-            }
-            Self::Pyramid(PyramidEncoders { feature, stem_2, stem_4, cnet }) => {
-                let context = probe.time("context encoder", || cnet.context(normalise(context_left), levels));
-                let left = probe
-                    .time("feature encoder", || feature_pyramid(feature, [stem_2, stem_4], normalise(features_left)));
-                let right = probe
-                    .time("feature encoder", || feature_pyramid(feature, [stem_2, stem_4], normalise(features_right)));
-                if probe.tracing() {
-                    left.record("left", probe);
-                    right.record("right", probe);
-                }
-                let fmap2 = right.levels.into_iter().next().expect("a pyramid has four levels");
-                Encoded { fmap1: left.levels[0].clone(), fmap2, context, pyramid: Some(left) }
-            }
-        })
+        // The trunk sees both images; the context heads only the left.
+        let n = context_left.dims()[0];
+        // The heads feed only the GRUs, so they take the context encoder's numerics; the trunk
+        // feeds `conv2`'s instance norm and keeps the plain products.
+        let trunk = probe.time("context encoder", || {
+            cnet.trunk(normalise(Tensor::cat(vec![context_left, features_right], 0)), Numerics::Sensitive)
+        });
+        let context =
+            probe.time("context encoder", || cnet.heads(trunk.clone().narrow(0, 0, n), levels, cnet.numerics(), None));
+        let feats = probe.time("feature encoder", || conv2.forward(trunk));
+        Ok(Encoded { fmap1: feats.clone().narrow(0, 0, n), fmap2: feats.narrow(0, n, n), context, pyramid: None })
+    }
+}
+
+impl StereoEncoder for PyramidEncoders {
+    fn normalisation(&self) -> InputNormalisation {
+        InputNormalisation::SignedUnit
+    }
+
+    fn takes_depth_features(&self) -> bool {
+        false
+    }
+
+    fn encode(&self, inputs: EncoderInputs, levels: usize, probe: &mut Probe<'_>) -> Result<Encoded> {
+        check_depth(self, &inputs.depth)?;
+        let EncoderInputs { context_left, features_left, features_right, .. } = inputs;
+        let Self { feature, stem_2, stem_4, cnet } = self;
+        let normalise = |x: Tensor<4>| self.normalisation().apply(x);
+        let context = probe.time("context encoder", || cnet.context(normalise(context_left), levels));
+        let left =
+            probe.time("feature encoder", || feature_pyramid(feature, [stem_2, stem_4], normalise(features_left)));
+        let right =
+            probe.time("feature encoder", || feature_pyramid(feature, [stem_2, stem_4], normalise(features_right)));
+        if probe.tracing() {
+            left.record("left", probe);
+            right.record("right", probe);
+        }
+        let fmap2 = right.levels.into_iter().next().expect("a pyramid has four levels");
+        Ok(Encoded { fmap1: left.levels[0].clone(), fmap2, context, pyramid: Some(left) })
     }
 }

@@ -9,8 +9,7 @@ use dgstereo_core::tensor::max_abs_diff;
 use dgstereo_encoder::norm::Norm;
 use dgstereo_encoder::residual::ResidualBlock;
 use dgstereo_encoder::{
-    ContextEncoder, ContextExtractor, EncoderInputs, Encoders, FeatureEncoder, FeatureExtractor, NormKind,
-    SharedBackbone, SharedFeatureHead,
+    ContextEncoder, EncoderInputs, Encoders, FeatureEncoder, NormKind, SharedBackbone, SharedFeatureHead, StereoEncoder,
 };
 
 /// Agreement up to float rounding: the largest difference relative to the largest magnitude

@@ -1,28 +1,25 @@
-//! IGEV-Stereo's encoder layout (`feature_network = "mobilenet-pyramid"`): what it refuses and
+//! IGEV-Stereo's encoder layout (`layout = "mobilenet-pyramid"`): what it refuses and
 //! what it hands on.
 
 use burn::tensor::{Distribution, Tensor};
 use dgstereo_core::tensor::max_abs_diff;
 use dgstereo_core::{Probe, default_device};
-use dgstereo_encoder::{DepthFeatureInput, EncoderConfig, EncoderInputs, Encoders, FeatureNetwork};
+use dgstereo_encoder::{DepthFeatureInput, EncoderConfig, EncoderInputs, EncoderLayout, Encoders, StereoEncoder};
 
 fn pyramid_config() -> EncoderConfig {
-    EncoderConfig { feature_network: FeatureNetwork::MobilenetPyramid, ..Default::default() }
+    EncoderConfig { layout: EncoderLayout::MobilenetPyramid, ..Default::default() }
 }
 
-/// The pyramid has its own feature network and no monocular input, and works at stride 4 only:
-/// each conflict is refused by the `feature_network` key.
+/// The pyramid takes no monocular input, refused by the `depth_features` key, and works at
+/// stride 4 only, refused by the `layout` key.
 #[test]
 fn conflicting_options_are_refused_by_key() {
     assert!(pyramid_config().problems().is_empty());
-    let shared = EncoderConfig { shared_backbone: true, ..pyramid_config() };
     let added = EncoderConfig { depth_features: DepthFeatureInput::Added, ..pyramid_config() };
-    for config in [shared, added] {
-        let problems = config.problems();
-        assert!(problems.iter().any(|p| p.to_string().contains("feature_network")), "{problems:?}");
-    }
+    let problems = added.problems();
+    assert!(problems.iter().any(|p| p.key == "depth_features"), "{problems:?}");
     let e = pyramid_config().init([128; 3], 3, None, &default_device()).unwrap_err().to_string();
-    assert!(e.contains("feature_network") && e.contains("n_downsample"), "{e}");
+    assert!(e.contains("layout") && e.contains("n_downsample"), "{e}");
 }
 
 /// Both views' matching features are the 96-channel 1/4 level; the left view's pyramid (1/4 to

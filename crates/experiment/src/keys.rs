@@ -6,8 +6,7 @@
 //! one fully dotted key per line (`"loss"."tau" = 0.9`): the position of a deserialisation error
 //! then gives the line, the line gives the dotted key, and the [`Provenance`] gives the file that
 //! set it. A second pass compares the input with the configuration serialised back, which finds
-//! keys that serde accepted but ignored (next to a variant without fields, such as
-//! `kind = "none"`).
+//! any key that deserialisation accepted but did not keep.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -21,7 +21,7 @@ use dgstereo_experiment::{ExperimentConfig, smoke_test};
 use dgstereo_fusion::{FusionConfig, FusionTarget};
 use dgstereo_loss::{DisparityLoss, LossConfig, LossTarget};
 use dgstereo_model::checkpoint_config::config_from_keys;
-use dgstereo_model::encoder::NormKind;
+use dgstereo_model::encoder::{EncoderLayout, NormKind};
 use dgstereo_model::official_keys::model_official_keys;
 use dgstereo_model::{ModelConfig, RaftStereo, StereoModel, checkpoint};
 use dgstereo_prior::{PriorConfig, SimulatedPriorConfig};
@@ -34,7 +34,7 @@ struct Combination {
     guidance: GuidanceKind,
     n_gru_layers: usize,
     implementation: CorrelationImplementation,
-    shared_backbone: bool,
+    layout: EncoderLayout,
     slow_fast_gru: bool,
     n_downsample: usize,
     context_norm: NormKind,
@@ -65,13 +65,15 @@ fn combination() -> impl Strategy<Value = Combination> {
     // (levels, radius) as detection splits their product: radius 4, or 4 levels, or a few others.
     let correlation =
         prop_oneof![(1usize..=4).prop_map(|l| (l, 4)), (1usize..=3).prop_map(|r| (4, r)), Just((2, 3)), Just((1, 2))];
-    let model = (fusion, guidance, 1usize..=3, implementation, any::<bool>(), any::<bool>());
+    // RAFT-Stereo's two layouts (the MobileNetV2 pyramid has its own widths and stride).
+    let layouts = prop::sample::select(vec![EncoderLayout::Separate, EncoderLayout::SharedBackbone]);
+    let model = (fusion, guidance, 1usize..=3, implementation, layouts, any::<bool>());
     let architecture = (2usize..=3, norm, correlation);
     let sizes =
         (loss, prop_oneof![Just(8usize), Just(16)], prop_oneof![Just(16usize), Just(32)], 20usize..=32, 36usize..=64);
     (model, architecture, sizes).prop_map(
         |(
-            (fusion, guidance, n_gru_layers, implementation, shared_backbone, slow_fast_gru),
+            (fusion, guidance, n_gru_layers, implementation, layout, slow_fast_gru),
             (n_downsample, context_norm, correlation),
             (loss, hidden, feature_dim, h, w),
         )| {
@@ -80,7 +82,7 @@ fn combination() -> impl Strategy<Value = Combination> {
                 guidance,
                 n_gru_layers,
                 implementation,
-                shared_backbone,
+                layout,
                 slow_fast_gru,
                 n_downsample,
                 context_norm,
@@ -101,7 +103,7 @@ fn experiment(c: &Combination) -> ExperimentConfig {
     model.updater.hidden_dims = [c.hidden; 3];
     model.updater.slow_fast_gru = c.slow_fast_gru;
     model.correlation.implementation = c.implementation;
-    model.encoder.shared_backbone = c.shared_backbone;
+    model.encoder.layout = c.layout;
     model.encoder.feature_dim = c.feature_dim;
     model.encoder.context_norm = c.context_norm;
     model.updater.n_downsample = c.n_downsample;

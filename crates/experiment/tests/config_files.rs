@@ -224,7 +224,7 @@ fn unknown_keys_name_the_file_and_the_key() {
         ("top.toml", "modle = 3\n"),
         ("loss.toml", "base = \"main.toml\"\n[loss]\ntaux = 0.9\n"),
         ("nested.toml", "[model.updater]\nhidden_dim = [1, 2, 3]\n"),
-        // Accepted by serde next to a variant without fields; still an error.
+        // Keys beside a kind without fields.
         ("none.toml", "[prior]\nkind = \"none\"\nweights = \"x.pth\"\n"),
         ("fusion.toml", "[model.fusion]\nkind = \"none\"\ntarget = \"both\"\n"),
         ("bad_base.toml", "[loss]\nkind = \"edge-aware\"\ntua = 1.0\n"),
@@ -237,6 +237,26 @@ fn unknown_keys_name_the_file_and_the_key() {
     names(&files.error("fusion.toml"), "fusion.toml", "model.fusion.target");
     // The key is reported against the base file that wrote it.
     names(&files.error("child.toml"), "bad_base.toml", "loss.tua");
+}
+
+/// The encoder layout is one key: a file that names it by `shared_backbone` or
+/// `feature_network` is refused by that key, and the message names `layout`, the key to write.
+#[test]
+fn the_encoder_layout_is_one_key() {
+    let files = Files::new(&[
+        ("shared.toml", "[model.encoder]\nshared_backbone = true\n"),
+        ("pyramid.toml", "[model.encoder]\nfeature_network = \"mobilenet-pyramid\"\n"),
+        ("layout.toml", "[model.encoder]\nlayout = \"shared-backbone\"\n"),
+    ]);
+    for (name, key) in
+        [("shared.toml", "model.encoder.shared_backbone"), ("pyramid.toml", "model.encoder.feature_network")]
+    {
+        let message = files.error(name);
+        names(&message, name, key);
+        assert!(message.contains("`layout`"), "{message}");
+    }
+    let layout = files.one("layout.toml").model.encoder.layout;
+    assert_eq!(layout, dgstereo_model::encoder::EncoderLayout::SharedBackbone);
 }
 
 #[test]

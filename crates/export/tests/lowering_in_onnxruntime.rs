@@ -22,7 +22,7 @@ use burn::tensor::ops::{
 };
 use burn::tensor::{Device, Distribution, Int, Tensor, s};
 use dgstereo_encoder::pyramid::feature_pyramid;
-use dgstereo_encoder::{EncoderConfig, Encoders, FeatureNetwork, PyramidEncoders};
+use dgstereo_encoder::{EncoderConfig, EncoderLayout, Encoders, PyramidEncoders};
 use dgstereo_export::lower::{Boundaries, lower_graph, to_bytes};
 use dgstereo_updater::superpixel::{SuperpixelUpsampler, context_upsample};
 
@@ -188,7 +188,7 @@ fn igev_modules() -> &'static (PyramidEncoders, SuperpixelUpsampler) {
     static MODULES: OnceLock<(PyramidEncoders, SuperpixelUpsampler)> = OnceLock::new();
     MODULES.get_or_init(|| {
         let host = Device::flex();
-        let config = EncoderConfig { feature_network: FeatureNetwork::MobilenetPyramid, ..Default::default() };
+        let config = EncoderConfig { layout: EncoderLayout::MobilenetPyramid, ..Default::default() };
         let Encoders::Pyramid(encoders) = config.init([32; 3], 2, None, &host).unwrap() else { unreachable!() };
         (encoders, SuperpixelUpsampler::new(&host))
     })

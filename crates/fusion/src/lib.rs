@@ -21,6 +21,9 @@
 //! - Where the enhanced image goes (both encoders, or the context encoder only while the feature
 //!   encoder keeps the raw image) is the model's decision; the config carries it as
 //!   [`FusionTarget`], read through [`FusionConfig::target`].
+//! - The stage's contract is the trait [`ImageFusion`]: each kind's module implements it,
+//!   [`Fusion`], the module a configuration built, delegates to its variant with one `match`,
+//!   and `tests/stage_contract.rs` runs every fusion through one body generic over the trait.
 //!
 //! # Config (TOML)
 //! ```toml
@@ -29,7 +32,7 @@
 //! target = "both"            # or "context-only"; default "both"
 //! features = 8               # channels of F_i and F_d; default 8
 //! ```
-//! (serde does not reject unknown keys next to the unit kind `none`; the learned kinds do.)
+//! Every kind refuses a key it does not have (`none` has none).
 //!
 //! # Training
 //! Build on the autodiff device, or build on a plain device and call

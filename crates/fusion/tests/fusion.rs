@@ -131,6 +131,17 @@ fn every_kind_is_listed() {
     }
 }
 
+/// Every kind refuses a key it does not have, naming it: `none`, which has no keys, as well as
+/// the learned kinds.
+#[test]
+fn every_kind_refuses_unknown_keys() {
+    for config in FusionConfig::variants() {
+        let text = format!("featurez = 8\n{}", toml::to_string(&config).unwrap());
+        let message = toml::from_str::<FusionConfig>(&text).expect_err(&text).to_string();
+        assert!(message.contains("featurez"), "{}: {message}", config.kind());
+    }
+}
+
 /// Checks that every float parameter has a finite, non-zero gradient.
 struct GradientCheck<'a> {
     grads: &'a Gradients,

@@ -110,7 +110,7 @@ pub fn load_model(
             let config = match (config, ext.as_str()) {
                 (Some(c), _) => c,
                 (None, "safetensors") => match checkpoint::safetensors_metadata(weights, "model_config")? {
-                    Some(json) => serde_json::from_str(&json).map_err(|e| {
+                    Some(json) => ModelConfig::from_checkpoint_json(&json).map_err(|e| {
                         Error::format(weights, format!("its model_config metadata does not parse: {e}"))
                     })?,
                     None => ModelConfig::default(),

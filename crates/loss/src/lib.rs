@@ -24,6 +24,10 @@
 //! gamma = 0.9
 //! max_disparity = 700.0
 //! ```
+//!
+//! Design decision: the stage's contract is the trait [`DisparityLoss`]: each loss implements it,
+//! [`LossConfig`] delegates to its kind with one `match` per method, and `tests/stage_contract.rs`
+//! runs every loss through one body generic over the trait.
 #![deny(missing_docs)]
 
 pub mod edge_aware;

@@ -3,13 +3,9 @@
 //! Official `.pth` files (`raftstereo-*.pth`, saved from `DataParallel`, keys prefixed
 //! `module.`; DEFOM-Stereo's `defomstereo_*.pth`) load directly through burn-store's PyTorch
 //! reader, into a model built with the checkpoint's configuration ([`crate::checkpoint_config`]
-//! reads it from the tensors). A few keys are renamed where a PyTorch `Sequential` index has no
-//! Rust field name (`outputs08.0.1` → `outputs08.0.conv`, `mask.2` → `mask.conv2`, `downsample.0`
-//! → `downsample`, Depth Anything's `resize_layers.0` → `upsample_4x`, ...), and DEFOM-Stereo's
-//! `defomencoder.depth_anything.` is `monocular.`; `downsample.1` is the same module as `norm3`
-//! in the reference, `num_batches_tracked` is unused and DEFOM-Stereo's `mean` and `std` are the
-//! ImageNet constants its encoders apply ([`dgstereo_encoder::InputNormalisation`]), so these are
-//! ignored. Any other unknown key, any missing key and any shape mismatch is an error naming the
+//! reads it from the tensors), their keys renamed to our paths and the keys the reference stores
+//! twice or as constants ignored, as the model family's table says
+//! ([`crate::official_keys::renames`]). Any other unknown key, any missing key and any shape mismatch is an error naming the
 //! key, and non-finite weights are refused. A state dict held in memory (the seeded weights of a
 //! conformance file, [`crate::seeded`]) goes through the same renames and checks
 //! ([`load_state_dict`]). Our own checkpoints are safetensors with the resolved config in the
@@ -26,58 +22,8 @@ use dgstereo_core::atomic_file::commit_file;
 use dgstereo_core::{Error, Result};
 
 use crate::RaftStereo;
-use crate::file_keys::{TO_FILE, from_file};
+use crate::official_keys::{Family, TO_FILE, from_file, ignored_by_loader};
 use crate::seeded::StateDict;
-
-/// Renames from the reference's state-dict keys to our module paths, applied in order.
-const RENAMES: &[(&str, &str)] = &[
-    (r"^module\.", ""),
-    (r"(outputs08|outputs16)\.(\d+)\.0\.", "$1.$2.block."),
-    (r"(outputs08|outputs16)\.(\d+)\.1\.", "$1.$2.conv."),
-    (r"downsample\.0\.", "downsample."),
-    (r"^conv2\.0\.", "conv2.block."),
-    (r"^conv2\.1\.", "conv2.conv."),
-    (r"update_block\.mask\.0\.", "update_block.mask.conv1."),
-    (r"update_block\.mask\.2\.", "update_block.mask.conv2."),
-    // The encoder layout's module (enum variants are skipped when reading `.pth` files).
-    (r"^(fnet|cnet|conv2)\.", "encoder.$1."),
-    // DEFOM-Stereo's Depth Anything V2, and the PyTorch names of its DPT heads.
-    (r"^defomencoder\.depth_anything\.", "monocular."),
-    (r"\.(depth_head|depth_feat)\.resize_layers\.0\.", ".$1.upsample_4x."),
-    (r"\.(depth_head|depth_feat)\.resize_layers\.1\.", ".$1.upsample_2x."),
-    (r"\.(depth_head|depth_feat)\.resize_layers\.3\.", ".$1.downsample_2x."),
-    (r"\.output_conv2\.0\.", ".output_conv2_hidden."),
-    (r"\.output_conv2\.2\.", ".output_conv2_out."),
-    (r"\.resConfUnit([12])\.", ".res_conf_unit$1."),
-];
-
-/// The renames from `model`'s official keys to its module paths: RAFT-Stereo's, and for
-/// IGEV-Stereo (a model with the geometry encoding volume) its own before them
-/// ([`crate::igev_keys::from_official`]).
-pub fn official_renames(model: &RaftStereo) -> Vec<(&'static str, &'static str)> {
-    match model.geometry {
-        Some(_) => crate::igev_keys::from_official(RENAMES),
-        None => RENAMES.to_vec(),
-    }
-}
-
-/// Our module path of an official state-dict key (with or without the `module.` prefix): the
-/// renames the loader applies, and `downsample.1`, the same BatchNorm as the block's `norm3` in
-/// the reference, as `norm3`.
-pub fn module_path_of_official_key(key: &str) -> String {
-    let mut path = key.to_string();
-    let renames = burn::store::KeyRemapper::from_patterns(RENAMES.to_vec()).expect("the renames are valid patterns");
-    for (pattern, replacement) in renames.patterns.iter() {
-        path = pattern.replace_all(&path, replacement.as_str()).into_owned();
-    }
-    path.replace("downsample.1.", "norm3.")
-}
-
-/// Whether an unused checkpoint key is one the reference stores redundantly (or, DEFOM-Stereo's
-/// `mean` and `std`, as constants the encoders apply).
-fn ignorable(key: &str) -> bool {
-    key.ends_with("num_batches_tracked") || key.contains("downsample.1.") || key == "mean" || key == "std"
-}
 
 /// Loads an official RAFT-Stereo `.pth` checkpoint into `model` (built with the matching config).
 pub fn load_pytorch(model: RaftStereo, path: &Path) -> Result<RaftStereo> {
@@ -91,7 +37,7 @@ fn load_pytorch_keys(mut model: RaftStereo, path: &Path, strict: bool) -> Result
         return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
     }
     let mut store = PytorchStore::from_file(path).map_indices_contiguous(false).allow_partial(true).validate(false);
-    for (from, to) in official_renames(&model) {
+    for (from, to) in Family::of(&model).load_patterns() {
         store = store.with_key_remapping(from, to);
     }
     let result = model
@@ -113,7 +59,8 @@ pub fn load_state_dict(mut model: RaftStereo, state: &StateDict, origin: &Path) 
         .iter()
         .map(|t| bridge::from_data(TensorData::new(t.values.clone(), t.shape.clone()), t.key.clone(), None))
         .collect();
-    let renames = KeyRemapper::from_patterns(official_renames(&model)).expect("the renames are valid patterns");
+    let renames = KeyRemapper::from_patterns(Family::of(&model).load_patterns())
+        .expect("the renames' notation makes valid patterns");
     let (tensors, _) = renames.remap(tensors);
     // As the PyTorch store applies a file's tensors: PyTorch's layouts, enum variants skipped.
     let result = model.apply(tensors, None, Some(Box::new(PyTorchToBurnAdapter)), true);
@@ -142,7 +89,7 @@ fn check_official(
             result.missing.len()
         ));
     }
-    let unknown: Vec<&str> = result.unused.iter().map(String::as_str).filter(|k| !ignorable(k)).collect();
+    let unknown: Vec<&str> = result.unused.iter().map(String::as_str).filter(|k| !ignored_by_loader(k)).collect();
     if !unknown.is_empty() {
         return fail(format!(
             "unknown key(s) not used by this model configuration: {} ({} in all)",

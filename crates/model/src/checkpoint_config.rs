@@ -28,10 +28,10 @@ use std::path::Path;
 
 use burn::tensor::Device;
 use dgstereo_core::{Error, Problem, Result};
-use dgstereo_encoder::NormKind;
+use dgstereo_encoder::{EncoderLayout, NormKind};
 
 use crate::key_shapes::{dim, gru_levels};
-use crate::official_keys::{KeyShape, model_official_keys, pth_keys, redundant};
+use crate::official_keys::{KeyShape, ignored_by_loader, model_official_keys, pth_keys};
 use crate::{ModelConfig, RaftStereo, checkpoint, defom_config, igev_config};
 
 /// The most disagreeing keys an error lists.
@@ -76,9 +76,13 @@ impl OfficialPreset {
             && e.trunk_dims == [64, 96, 128];
         if !standard {
             Self::Custom
-        } else if e.shared_backbone && u.n_downsample == 3 && u.n_gru_layers == 2 && e.context_norm == NormKind::Batch {
+        } else if e.layout == EncoderLayout::SharedBackbone
+            && u.n_downsample == 3
+            && u.n_gru_layers == 2
+            && e.context_norm == NormKind::Batch
+        {
             Self::Realtime
-        } else if e.shared_backbone || u.n_downsample != 2 || u.n_gru_layers != 3 {
+        } else if e.layout != EncoderLayout::Separate || u.n_downsample != 2 || u.n_gru_layers != 3 {
             Self::Custom
         } else if e.context_norm == NormKind::Instance {
             Self::InstanceContext
@@ -139,10 +143,10 @@ pub fn summary(config: &ModelConfig) -> String {
     let norm = serde_json::to_value(e.context_norm).ok().and_then(|v| v.as_str().map(String::from));
     let raft = format!(
         "{}, n_downsample {}, {} GRU levels, hidden {:?}, context_norm {}, corr {} levels x radius {}, slow_fast_gru {}",
-        match (e.feature_network, e.shared_backbone) {
-            (dgstereo_encoder::FeatureNetwork::MobilenetPyramid, _) => "MobileNetV2 feature pyramid",
-            (_, true) => "shared backbone",
-            (_, false) => "separate feature encoder",
+        match e.layout {
+            EncoderLayout::MobilenetPyramid => "MobileNetV2 feature pyramid",
+            EncoderLayout::SharedBackbone => "shared backbone",
+            EncoderLayout::Separate => "separate feature encoder",
         },
         u.n_downsample,
         u.n_gru_layers,
@@ -195,7 +199,7 @@ fn architecture(keys: &BTreeMap<&str, &[usize]>) -> std::result::Result<ModelCon
             false
         }
     };
-    config.encoder.shared_backbone = shared;
+    config.encoder.layout = if shared { EncoderLayout::SharedBackbone } else { EncoderLayout::Separate };
     config.encoder.feature_dim =
         dim(keys, if shared { "conv2.1.weight" } else { "fnet.conv2.weight" }, 0, &mut problems);
     config.encoder.trunk_dims = [
@@ -256,7 +260,7 @@ fn architecture(keys: &BTreeMap<&str, &[usize]>) -> std::result::Result<ModelCon
 /// file, keys the model lacks and shapes that differ, redundant keys ignored.
 pub fn disagreements(expected: &[KeyShape], file: &[KeyShape]) -> Vec<String> {
     let file: BTreeMap<&str, &Vec<usize>> =
-        file.iter().filter(|(k, _)| !redundant(k)).map(|(k, s)| (k.as_str(), s)).collect();
+        file.iter().filter(|(k, _)| !ignored_by_loader(k)).map(|(k, s)| (k.as_str(), s)).collect();
     let model: BTreeMap<&str, &Vec<usize>> = expected.iter().map(|(k, s)| (k.as_str(), s)).collect();
     let mut out = Vec::new();
     for (k, s) in &model {

@@ -3,7 +3,7 @@
 use dgstereo_core::{Error, Problem, Result};
 use dgstereo_costvolume::CorrelationConfig;
 pub use dgstereo_encoder::EncoderConfig;
-use dgstereo_encoder::{DepthFeatureInput, FeatureNetwork};
+use dgstereo_encoder::{DepthFeatureInput, EncoderLayout};
 use dgstereo_fusion::FusionConfig;
 use dgstereo_prior::MonocularConfig;
 use dgstereo_updater::{GuidanceKind, UpdaterConfig, UpsamplingKind};
@@ -98,17 +98,17 @@ impl ModelConfig {
                 "\"soft-argmin\" reads the geometry encoding volume: set model.correlation.geometry",
             ));
         }
-        let pyramid = self.encoder.feature_network == FeatureNetwork::MobilenetPyramid;
+        let pyramid = self.encoder.layout == EncoderLayout::MobilenetPyramid;
         if self.correlation.geometry.is_some() && !pyramid {
             problems.push(Problem::new(
                 "correlation.geometry",
-                "the geometry volume reads the feature pyramid: set model.encoder.feature_network = \"mobilenet-pyramid\"",
+                "the geometry volume reads the feature pyramid: set model.encoder.layout = \"mobilenet-pyramid\"",
             ));
         }
         if self.updater.upsampling == UpsamplingKind::Superpixel && !pyramid {
             problems.push(Problem::new(
                 "updater.upsampling",
-                "\"superpixel\" reads the feature pyramid's image stem: set model.encoder.feature_network = \
+                "\"superpixel\" reads the feature pyramid's image stem: set model.encoder.layout = \
                  \"mobilenet-pyramid\"",
             ));
         }

@@ -10,7 +10,7 @@ use burn::tensor::Tensor;
 use burn::tensor::activation::{relu, tanh};
 use dgstereo_core::tensor::cast_float;
 use dgstereo_core::{DepthPrior, MonocularFeatures, Probe};
-use dgstereo_encoder::{ContextFeatures, Encoded, EncoderInputs};
+use dgstereo_encoder::{ContextFeatures, Encoded, EncoderInputs, StereoEncoder};
 use dgstereo_fusion::ImageFusion;
 use dgstereo_kernels::{Numerics, conv2d_forward};
 use dgstereo_updater::GateContext;

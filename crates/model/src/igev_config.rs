@@ -18,7 +18,7 @@
 use std::collections::BTreeMap;
 
 use dgstereo_costvolume::GeometryVolume;
-use dgstereo_encoder::{FeatureNetwork, NormKind};
+use dgstereo_encoder::{EncoderLayout, NormKind};
 use dgstereo_updater::{MotionKind, UpsamplingKind};
 
 use crate::key_shapes::{dim, gru_levels};
@@ -38,7 +38,7 @@ pub fn architecture(
 ) -> Result<ModelConfig, Vec<String>> {
     let mut problems = Vec::new();
     let mut config = ModelConfig::default();
-    config.encoder.feature_network = FeatureNetwork::MobilenetPyramid;
+    config.encoder.layout = EncoderLayout::MobilenetPyramid;
     config.encoder.trunk_dims = [
         dim(keys, "cnet.conv1.weight", 0, &mut problems),
         dim(keys, "cnet.layer2.0.conv1.weight", 0, &mut problems),

@@ -33,7 +33,7 @@ use dgstereo_kernels::UpdateLoop;
 use dgstereo_prior::DepthAnythingV2Features;
 use dgstereo_updater::{
     GateContext, GuidanceKind, HeadOutput, MotionKind, MultiLevelUpdateBlock, SuperpixelUpsampler, UpdateOutput,
-    Updater, UpsamplingKind, context_upsample, convex_upsample,
+    UpsamplingKind, context_upsample, convex_upsample,
 };
 
 use crate::config::ModelConfig;

@@ -11,7 +11,7 @@ use dgstereo_core::default_device;
 use dgstereo_core::shared::shared_dir_for_test;
 use dgstereo_model::ModelConfig;
 use dgstereo_model::checkpoint_config::{OfficialPreset, config_from_keys, correlation_split, detect};
-use dgstereo_model::encoder::NormKind;
+use dgstereo_model::encoder::{EncoderLayout, NormKind};
 use dgstereo_model::official_keys::{KeyShape, model_official_keys};
 
 fn official_keys(config: &ModelConfig) -> Vec<KeyShape> {
@@ -40,7 +40,7 @@ fn golden_realtime_checkpoint_detects_as_the_realtime_configuration() {
     };
     let detected = detect(&shared.join(file), &default_device()).expect("the realtime checkpoint detects");
     let mut expected = ModelConfig::default();
-    expected.encoder.shared_backbone = true;
+    expected.encoder.layout = EncoderLayout::SharedBackbone;
     expected.updater.n_downsample = 3;
     expected.updater.n_gru_layers = 2;
     expected.updater.slow_fast_gru = true;
@@ -65,7 +65,7 @@ fn variant(change: impl FnOnce(&mut ModelConfig)) -> ModelConfig {
 fn every_variant_detects_as_itself() {
     let variants = [
         variant(|_| {}),
-        variant(|c| c.encoder.shared_backbone = true),
+        variant(|c| c.encoder.layout = EncoderLayout::SharedBackbone),
         variant(|c| c.updater.n_downsample = 3),
         variant(|c| c.updater.n_gru_layers = 1),
         variant(|c| c.updater.n_gru_layers = 2),
@@ -77,7 +77,7 @@ fn every_variant_detects_as_itself() {
         variant(|c| c.updater.hidden_dims = [24; 3]),
         variant(|c| c.encoder.feature_dim = 64),
         variant(|c| {
-            c.encoder.shared_backbone = true;
+            c.encoder.layout = EncoderLayout::SharedBackbone;
             c.updater.n_downsample = 3;
             c.updater.n_gru_layers = 2;
             c.encoder.context_norm = NormKind::Group;
@@ -94,7 +94,7 @@ fn every_variant_detects_as_itself() {
 #[test]
 fn the_official_architectures_get_their_presets() {
     let mut realtime = ModelConfig::default();
-    realtime.encoder.shared_backbone = true;
+    realtime.encoder.layout = EncoderLayout::SharedBackbone;
     realtime.updater.n_downsample = 3;
     realtime.updater.n_gru_layers = 2;
     let detected = config_from_keys(&official_keys(&realtime), &default_device()).unwrap();
@@ -150,7 +150,7 @@ fn inconsistent_state_dicts_are_errors_naming_the_keys() {
     // Both a feature encoder and a shared backbone's head.
     let mut keys = base.clone();
     keys.extend(
-        official_keys(&variant(|c| c.encoder.shared_backbone = true))
+        official_keys(&variant(|c| c.encoder.layout = EncoderLayout::SharedBackbone))
             .into_iter()
             .filter(|(k, _)| k.starts_with("conv2.")),
     );

@@ -17,7 +17,7 @@ use burn::tensor::{Device, Gradients, Tensor};
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_core::{DepthPrior, default_device};
 use dgstereo_model::costvolume::{CorrelationImplementation, ScaleLookup};
-use dgstereo_model::encoder::{DepthFeatureInput, NormKind};
+use dgstereo_model::encoder::{DepthFeatureInput, EncoderLayout, NormKind};
 use dgstereo_model::fusion::{FusionConfig, FusionTarget};
 use dgstereo_model::prior::{DepthAnythingV2Encoder, MonocularConfig};
 use dgstereo_model::updater::{GuidanceKind, MotionKind, ScaleUpdateConfig};
@@ -77,13 +77,15 @@ fn config() -> impl Strategy<Value = ModelConfig> {
     let updater = (2usize..=3, 1usize..=3, hidden_dims(), any::<bool>(), guidance());
     // Trunk widths that a group norm (width / 8 groups) can and cannot split.
     let trunk = prop::sample::select(vec![[16usize, 16, 24], [8, 16, 16], [12, 16, 20], [16, 17, 24], [4, 16, 16]]);
-    let encoder = (norm(), any::<bool>(), prop::sample::select(vec![16usize, 32]), trunk);
+    // RAFT-Stereo's two layouts (the MobileNetV2 pyramid has its own widths and stride).
+    let layouts = prop::sample::select(vec![EncoderLayout::Separate, EncoderLayout::SharedBackbone]);
+    let encoder = (norm(), layouts, prop::sample::select(vec![16usize, 32]), trunk);
     let implementation = prop_oneof![Just(CorrelationImplementation::Reg), Just(CorrelationImplementation::Alt)];
     let correlation = (0usize..=4, 0usize..=4, implementation);
     (updater, encoder, correlation, fusion(), defom_variants()).prop_map(
         |(
             (n_downsample, n_gru_layers, hidden, slow_fast, guidance),
-            (norm, shared, feature_dim, trunk),
+            (norm, layout, feature_dim, trunk),
             (levels, radius, implementation),
             fusion,
             defom,
@@ -95,7 +97,7 @@ fn config() -> impl Strategy<Value = ModelConfig> {
             c.updater.slow_fast_gru = slow_fast;
             c.updater.guidance = guidance;
             c.encoder.context_norm = norm;
-            c.encoder.shared_backbone = shared;
+            c.encoder.layout = layout;
             c.encoder.feature_dim = feature_dim;
             c.encoder.trunk_dims = trunk;
             c.correlation.levels = levels;
@@ -290,17 +292,22 @@ fn unequal_hidden_widths_run() {
     builds_and_runs(&config, [64, 64], 2).expect("runs");
 }
 
-/// Saved checkpoints keep the reference's top-level keys (`fnet.`, `cnet.`, `conv2.`) for both
-/// encoder layouts, load back into the same layout, and are readable by others (0644).
+/// Saved checkpoints keep the reference's top-level keys (`fnet.`, `cnet.`, `conv2.`, IGEV-Stereo's
+/// `feature.`, `stem_2.`, `stem_4.`) for every encoder layout, load back into the same layout,
+/// and are readable by others (0644).
 #[test]
 fn saved_keys_keep_the_reference_names() {
     let device = default_device();
-    for shared in [false, true] {
+    for layout in EncoderLayout::ALL {
         let mut config = ModelConfig::default();
-        config.encoder.shared_backbone = shared;
+        config.encoder.layout = layout;
         config.encoder.trunk_dims = [16, 16, 24];
         let model = config.init(&device).unwrap();
-        let path = std::env::temp_dir().join(format!("config-space-keys-{}-{shared}.safetensors", std::process::id()));
+        let path = std::env::temp_dir().join(format!(
+            "config-space-keys-{}-{}.safetensors",
+            std::process::id(),
+            layout.name()
+        ));
         dgstereo_model::checkpoint::save_safetensors(&model, &path, &[]).unwrap();
         // Written through a temporary file that is gone, and readable by others as any output.
         assert!(!path.with_extension("safetensors.tmp").exists(), "the temporary file is left behind");
@@ -316,10 +323,12 @@ fn saved_keys_keep_the_reference_names() {
             file.names().iter().map(|k| k.split('.').next().unwrap_or_default().to_string()).collect();
         tops.sort();
         tops.dedup();
-        let expected: &[&str] = if shared {
-            &["cnet", "context_zqr_convs", "conv2", "update_block"]
-        } else {
-            &["cnet", "context_zqr_convs", "fnet", "update_block"]
+        let expected: &[&str] = match layout {
+            EncoderLayout::Separate => &["cnet", "context_zqr_convs", "fnet", "update_block"],
+            EncoderLayout::SharedBackbone => &["cnet", "context_zqr_convs", "conv2", "update_block"],
+            EncoderLayout::MobilenetPyramid => {
+                &["cnet", "context_zqr_convs", "feature", "stem_2", "stem_4", "update_block"]
+            }
         };
         assert_eq!(tops, expected);
         dgstereo_model::checkpoint::load_safetensors(config.init(&device).unwrap(), &path).unwrap();

@@ -33,7 +33,7 @@ fn pair(h: usize, w: usize, device: &Device) -> (Tensor<4>, Tensor<4>) {
 fn models(device: &Device) -> Vec<(&'static str, StereoModel, [Tensor<4>; 2], Option<DepthPrior>)> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/weights/raft-stereo-default.safetensors");
     let json = checkpoint::safetensors_metadata(&path, "model_config").unwrap().expect("config in the metadata");
-    let config: ModelConfig = serde_json::from_str(&json).unwrap();
+    let config = ModelConfig::from_checkpoint_json(&json).unwrap();
     let network = checkpoint::load_safetensors(config.init(device).unwrap(), &path).unwrap();
     let bundled = StereoModel::new(network, config, device.clone());
     let paper: ModelConfig = serde_json::from_str(

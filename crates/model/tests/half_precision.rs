@@ -88,7 +88,7 @@ fn float_dtypes(network: &RaftStereo) -> Vec<(DType, String)> {
 /// The bundled weights' model configuration (from their metadata).
 fn bundled_config() -> ModelConfig {
     let json = checkpoint::safetensors_metadata(&weights(), "model_config").unwrap().expect("config in the metadata");
-    serde_json::from_str(&json).unwrap()
+    ModelConfig::from_checkpoint_json(&json).unwrap()
 }
 
 /// The synthetic pair as `[1, 3, H, W]` tensors on `device`.

@@ -22,7 +22,10 @@
 //! Design decision: every provider returns plain tensors in one convention (relative inverse
 //! depth, arbitrary scale and shift, non-negative, at the image resolution) and the fusion stage
 //! normalises them. A provider never falls back silently: a missing checkpoint, file or
-//! ground truth is an error naming the configuration key or the file.
+//! ground truth is an error naming the configuration key or the file. The stage's contract is the
+//! trait [`PriorProvider`]: each provider implements it, [`Prior`], the provider a configuration
+//! built, delegates to its variant with one `match`, [`CachedPrior`] wraps any implementation,
+//! and `tests/stage_contract.rs` runs the providers through one body generic over the trait.
 #![deny(missing_docs)]
 
 pub mod cache;

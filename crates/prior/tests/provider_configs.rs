@@ -320,3 +320,14 @@ fn problems_are_keyed_relative_to_the_table() {
     let files = PriorConfig::File { dir: "no/such/folder".into(), left: "l".into(), right: "r".into() };
     assert!(files.validate().is_ok(), "validation reads no files");
 }
+
+/// Every kind refuses a key it does not have, naming it: `none`, which has no keys, as well as
+/// the kinds with parameters.
+#[test]
+fn every_kind_refuses_unknown_keys() {
+    for variant in PriorConfig::variants() {
+        let text = format!("weightz = 1\n{}", toml::to_string(&variant).unwrap());
+        let message = toml::from_str::<PriorConfig>(&text).expect_err(&text).to_string();
+        assert!(message.contains("weightz"), "{}: {message}", variant.kind());
+    }
+}

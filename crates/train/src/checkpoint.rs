@@ -94,7 +94,7 @@ pub fn prune_checkpoints(dir: &Path, keep: usize) -> Result<()> {
 /// The safetensors bytes of `model`'s tensors under their module paths.
 fn tensor_bytes(model: &RaftStereo) -> Result<Vec<u8>> {
     let fail = |m: String| Error::encode("the checkpoint", m);
-    let (from, to) = dgstereo_model::file_keys::TO_FILE;
+    let (from, to) = dgstereo_model::official_keys::TO_FILE;
     let mut store = SafetensorsStore::from_bytes(None).with_key_remapping(from, to);
     model.save_into(&mut store).map_err(|e| fail(e.to_string()))?;
     store.get_bytes().map_err(|e| fail(e.to_string()))
@@ -190,8 +190,8 @@ pub fn load_checkpoint(parts: TrainParts, path: &Path, device: &burn::tensor::De
     let step: usize = get("step")?.parse().map_err(|e| bad(format!("metadata 'step': {e}")))?;
     let ids: BTreeMap<String, u64> =
         serde_json::from_str(get("param_ids")?).map_err(|e| bad(format!("metadata 'param_ids': {e}")))?;
-    let saved_model: dgstereo_model::ModelConfig =
-        serde_json::from_str(get("model_config")?).map_err(|e| bad(format!("metadata 'model_config': {e}")))?;
+    let saved_model = dgstereo_model::ModelConfig::from_checkpoint_json(get("model_config")?)
+        .map_err(|e| bad(format!("metadata 'model_config': {e}")))?;
     if saved_model != parts.model {
         return Err(bad("the checkpoint was trained with another [model] configuration than the experiment's".into()));
     }
@@ -238,7 +238,7 @@ pub fn load_checkpoint(parts: TrainParts, path: &Path, device: &burn::tensor::De
 fn read_model(parts: &TrainParts, bytes: Vec<u8>, path: &Path, device: &burn::tensor::Device) -> Result<RaftStereo> {
     let bad = |m: String| Error::Checkpoint { path: path.into(), message: m };
     let mut model = init_model(&parts.model, device, None)?;
-    let (from, to) = dgstereo_model::file_keys::from_file(&model);
+    let (from, to) = dgstereo_model::official_keys::from_file(&model);
     let mut store =
         SafetensorsStore::from_bytes(Some(bytes)).allow_partial(true).validate(false).with_key_remapping(from, to);
     let result = model.load_from(&mut store).map_err(|e| bad(format!("cannot read the weights: {e}")))?;

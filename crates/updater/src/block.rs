@@ -11,7 +11,7 @@ use dgstereo_kernels::{conv2d_forward, conv2d_forward_then, conv2d_relu_forward}
 use crate::gru::{ConvGru, GateContext};
 use crate::loop_numerics::UPDATE_LOOP;
 use crate::motion::{MotionEncoder, MotionKind};
-use crate::{HeadOutput, UpdateOutput, Updater, UpdaterConfig, UpsamplingKind};
+use crate::{HeadOutput, UpdateOutput, UpdaterConfig, UpsamplingKind};
 
 /// Two convolutions predicting the update (`FlowHead`, and DEFOM-Stereo's `DispHead`).
 #[derive(Module, Debug)]
@@ -168,8 +168,16 @@ impl MultiLevelUpdateBlock {
     }
 }
 
-impl Updater for MultiLevelUpdateBlock {
-    fn step(
+impl MultiLevelUpdateBlock {
+    /// One iteration: updates `hidden` in place and predicts the flow update.
+    ///
+    /// `hidden` and `context` are ordered finest level first; `flow` is `[N, 2, H, W]` (x, y=0),
+    /// `corr` the correlation lookup, `guidance` the feature of
+    /// [`GuidanceKind::feature`](crate::GuidanceKind::feature). The step includes the configured
+    /// schedule of the coarse levels (`slow_fast_gru`). On a `probe` with a clock, each GRU
+    /// level, the motion encoder, the interpolations and the flow head are timed as stages
+    /// (`GRU 1/4`, `motion encoder`, ...).
+    pub fn step(
         &self,
         hidden: &mut [Tensor<4>],
         context: &[GateContext],
@@ -194,9 +202,14 @@ impl Updater for MultiLevelUpdateBlock {
         UpdateOutput { prediction, output: self.output }
     }
 
-    /// The mask head on the finest state, its logits scaled by 0.25 as in the reference; or
-    /// the mask feature.
-    fn upsample_mask(&self, hidden: &[Tensor<4>]) -> Tensor<4> {
+    /// The upsampling's input from the current state: the convex-upsampling weights, `[N, 9·f²,
+    /// H, W]` (the mask head's logits scaled by 0.25 as in the reference), or for
+    /// [`UpsamplingKind::Superpixel`] the mask feature, `[N, 32, H, W]`.
+    ///
+    /// Separate from [`Self::step`] because the mask never feeds back into the state: a caller
+    /// computes it only for the iterations whose full-resolution flow it needs (the last one in
+    /// inference), which saves a sixth of every other iteration's work.
+    pub fn upsample_mask(&self, hidden: &[Tensor<4>]) -> Tensor<4> {
         if let Some(head) = &self.mask_feat_4 {
             return conv2d_relu_forward(&head.conv, hidden[0].clone(), UPDATE_LOOP);
         }

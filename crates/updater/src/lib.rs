@@ -1,10 +1,11 @@
 //! The iterative update operator of RAFT-Stereo, with the paper's depth guidance.
 //!
-//! The [`Updater`] stage takes the GRU states, the precomputed context terms, the correlation
-//! lookup, the current disparity and (optionally) a guidance feature, and returns the
-//! disparity update ([`UpdateOutput`]); the convex-upsampling weights are asked for apart
-//! ([`Updater::upsample_mask`]), only for the iterations whose full-resolution disparity is used. [`MultiLevelUpdateBlock`] is RAFT-Stereo's
-//! three-level ConvGRU; its motion encoder gains a guidance branch when [`GuidanceKind`] is not
+//! The update stage, [`MultiLevelUpdateBlock`], takes the GRU states, the precomputed context
+//! terms, the correlation lookup, the current disparity and (optionally) a guidance feature, and
+//! returns the disparity update ([`UpdateOutput`], [`MultiLevelUpdateBlock::step`]); the
+//! convex-upsampling weights are asked for apart ([`MultiLevelUpdateBlock::upsample_mask`]), only
+//! for the iterations whose full-resolution disparity is used. It is RAFT-Stereo's three-level
+//! ConvGRU; its motion encoder gains a guidance branch when [`GuidanceKind`] is not
 //! `none`, so the guidance reaches the GRU input but never the disparity head directly. Bilinear
 //! resizes between levels are matrix products (see `dgstereo_kernels::resize_bilinear`), which train on
 //! every backend.
@@ -17,6 +18,10 @@
 //! IGEV-Stereo's block is the same with the disparity motion and, for its superpixel
 //! upsampling ([`superpixel`], [`UpsamplingKind::Superpixel`]) instead of the convex one, a
 //! mask-feature head (`mask_feat_4`) in place of the convex-upsampling weights.
+//!
+//! Design decision: the stage has one implementation, so its contract is that block's own
+//! methods and no trait: every variant (guidance, motion, clip, scale head, upsampling head) is
+//! a field of the one block chosen by [`UpdaterConfig`], and the model calls the block itself.
 #![deny(missing_docs)]
 
 pub mod block;
@@ -27,8 +32,8 @@ pub mod motion;
 pub mod superpixel;
 
 use burn::tensor::{FloatDType, Tensor};
+use dgstereo_core::Problem;
 use dgstereo_core::tensor::cast_float;
-use dgstereo_core::{Probe, Problem};
 use serde::{Deserialize, Serialize};
 
 pub use block::{MaskFeatureHead, MultiLevelUpdateBlock};
@@ -79,35 +84,6 @@ impl UpdateOutput {
     }
 }
 
-/// The update stage.
-pub trait Updater {
-    /// One iteration: updates `hidden` in place and predicts the flow update.
-    ///
-    /// `hidden` and `context` are ordered finest level first; `flow` is `[N, 2, H, W]` (x, y=0),
-    /// `corr` the correlation lookup, `guidance` the feature of [`GuidanceKind::feature`]. The
-    /// step includes the configured schedule of the coarse levels (`slow_fast_gru`). On a
-    /// `probe` with a clock, each GRU level, the motion encoder, the interpolations and the
-    /// flow head are timed as stages (`GRU 1/4`, `motion encoder`, ...).
-    fn step(
-        &self,
-        hidden: &mut [Tensor<4>],
-        context: &[GateContext],
-        corr: Tensor<4>,
-        flow: Tensor<4>,
-        guidance: Option<&Tensor<4>>,
-        probe: &mut Probe<'_>,
-    ) -> UpdateOutput;
-
-    /// The upsampling's input from the current state: the convex-upsampling weights, `[N, 9·f²,
-    /// H, W]` (logits already scaled by 0.25), or for [`UpsamplingKind::Superpixel`] the mask
-    /// feature, `[N, 32, H, W]`.
-    ///
-    /// Separate from [`Updater::step`] because the mask never feeds back into the state: a
-    /// caller computes it only for the iterations whose full-resolution flow it needs (the last
-    /// one in inference), which saves a sixth of every other iteration's work.
-    fn upsample_mask(&self, hidden: &[Tensor<4>]) -> Tensor<4>;
-}
-
 /// Configuration of the update stage (RAFT-Stereo's defaults).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -144,7 +120,7 @@ pub struct UpdaterConfig {
 }
 
 /// How the loop's state is upsampled to full resolution, and so what the update block's second
-/// head gives ([`Updater::upsample_mask`]).
+/// head gives ([`MultiLevelUpdateBlock::upsample_mask`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum UpsamplingKind {

@@ -14,19 +14,6 @@ use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Tensor};
 use dgstereo_core::conv_blocks::{BlockNorm, InstanceStem, UpConcat, upsample_deconv};
 
-/// Renames from IGEV-Stereo's state-dict keys under `spx.`, `spx_2.`, `spx_4.`, `spx_2_gru.` and
-/// `spx_gru.` to the paths of [`SuperpixelUpsampler`]'s fields, applied in order (the
-/// `Sequential` indices; enum variants in our paths are skipped by the PyTorch loader).
-pub const SUPERPIXEL_RENAMES: &[(&str, &str)] =
-    &[(r"^(spx|spx_gru)\.0\.", "$1."), (r"^spx_4\.0\.", "spx_4.block."), (r"^spx_4\.1\.", "spx_4.conv.")];
-
-/// Renames from our paths (enum variants removed) back to IGEV-Stereo's keys, applied in order.
-pub const SUPERPIXEL_INVERSE_RENAMES: &[(&str, &str)] = &[
-    (r"^(spx|spx_gru)\.(weight|bias)$", "$1.0.$2"),
-    (r"^spx_4\.block\.", "spx_4.0."),
-    (r"^spx_4\.conv\.", "spx_4.1."),
-];
-
 /// The two weight heads of the superpixel upsampling, named as in the official model.
 ///
 /// # Shapes

@@ -3,37 +3,48 @@
 //! burn-store's [`PytorchStore`] reads the pickle and transposes `Linear` weights. The module's
 //! field names are the checkpoint's own except for four PyTorch names that are not Rust
 //! identifiers or index an `nn.Sequential`/`nn.ModuleList` with gaps; [`KEY_RENAMES`] maps those
-//! both ways. Index renumbering is off (`map_indices_contiguous(false)`): `resize_layers.{0,1,3}`
+//! both ways, in core's key notation, and is the one copy of them: the model crate reads it for
+//! DEFOM-Stereo's Depth Anything V2. Index renumbering is off (`map_indices_contiguous(false)`): `resize_layers.{0,1,3}`
 //! and `output_conv2.{0,2}` would otherwise be silently shifted. Loading is strict: every
 //! checkpoint key must land in the module and every module parameter must come from the
 //! checkpoint, with the same shape; otherwise the error names the checkpoint key.
 
 use std::path::Path;
 
-use burn::store::{ApplyError, BurnToPyTorchAdapter, ModuleSnapshot, ModuleStore, PytorchStore};
+use std::sync::LazyLock;
+
+use burn::store::{ApplyError, BurnToPyTorchAdapter, KeyRemapper, ModuleSnapshot, ModuleStore, PytorchStore};
+use dgstereo_core::key_notation::{Rename, apply, load_patterns, save_patterns};
 use dgstereo_core::{Error, Problem, Result};
 
 use super::encoder::DepthAnythingV2Encoder;
 
-/// `(checkpoint prefix, module prefix)` pairs for keys whose PyTorch names are not field names.
-pub const KEY_RENAMES: [(&str, &str); 7] = [
-    ("depth_head.resize_layers.0.", "depth_head.upsample_4x."),
-    ("depth_head.resize_layers.1.", "depth_head.upsample_2x."),
-    ("depth_head.resize_layers.3.", "depth_head.downsample_2x."),
-    ("depth_head.scratch.output_conv2.0.", "depth_head.scratch.output_conv2_hidden."),
-    ("depth_head.scratch.output_conv2.2.", "depth_head.scratch.output_conv2_out."),
-    (".resConfUnit1.", ".res_conf_unit1."),
-    (".resConfUnit2.", ".res_conf_unit2."),
+/// The keys whose PyTorch names are not field names, checkpoint fragment to module fragment: the
+/// DPT heads' (`depth_head`, and DEFOM-Stereo's `depth_feat` built of the same blocks).
+pub const KEY_RENAMES: &[Rename] = &[
+    Rename::new("{depth_head|depth_feat}.resize_layers.0.", "{depth_head|depth_feat}.upsample_4x."),
+    Rename::new("{depth_head|depth_feat}.resize_layers.1.", "{depth_head|depth_feat}.upsample_2x."),
+    Rename::new("{depth_head|depth_feat}.resize_layers.3.", "{depth_head|depth_feat}.downsample_2x."),
+    Rename::new("scratch.output_conv2.0.", "scratch.output_conv2_hidden."),
+    Rename::new("scratch.output_conv2.2.", "scratch.output_conv2_out."),
+    Rename::new(".resConfUnit{1|2}.", ".res_conf_unit{1|2}."),
 ];
+
+static TO_MODULE: LazyLock<KeyRemapper> = LazyLock::new(|| {
+    KeyRemapper::from_patterns(load_patterns(KEY_RENAMES)).expect("the notation makes valid patterns")
+});
+static TO_CHECKPOINT: LazyLock<KeyRemapper> = LazyLock::new(|| {
+    KeyRemapper::from_patterns(save_patterns(KEY_RENAMES)).expect("the notation makes valid patterns")
+});
 
 /// The module path of a checkpoint key.
 pub fn module_key(checkpoint_key: &str) -> String {
-    KEY_RENAMES.iter().fold(checkpoint_key.to_string(), |k, (from, to)| k.replace(from, to))
+    apply(&TO_MODULE, checkpoint_key)
 }
 
 /// The checkpoint key of a module path (inverse of [`module_key`]).
 pub fn checkpoint_key(module_key: &str) -> String {
-    KEY_RENAMES.iter().fold(module_key.to_string(), |k, (from, to)| k.replace(to, from))
+    apply(&TO_CHECKPOINT, module_key)
 }
 
 fn checkpoint_error(path: &Path, message: impl Into<String>) -> Error {
@@ -45,20 +56,10 @@ fn open_store(weights: &Path) -> Result<PytorchStore> {
         return Err(Error::io(weights, std::io::Error::new(std::io::ErrorKind::NotFound, "checkpoint not found")));
     }
     let mut store = PytorchStore::from_file(weights).map_indices_contiguous(false).allow_partial(true).validate(false);
-    for (from, to) in KEY_RENAMES {
-        store = store.with_key_remapping(regex_escape(from), to);
+    for (from, to) in load_patterns(KEY_RENAMES) {
+        store = store.with_key_remapping(from, to);
     }
     Ok(store)
-}
-
-fn regex_escape(s: &str) -> String {
-    s.chars().fold(String::new(), |mut out, c| {
-        if c == '.' {
-            out.push('\\');
-        }
-        out.push(c);
-        out
-    })
 }
 
 /// Loads every tensor of `weights` into `model`, a network of size `encoder`.

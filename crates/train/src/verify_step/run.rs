@@ -10,7 +10,10 @@ use dgstereo_core::tensor::to_vec;
 use dgstereo_core::{Error, Result};
 use dgstereo_loss::LossConfig;
 use dgstereo_model::RaftStereo;
-use dgstereo_model::checkpoint::{load_pytorch, module_path_of_official_key};
+use dgstereo_model::checkpoint::load_pytorch;
+use dgstereo_model::encoder::EncoderLayout;
+use dgstereo_model::official_keys::Family;
+use dgstereo_model::official_keys::renames::alias_of_ignored;
 use serde::Deserialize;
 
 use super::alteration::{Alteration, optimizer};
@@ -215,7 +218,8 @@ fn recipe_lines(recipe: &TrainParts, reference: &TrainStepReference) -> Result<V
     same("model.correlation.levels", m.correlation.levels.to_string(), args.corr_levels.to_string());
     same("model.correlation.radius", m.correlation.radius.to_string(), args.corr_radius.to_string());
     same("model.encoder.context_norm", serde_name(&m.encoder.context_norm), args.context_norm);
-    same("model.encoder.shared_backbone", m.encoder.shared_backbone.to_string(), args.shared_backbone.to_string());
+    let layout = if args.shared_backbone { EncoderLayout::SharedBackbone } else { EncoderLayout::Separate };
+    same("model.encoder.layout", m.encoder.layout.name().into(), layout.name().into());
     same("model.precision", "float32".into(), if args.mixed_precision { "mixed" } else { "float32" }.into());
     same("model (depth prior)", if m.needs_prior() { "used" } else { "none" }.into(), "none".into());
     Ok(lines)
@@ -247,7 +251,8 @@ fn named_values(
     names: &[String],
     grads: Option<&GradientsParams>,
 ) -> BTreeMap<String, ReferenceTensor> {
-    let wanted: BTreeMap<String, String> = names.iter().map(|n| (module_path_of_official_key(n), n.clone())).collect();
+    let path = |n: &str| alias_of_ignored(&Family::RaftStereo.module_path_of_official_key(n));
+    let wanted: BTreeMap<String, String> = names.iter().map(|n| (path(n), n.clone())).collect();
     let mut collector = Collector { wanted, grads, path: Vec::new(), found: BTreeMap::new() };
     model.visit(&mut collector);
     collector.found
