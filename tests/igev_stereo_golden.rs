@@ -12,12 +12,12 @@
 use std::path::PathBuf;
 
 use dgstereo_core::default_device;
-use dgstereo_core::tensor::{from_vec, max_abs_diff};
+use dgstereo_core::tensor::{from_vec, max_abs_diff, to_vec};
 use dgstereo_model::checkpoint_config::{self, OfficialPreset, config_from_keys, model_from_keys};
 use dgstereo_model::official_keys::KeyShape;
 use dgstereo_model::seeded::golden_state_dict;
 use dgstereo_model::verify_igev::{DISPARITY_TOLERANCE, verify_igev};
-use dgstereo_model::{InitialDisparity, ModelConfig, checkpoint, verify};
+use dgstereo_model::{InitialDisparity, ModelConfig, checkpoint, padded_training_disparities, verify};
 use dgstereo_suite::shared_dir_for_test;
 
 #[path = "support/official_pth.rs"]
@@ -130,4 +130,41 @@ fn an_official_igev_pth_file_loads_and_gives_the_reference_disparity() {
     let out = model.forward_flow(f("input.left"), f("input.right"), None, 4, Default::default()).unwrap();
     let error = max_abs_diff(out.flow_up.last().unwrap().clone().neg(), f("disparity.iter3"));
     assert!(error <= DISPARITY_TOLERANCE, "the .pth file's model is off by {error} px");
+}
+
+/// A training pass also returns the official `init_disp`: the soft-argmin start upsampled by the
+/// initial superpixel heads (`spx_4`, `spx_2`, `spx`), which IGEV-Stereo's loss supervises. Its
+/// iterations are the inference pass's, and a start that is not the soft-argmin gives none.
+#[test]
+fn a_training_pass_returns_the_official_initial_disparity() {
+    let Some(reference) = golden("a_training_pass_returns_the_official_initial_disparity") else { return };
+    let device = default_device();
+    let (state, _) = golden_state_dict(&reference).unwrap();
+    let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
+    let (detected, model) = model_from_keys(&keys, &device).unwrap();
+    let mut model = checkpoint::load_state_dict(model, &state, &reference).unwrap();
+    let refs = verify::read_reference(&reference).unwrap();
+    let f = |k: &str| {
+        let (s, v) = &refs[k];
+        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
+    };
+    let train = |model: &dgstereo_model::RaftStereo| {
+        padded_training_disparities(model, &detected.model, f("input.left"), f("input.right"), None, 4).unwrap()
+    };
+    let training = train(&model);
+    let initial = training.initial.clone().expect("IGEV-Stereo's training pass gives its initial disparity");
+    assert_eq!(initial.dims(), [1, 1, 96, 128]);
+    let error = max_abs_diff(initial, f("disparity.init"));
+    assert!(error <= DISPARITY_TOLERANCE, "the initial disparity is off by {error} px");
+    assert_eq!(training.iterations.len(), 4);
+    for (k, disparity) in training.iterations.iter().enumerate() {
+        let error = max_abs_diff(disparity.clone(), f(&format!("disparity.iter{k}")));
+        assert!(error <= DISPARITY_TOLERANCE, "iteration {k} is off by {error} px");
+    }
+    let inference = model.forward_flow(f("input.left"), f("input.right"), None, 4, Default::default()).unwrap();
+    assert!(inference.initial_flow_up.is_none(), "inference does not upsample the start");
+    let last = to_vec(inference.flow_up.last().unwrap().clone().neg());
+    assert_eq!(last, to_vec(training.iterations[3].clone()), "the training pass changes the iterations");
+    model.initial_disparity = InitialDisparity::Zero {};
+    assert!(train(&model).initial.is_none());
 }

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use dgstereo_core::default_device;
 use dgstereo_core::shared::shared_dir_for_test;
 use dgstereo_experiment::{ExperimentConfig, load};
-use dgstereo_loss::{GammaAdjustment, LossConfig};
+use dgstereo_loss::{GammaAdjustment, InitialDisparityTerm, LossConfig};
 use dgstereo_train::batch::{TrainingData, to_tensors};
 use dgstereo_train::checkpoint::{list_checkpoints, load_checkpoint};
 use dgstereo_train::run::{RunOptions, checkpoint_dir, train};
@@ -70,7 +70,12 @@ fn the_recipe_file_holds_the_official_defaults() {
     assert_eq!(t.frozen, ["monocular.pretrained", "monocular.depth_head"]);
     assert_eq!(
         config.loss,
-        LossConfig::SequenceL1 { gamma: 0.9, max_disparity: 700.0, gamma_adjustment: GammaAdjustment::DefomStereo }
+        LossConfig::SequenceL1 {
+            gamma: 0.9,
+            max_disparity: 700.0,
+            gamma_adjustment: GammaAdjustment::DefomStereo,
+            initial_disparity: InitialDisparityTerm::None,
+        }
     );
     assert_eq!(config.data.sources.len(), 6);
 }
