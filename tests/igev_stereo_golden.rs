@@ -168,3 +168,31 @@ fn a_training_pass_returns_the_official_initial_disparity() {
     model.initial_disparity = InitialDisparity::Zero {};
     assert!(train(&model).initial.is_none());
 }
+
+/// Our own safetensors file of an IGEV-Stereo network (what training writes: `model.safetensors`,
+/// checkpoints) keeps the pyramid encoders' keys (`feature.*`, `stem_2.*`) and loads back into a
+/// fresh network, giving the same disparity bit for bit.
+#[test]
+fn an_igev_safetensors_file_round_trips() {
+    let Some(reference) = golden("an_igev_safetensors_file_round_trips") else { return };
+    let device = default_device();
+    let (state, _) = golden_state_dict(&reference).unwrap();
+    let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
+    let (_, model) = model_from_keys(&keys, &device).unwrap();
+    let model = checkpoint::load_state_dict(model, &state, &reference).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("igev.safetensors");
+    checkpoint::save_safetensors(&model, &file, &[]).unwrap();
+    let (_, fresh) = model_from_keys(&keys, &device).unwrap();
+    let loaded = checkpoint::load_safetensors(fresh, &file).unwrap_or_else(|e| panic!("{e}"));
+    let refs = verify::read_reference(&reference).unwrap();
+    let f = |k: &str| {
+        let (s, v) = &refs[k];
+        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
+    };
+    let run = |m: &dgstereo_model::RaftStereo| {
+        let out = m.forward_flow(f("input.left"), f("input.right"), None, 2, Default::default()).unwrap();
+        to_vec(out.flow_up.last().unwrap().clone())
+    };
+    assert_eq!(run(&model), run(&loaded));
+}

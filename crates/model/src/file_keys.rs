@@ -11,7 +11,9 @@ use crate::RaftStereo;
 /// The pattern and replacement that turn a module path into its file key.
 pub const TO_FILE: (&str, &str) = (r"^encoder\.[A-Z][A-Za-z0-9]*\.", "");
 
-/// The pattern and replacement that turn a file key into a module path of `model`.
+/// The pattern and replacement that turn a file key into a module path of `model`: the
+/// layouts' fields (`fnet`, `cnet`, `conv2`; IGEV-Stereo's `feature`, `stem_2`, `stem_4`) go back
+/// under the encoder's variant.
 pub fn from_file(model: &RaftStereo) -> (&'static str, String) {
-    (r"^(fnet|cnet|conv2)\.", format!("encoder.{}.$1.", model.encoder.variant_name()))
+    (r"^(fnet|cnet|conv2|feature|stem_2|stem_4)\.", format!("encoder.{}.$1.", model.encoder.variant_name()))
 }

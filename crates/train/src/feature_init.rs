@@ -65,12 +65,14 @@ pub fn load_feature_init(mut model: RaftStereo, weights: &Path) -> Result<(RaftS
     if let Some(error) = result.errors.first() {
         return Err(in_file(error_message(error)));
     }
-    let lacking: Vec<String> = result
+    // In the trunk's order, so that the first one named is the first the file lacks.
+    let mut lacking: Vec<(usize, String)> = result
         .missing
         .iter()
-        .filter(|(path, _)| TRUNK.iter().any(|t| path.starts_with(t)))
-        .map(|(path, _)| timm_key(path))
+        .filter_map(|(path, _)| Some((TRUNK.iter().position(|t| path.starts_with(t))?, timm_key(path))))
         .collect();
+    lacking.sort();
+    let lacking: Vec<String> = lacking.into_iter().map(|(_, key)| key).collect();
     if let Some(first) = lacking.first() {
         return Err(in_file(format!(
             "missing key '{first}' (and {} more of the trunk): not a timm mobilenetv2_100 state dict (keys \
