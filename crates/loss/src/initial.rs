@@ -47,7 +47,7 @@ impl InitialDisparityTerm {
     /// # Errors
     /// [`Error::Config`] keyed `loss.initial_disparity` when the term needs an initial disparity
     /// and the network gave none; [`Error::Shape`] when its shape is not the ground truth's.
-    pub fn input<'a>(self, initial: Option<&'a Tensor<4>>, dims: [usize; 4]) -> Result<Option<&'a Tensor<4>>> {
+    pub fn input(self, initial: Option<&Tensor<4>>, dims: [usize; 4]) -> Result<Option<&Tensor<4>>> {
         if !self.needs_initial() {
             return Ok(None);
         }

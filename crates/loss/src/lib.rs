@@ -118,10 +118,18 @@ pub struct LossTerms {
 pub trait DisparityLoss {
     /// The scalar loss of `predictions` ([`Predictions`], or a slice of one `[N, 1, H, W]`
     /// positive disparity per iteration).
-    fn loss<'a>(&self, predictions: impl Into<Predictions<'a>>, target: &LossTarget) -> dgstereo_core::Result<Tensor<1>>;
+    fn loss<'a>(
+        &self,
+        predictions: impl Into<Predictions<'a>>,
+        target: &LossTarget,
+    ) -> dgstereo_core::Result<Tensor<1>>;
 
     /// The same loss as [`LossTerms`]: `loss` equals `sum / max(count, 1)` up to rounding.
-    fn terms<'a>(&self, predictions: impl Into<Predictions<'a>>, target: &LossTarget) -> dgstereo_core::Result<LossTerms>;
+    fn terms<'a>(
+        &self,
+        predictions: impl Into<Predictions<'a>>,
+        target: &LossTarget,
+    ) -> dgstereo_core::Result<LossTerms>;
 }
 
 /// Which loss an experiment uses.
@@ -265,7 +273,11 @@ impl LossConfig {
 }
 
 impl DisparityLoss for LossConfig {
-    fn loss<'a>(&self, predictions: impl Into<Predictions<'a>>, target: &LossTarget) -> dgstereo_core::Result<Tensor<1>> {
+    fn loss<'a>(
+        &self,
+        predictions: impl Into<Predictions<'a>>,
+        target: &LossTarget,
+    ) -> dgstereo_core::Result<Tensor<1>> {
         match *self {
             Self::SequenceL1 { gamma, max_disparity, gamma_adjustment, initial_disparity } => {
                 SequenceL1Loss { gamma, max_disparity, adjustment: gamma_adjustment, initial: initial_disparity }
@@ -277,7 +289,11 @@ impl DisparityLoss for LossConfig {
         }
     }
 
-    fn terms<'a>(&self, predictions: impl Into<Predictions<'a>>, target: &LossTarget) -> dgstereo_core::Result<LossTerms> {
+    fn terms<'a>(
+        &self,
+        predictions: impl Into<Predictions<'a>>,
+        target: &LossTarget,
+    ) -> dgstereo_core::Result<LossTerms> {
         match *self {
             Self::SequenceL1 { gamma, max_disparity, gamma_adjustment, initial_disparity } => {
                 SequenceL1Loss { gamma, max_disparity, adjustment: gamma_adjustment, initial: initial_disparity }

@@ -37,11 +37,14 @@ fn plus(gt: &[f32], offsets: &[f32], device: &Device) -> Tensor<4> {
 fn official_input(device: &Device) -> (Vec<Tensor<4>>, Tensor<4>, LossTarget) {
     let gt = [1.0, 2.0, 3.0, 10.0, 191.5, 192.0, 250.0, 5.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 180.0, 200.0];
     let valid = [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0];
-    let initial =
-        [0.5, 0.99, -2.5, 4.0, -1.01, 7.0, 7.0, 95.0, 0.3, -1.7, 50.0, 0.0, 2.2, -0.8, 1.5, 9.0];
+    let initial = [0.5, 0.99, -2.5, 4.0, -1.01, 7.0, 7.0, 95.0, 0.3, -1.7, 50.0, 0.0, 2.2, -0.8, 1.5, 9.0];
     let second = [1.0, -1.0, 2.0, -2.0, 0.5, 7.0, 7.0, 7.0, -3.0, 0.25, 9.0, 1.0, -0.5, 4.0, -6.0, 3.0];
     let iterations = vec![map(&[0.0; 16], device), plus(&gt, &second, device), plus(&gt, &[0.25; 16], device)];
-    let target = LossTarget { disparity_bilinear: map(&gt, device), disparity_nearest: map(&gt, device), valid: map(&valid, device) };
+    let target = LossTarget {
+        disparity_bilinear: map(&gt, device),
+        disparity_nearest: map(&gt, device),
+        valid: map(&valid, device),
+    };
     (iterations, plus(&gt, &initial, device), target)
 }
 
@@ -105,7 +108,8 @@ fn max_disp_and_validity_mask_both_terms() {
     let initial = initial.require_grad();
     let last = iterations[2].clone().require_grad();
     let iterations = [iterations[0].clone(), iterations[1].clone(), last.clone()];
-    let loss = LossConfig::igev_stereo().loss(Predictions { iterations: &iterations, initial: Some(&initial) }, &target);
+    let loss =
+        LossConfig::igev_stereo().loss(Predictions { iterations: &iterations, initial: Some(&initial) }, &target);
     let grads = loss.unwrap().backward();
     let initial_grad = to_vec(initial.grad(&grads).unwrap());
     let last_grad = to_vec(last.grad(&grads).unwrap());
@@ -130,7 +134,8 @@ fn max_disp_and_validity_mask_both_terms() {
 #[test]
 fn smooth_l1_is_quadratic_inside_one_and_linear_outside() {
     let device = default_device().autodiff();
-    let x = from_vec(vec![-3.0, -1.01, -0.99, -0.5, 0.0, 0.5, 0.99, 1.0, 1.01, 3.0], [1, 1, 1, 10], &device).require_grad();
+    let x =
+        from_vec(vec![-3.0, -1.01, -0.99, -0.5, 0.0, 0.5, 0.99, 1.0, 1.01, 3.0], [1, 1, 1, 10], &device).require_grad();
     let y = smooth_l1(x.clone());
     let values = to_vec(y.clone());
     let expected = [2.5, 0.51, 0.49005, 0.125, 0.0, 0.125, 0.49005, 0.5, 0.51, 2.5];

@@ -4,8 +4,8 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_loss::{
-    DisparityLoss, EdgeAwareLoss, GammaAdjustment, InitialDisparityTerm, LossConfig, LossTarget, SequenceL1Loss, edge_mask,
-    sequence_weights,
+    DisparityLoss, EdgeAwareLoss, GammaAdjustment, InitialDisparityTerm, LossConfig, LossTarget, SequenceL1Loss,
+    edge_mask, sequence_weights,
 };
 use proptest::prelude::*;
 

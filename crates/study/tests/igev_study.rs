@@ -35,10 +35,7 @@ fn the_igev_recipe_passes_the_study_check() {
     };
     // Nor is the placeholder path of the ImageNet weights.
     let message = check_run(&parts_of(config.clone(), Some(2)), &config.benchmarks, &folder).unwrap_err().to_string();
-    assert!(
-        message.contains("train.feature_init") && message.contains("mobilenetv2_100_ra-b33bc2c4.pth"),
-        "{message}"
-    );
+    assert!(message.contains("train.feature_init") && message.contains("mobilenetv2_100_ra-b33bc2c4.pth"), "{message}");
     let weights = out.path().join("mobilenetv2_100_ra-b33bc2c4.pth");
     std::fs::write(&weights, b"the check opens no weights file, it finds it").unwrap();
     config.train.feature_init = Some(weights);

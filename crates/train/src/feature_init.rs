@@ -14,7 +14,9 @@
 
 use std::path::Path;
 
-use burn::store::{ApplyError, ApplyResult, ModuleSnapshot, ModuleStore, PyTorchToBurnAdapter, PytorchStore, SafetensorsStore};
+use burn::store::{
+    ApplyError, ApplyResult, ModuleSnapshot, ModuleStore, PyTorchToBurnAdapter, PytorchStore, SafetensorsStore,
+};
 use dgstereo_core::{Error, Result};
 use dgstereo_encoder::{Encoders, MobileNetPyramid};
 use dgstereo_model::RaftStereo;
@@ -97,7 +99,10 @@ fn load_trunk(network: &mut MobileNetPyramid, weights: &Path) -> std::result::Re
         .iter()
         .enumerate()
         .flat_map(|(group, stages)| {
-            stages.iter().enumerate().map(move |(i, stage)| (format!(r"^blocks\.{stage}\."), format!("block{group}.{i}.")))
+            stages
+                .iter()
+                .enumerate()
+                .map(move |(i, stage)| (format!(r"^blocks\.{stage}\."), format!("block{group}.{i}.")))
         })
         .collect();
     if weights.extension().is_some_and(|e| e == "safetensors") {

@@ -42,7 +42,8 @@ pub fn preflight(parts: &TrainParts, benchmarks: &[BenchmarkConfig]) -> Result<P
     // Weights names were resolved by the front end (`TrainParts::with_named_weights`).
     parts.check_named_weights_resolved()?;
     let t = &parts.train;
-    let weights = [("train.init", &t.init), ("train.monocular_init", &t.monocular_init), ("train.feature_init", &t.feature_init)];
+    let weights =
+        [("train.init", &t.init), ("train.monocular_init", &t.monocular_init), ("train.feature_init", &t.feature_init)];
     for (key, weights) in weights {
         if let Some(file) = weights
             && !file.is_file()

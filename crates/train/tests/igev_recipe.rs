@@ -94,7 +94,9 @@ fn write_safetensors(path: &Path, state: &StateDict) {
     let tracked = 10i64.to_le_bytes().to_vec();
     let mut views: Vec<(String, safetensors::tensor::TensorView<'_>)> = bytes
         .iter()
-        .map(|(k, s, b)| (k.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b).unwrap()))
+        .map(|(k, s, b)| {
+            (k.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b).unwrap())
+        })
         .collect();
     views.push((
         "bn1.num_batches_tracked".into(),
@@ -108,7 +110,8 @@ fn write_safetensors(path: &Path, state: &StateDict) {
 fn smoke_parts(feature_init: Option<&Path>, steps: usize, iters: usize) -> TrainParts {
     let mut config = recipe();
     let tiny = common::tiny_parts(steps, iters, 1e-3, Some(2), 1);
-    config.train = dgstereo_experiment::TrainingConfig { feature_init: feature_init.map(Path::to_path_buf), ..tiny.train };
+    config.train =
+        dgstereo_experiment::TrainingConfig { feature_init: feature_init.map(Path::to_path_buf), ..tiny.train };
     config.data = tiny.data;
     TrainParts::from(config)
 }
@@ -196,7 +199,9 @@ fn feature_init_loads_the_timm_trunk_and_keeps_the_decoder() {
         assert_ne!(&values_of(&before, ours), file_values, "{ours} held the file's values before");
     }
     // The decoder, the stems and the rest of the network keep their initialisation.
-    for kept in ["encoder.feature.deconv32_16.", "encoder.feature.conv4.", "encoder.stem_2.", "geometry.", "update_block."] {
+    for kept in
+        ["encoder.feature.deconv32_16.", "encoder.feature.conv4.", "encoder.stem_2.", "geometry.", "update_block."]
+    {
         assert!(identical_under(&before, &after, kept), "{kept} changed");
     }
     assert!(notice.contains("train.feature_init") && notice.contains("6 key(s) of the file ignored"), "{notice}");
@@ -209,7 +214,7 @@ fn a_file_that_does_not_fit_is_refused_by_key() {
     let igev = recipe().model;
     let message = |config: &dgstereo_model::ModelConfig, file: &Path| {
         let model = init_model(config, &device, Some(1)).unwrap();
-        load_feature_init(model, file).err().expect("the file does not fit").to_string()
+        load_feature_init(model, file).expect_err("the file does not fit").to_string()
     };
     // Another width at one stage (a mobilenetv2_140 has such shapes).
     let wide = dir.path().join("wide.safetensors");
@@ -233,7 +238,9 @@ fn a_file_that_does_not_fit_is_refused_by_key() {
     let m = message(&common::tiny_model(), &wide);
     assert!(m.contains("train.feature_init") && m.contains("mobilenet-pyramid"), "{m}");
     // A PyTorch file of another network: its keys are not timm's.
-    if let Some(shared) = dgstereo_core::shared::shared_dir_for_test("igev_feature_init_pth", "golden/raft_stereo_random.pth") {
+    if let Some(shared) =
+        dgstereo_core::shared::shared_dir_for_test("igev_feature_init_pth", "golden/raft_stereo_random.pth")
+    {
         let m = message(&igev, &shared.join("golden/raft_stereo_random.pth"));
         assert!(m.contains("raft_stereo_random.pth") && m.contains("missing key 'conv_stem.weight'"), "{m}");
     }
@@ -258,7 +265,9 @@ fn the_initial_term_alone_trains_the_classifier() {
     };
     let (before, after, initial) = step(parts.clone());
     assert_eq!(initial, Some([1, 1, common::SIZE[0], common::SIZE[1]]), "the initial disparity at full resolution");
-    for trains in ["geometry.classifier.", "superpixel.spx_4.", "superpixel.spx.", "superpixel.spx_gru.", "encoder.feature."] {
+    for trains in
+        ["geometry.classifier.", "superpixel.spx_4.", "superpixel.spx.", "superpixel.spx_gru.", "encoder.feature."]
+    {
         assert!(!identical_under(&before, &after, trains), "{trains} did not train");
     }
     assert!(identical_under(&before, &after, "encoder.feature.bn1.running_mean"));
