@@ -90,11 +90,16 @@ fn a_step_leaves_the_frozen_network_bit_identical_while_the_rest_moves() {
     let before = common::weights(&trainer.inference_model());
     let pairs = TrainingData::new(&parts.data, &parts.train).unwrap().batch(0, 1).unwrap();
     let batch = to_tensors(&pairs, trainer.autodiff_device()).unwrap();
-    let mut predictions = 0;
-    let mut observe = |i: dgstereo_train::StepInternals<'_>| predictions = i.predictions.len();
+    let (mut predictions, mut initial) = (0, true);
+    let mut observe = |i: dgstereo_train::StepInternals<'_>| {
+        predictions = i.predictions.len();
+        initial = i.initial.is_some();
+    };
     trainer.step_on(&batch, Some(&mut observe)).unwrap();
-    // Every iteration is supervised, the two scale iterations included.
+    // Every iteration is supervised, the two scale iterations included; the scaled inverse depth
+    // the loop starts from is not handed to the loss (the official DEFOM loss does not read it).
     assert_eq!(predictions, 3);
+    assert!(!initial);
     let after = common::weights(&trainer.inference_model());
     assert!(identical_under(&before, &after, "monocular.pretrained."));
     assert!(identical_under(&before, &after, "monocular.depth_head."));
