@@ -11,26 +11,22 @@
 use std::path::PathBuf;
 
 use dgstereo_core::default_device;
-use dgstereo_core::tensor::{from_vec, max_abs_diff};
-use dgstereo_model::checkpoint_config::{self, OfficialPreset, config_from_keys, model_from_keys};
-use dgstereo_model::official_keys::KeyShape;
-use dgstereo_model::seeded::golden_state_dict;
+use dgstereo_model::InitialDisparity;
+use dgstereo_model::checkpoint_config::{self, OfficialPreset, config_from_keys};
 use dgstereo_model::verify_defom::{DISPARITY_TOLERANCE, verify_defom};
-use dgstereo_model::{InitialDisparity, ModelConfig, checkpoint, verify};
 use dgstereo_suite::shared_dir_for_test;
 
 #[path = "support/official_pth.rs"]
 mod official_pth;
+#[path = "support/seeded_golden.rs"]
+mod seeded_golden;
+
+use seeded_golden::{SeededGolden, keys_of, zoo_model};
 
 const GOLDEN: &str = "golden/defom_stereo_vits_seeded.activations.safetensors";
 
 fn golden(test: &str) -> Option<PathBuf> {
     Some(shared_dir_for_test(test, GOLDEN)?.join(GOLDEN))
-}
-
-fn keys_of(path: &std::path::Path) -> Vec<KeyShape> {
-    let (state, _) = golden_state_dict(path).unwrap();
-    state.into_iter().map(|t| (t.key, t.shape)).collect()
 }
 
 #[test]
@@ -55,10 +51,7 @@ fn the_configuration_is_read_from_the_keys_and_shapes() {
     let detected = config_from_keys(&keys, &default_device()).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(detected.preset, OfficialPreset::Defom);
     assert_eq!(detected.valid_iters, 32);
-    let zoo = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/experiments/zoo/defom-vits.toml")).unwrap();
-    let zoo: toml::Table = toml::from_str(&zoo).unwrap();
-    let zoo: ModelConfig = zoo["model"].clone().try_into().unwrap();
-    assert_eq!(detected.model, zoo);
+    assert_eq!(detected.model, zoo_model("defom-vits.toml"));
     assert_eq!(detected.model.initial_disparity, InitialDisparity::scaled_inverse_depth());
     assert!(detected.to_string().contains("DEFOM-Stereo: Depth Anything V2 vits"), "{detected}");
     // 43,290,177 parameters, as the official model counts them (no buffers, aliases once).
@@ -81,22 +74,12 @@ fn the_configuration_is_read_from_the_keys_and_shapes() {
 #[test]
 fn the_reference_tells_the_scale_iterations_and_the_initialiser() {
     let Some(reference) = golden("the_reference_tells_the_scale_iterations_and_the_initialiser") else { return };
-    let device = default_device();
-    let (state, _) = golden_state_dict(&reference).unwrap();
-    let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
-    let refs = verify::read_reference(&reference).unwrap();
-    let f = |k: &str| {
-        let (s, v) = &refs[k];
-        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
-    };
-    let expected = f("disparity.iter5");
+    let golden = SeededGolden::open(&reference);
     let run = |alter: &dyn Fn(&mut dgstereo_model::RaftStereo)| {
-        let (_, model) = model_from_keys(&keys, &device).unwrap();
-        let mut model = checkpoint::load_state_dict(model, &state, &reference).unwrap();
+        let mut model = golden.model();
         model.scale_iters = 3;
         alter(&mut model);
-        let out = model.forward_flow(f("input.left"), f("input.right"), None, 6, Default::default()).unwrap();
-        max_abs_diff(out.flow_up.last().unwrap().clone().neg(), expected.clone())
+        golden.disparity_error(&model, 6, Default::default(), "disparity.iter5")
     };
     let right = run(&|_| {});
     assert!(right <= DISPARITY_TOLERANCE, "the official configuration is off by {right}");
@@ -113,20 +96,14 @@ fn the_reference_tells_the_scale_iterations_and_the_initialiser() {
 #[test]
 fn an_official_pth_file_loads_and_gives_the_reference_disparity() {
     let Some(reference) = golden("an_official_pth_file_loads_and_gives_the_reference_disparity") else { return };
-    let device = default_device();
-    let (state, _) = golden_state_dict(&reference).unwrap();
+    let golden = SeededGolden::open(&reference);
     let dir = tempfile::tempdir().unwrap();
     let pth = dir.path().join("defomstereo_vits_seeded.pth");
-    official_pth::write_pth(&state, "module.", &pth);
-    let (mut model, detected) = checkpoint_config::load_detected(&pth, &device).unwrap_or_else(|e| panic!("{e}"));
+    official_pth::write_pth(&golden.state, "module.", &pth);
+    let (mut model, detected) =
+        checkpoint_config::load_detected(&pth, &default_device()).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(detected.preset, OfficialPreset::Defom);
     model.scale_iters = 3;
-    let refs = verify::read_reference(&reference).unwrap();
-    let f = |k: &str| {
-        let (s, v) = &refs[k];
-        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
-    };
-    let out = model.forward_flow(f("input.left"), f("input.right"), None, 6, Default::default()).unwrap();
-    let error = max_abs_diff(out.flow_up.last().unwrap().clone().neg(), f("disparity.iter5"));
+    let error = golden.disparity_error(&model, 6, Default::default(), "disparity.iter5");
     assert!(error <= DISPARITY_TOLERANCE, "the .pth file's model is off by {error} px");
 }

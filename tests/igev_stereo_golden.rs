@@ -12,16 +12,19 @@
 use std::path::PathBuf;
 
 use dgstereo_core::default_device;
-use dgstereo_core::tensor::{from_vec, max_abs_diff, to_vec};
+use dgstereo_core::tensor::{max_abs_diff, to_vec};
+use dgstereo_costvolume::CorrelationImplementation;
 use dgstereo_model::checkpoint_config::{self, OfficialPreset, config_from_keys, model_from_keys};
-use dgstereo_model::official_keys::KeyShape;
-use dgstereo_model::seeded::golden_state_dict;
 use dgstereo_model::verify_igev::{DISPARITY_TOLERANCE, verify_igev};
-use dgstereo_model::{InitialDisparity, ModelConfig, checkpoint, padded_training_disparities, verify};
+use dgstereo_model::{ForwardOptions, InitialDisparity, RaftStereo, checkpoint, padded_training_disparities};
 use dgstereo_suite::shared_dir_for_test;
 
 #[path = "support/official_pth.rs"]
 mod official_pth;
+#[path = "support/seeded_golden.rs"]
+mod seeded_golden;
+
+use seeded_golden::{SeededGolden, keys_of, zoo_model};
 
 const GOLDEN: &str = "golden/igev_stereo_seeded.activations.safetensors";
 
@@ -43,11 +46,6 @@ fn every_igev_reference_tensor_matches() {
     assert!(report.final_flow_error <= DISPARITY_TOLERANCE, "final disparity off by {}", report.final_flow_error);
 }
 
-fn keys_of(path: &std::path::Path) -> Vec<KeyShape> {
-    let (state, _) = golden_state_dict(path).unwrap();
-    state.into_iter().map(|t| (t.key, t.shape)).collect()
-}
-
 /// The configuration comes from the tensors alone, and it is the zoo's IGEV-Stereo (with the
 /// official demo's 32 iterations).
 #[test]
@@ -57,10 +55,7 @@ fn the_igev_configuration_is_read_from_the_keys_and_shapes() {
     let detected = config_from_keys(&keys, &default_device()).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(detected.preset, OfficialPreset::Igev);
     assert_eq!(detected.valid_iters, 32);
-    let zoo = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/experiments/zoo/igev.toml")).unwrap();
-    let zoo: toml::Table = toml::from_str(&zoo).unwrap();
-    let zoo: ModelConfig = zoo["model"].clone().try_into().unwrap();
-    assert_eq!(detected.model, zoo);
+    assert_eq!(detected.model, zoo_model("igev.toml"));
     assert_eq!(detected.model.initial_disparity, InitialDisparity::SoftArgmin {});
     assert!(detected.to_string().contains("IGEV-Stereo: geometry volume max_disp 192, 8 groups"), "{detected}");
     // 12,598,114 parameters, as the official model counts them (no buffers, aliases once).
@@ -87,21 +82,11 @@ fn the_igev_configuration_is_read_from_the_keys_and_shapes() {
 #[test]
 fn the_reference_tells_the_soft_argmin_start() {
     let Some(reference) = golden("the_reference_tells_the_soft_argmin_start") else { return };
-    let device = default_device();
-    let (state, _) = golden_state_dict(&reference).unwrap();
-    let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
-    let refs = verify::read_reference(&reference).unwrap();
-    let f = |k: &str| {
-        let (s, v) = &refs[k];
-        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
-    };
-    let expected = f("disparity.iter3");
+    let golden = SeededGolden::open(&reference);
     let run = |alter: &dyn Fn(&mut dgstereo_model::RaftStereo)| {
-        let (_, model) = model_from_keys(&keys, &device).unwrap();
-        let mut model = checkpoint::load_state_dict(model, &state, &reference).unwrap();
+        let mut model = golden.model();
         alter(&mut model);
-        let out = model.forward_flow(f("input.left"), f("input.right"), None, 4, Default::default()).unwrap();
-        max_abs_diff(out.flow_up.last().unwrap().clone().neg(), expected.clone())
+        golden.disparity_error(&model, 4, Default::default(), "disparity.iter3")
     };
     let right = run(&|_| {});
     assert!(right <= DISPARITY_TOLERANCE, "the official configuration is off by {right}");
@@ -115,21 +100,18 @@ fn the_reference_tells_the_soft_argmin_start() {
 #[test]
 fn an_official_igev_pth_file_loads_and_gives_the_reference_disparity() {
     let Some(reference) = golden("an_official_igev_pth_file_loads_and_gives_the_reference_disparity") else { return };
-    let device = default_device();
-    let (state, _) = golden_state_dict(&reference).unwrap();
+    let golden = SeededGolden::open(&reference);
     let dir = tempfile::tempdir().unwrap();
     let pth = dir.path().join("igev_sceneflow_seeded.pth");
-    official_pth::write_pth(&state, "module.", &pth);
-    let (model, detected) = checkpoint_config::load_detected(&pth, &device).unwrap_or_else(|e| panic!("{e}"));
+    official_pth::write_pth(&golden.state, "module.", &pth);
+    let (model, detected) = checkpoint_config::load_detected(&pth, &default_device()).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(detected.preset, OfficialPreset::Igev);
-    let refs = verify::read_reference(&reference).unwrap();
-    let f = |k: &str| {
-        let (s, v) = &refs[k];
-        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
-    };
-    let out = model.forward_flow(f("input.left"), f("input.right"), None, 4, Default::default()).unwrap();
-    let error = max_abs_diff(out.flow_up.last().unwrap().clone().neg(), f("disparity.iter3"));
+    let error = golden.disparity_error(&model, 4, Default::default(), "disparity.iter3");
     assert!(error <= DISPARITY_TOLERANCE, "the .pth file's model is off by {error} px");
+    // The lookup's correlation half on the fly (`--corr alt`) gives the same disparity.
+    let alt = ForwardOptions { implementation: Some(CorrelationImplementation::Alt), ..Default::default() };
+    let error = golden.disparity_error(&model, 4, alt, "disparity.iter3");
+    assert!(error <= DISPARITY_TOLERANCE, "with the on-the-fly correlation the model is off by {error} px");
 }
 
 /// A training pass also returns the official `init_disp`: the soft-argmin start upsampled by the
@@ -138,30 +120,23 @@ fn an_official_igev_pth_file_loads_and_gives_the_reference_disparity() {
 #[test]
 fn a_training_pass_returns_the_official_initial_disparity() {
     let Some(reference) = golden("a_training_pass_returns_the_official_initial_disparity") else { return };
-    let device = default_device();
-    let (state, _) = golden_state_dict(&reference).unwrap();
-    let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
-    let (detected, model) = model_from_keys(&keys, &device).unwrap();
-    let mut model = checkpoint::load_state_dict(model, &state, &reference).unwrap();
-    let refs = verify::read_reference(&reference).unwrap();
-    let f = |k: &str| {
-        let (s, v) = &refs[k];
-        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
-    };
-    let train = |model: &dgstereo_model::RaftStereo| {
-        padded_training_disparities(model, &detected.model, f("input.left"), f("input.right"), None, 4).unwrap()
-    };
+    let golden = SeededGolden::open(&reference);
+    let config = config_from_keys(&golden.keys, &default_device()).unwrap_or_else(|e| panic!("{e}")).model;
+    let (left, right) = (golden.tensor("input.left"), golden.tensor("input.right"));
+    let train =
+        |model: &RaftStereo| padded_training_disparities(model, &config, left.clone(), right.clone(), None, 4).unwrap();
+    let mut model = golden.model();
     let training = train(&model);
     let initial = training.initial.clone().expect("IGEV-Stereo's training pass gives its initial disparity");
     assert_eq!(initial.dims(), [1, 1, 96, 128]);
-    let error = max_abs_diff(initial, f("disparity.init"));
+    let error = max_abs_diff(initial, golden.tensor("disparity.init"));
     assert!(error <= DISPARITY_TOLERANCE, "the initial disparity is off by {error} px");
     assert_eq!(training.iterations.len(), 4);
     for (k, disparity) in training.iterations.iter().enumerate() {
-        let error = max_abs_diff(disparity.clone(), f(&format!("disparity.iter{k}")));
+        let error = max_abs_diff(disparity.clone(), golden.tensor(&format!("disparity.iter{k}")));
         assert!(error <= DISPARITY_TOLERANCE, "iteration {k} is off by {error} px");
     }
-    let inference = model.forward_flow(f("input.left"), f("input.right"), None, 4, Default::default()).unwrap();
+    let inference = model.forward_flow(left.clone(), right.clone(), None, 4, Default::default()).unwrap();
     assert!(inference.initial_flow_up.is_none(), "inference does not upsample the start");
     let last = to_vec(inference.flow_up.last().unwrap().clone().neg());
     assert_eq!(last, to_vec(training.iterations[3].clone()), "the training pass changes the iterations");
@@ -175,24 +150,17 @@ fn a_training_pass_returns_the_official_initial_disparity() {
 #[test]
 fn an_igev_safetensors_file_round_trips() {
     let Some(reference) = golden("an_igev_safetensors_file_round_trips") else { return };
-    let device = default_device();
-    let (state, _) = golden_state_dict(&reference).unwrap();
-    let keys: Vec<KeyShape> = state.iter().map(|t| (t.key.clone(), t.shape.clone())).collect();
-    let (_, model) = model_from_keys(&keys, &device).unwrap();
-    let model = checkpoint::load_state_dict(model, &state, &reference).unwrap();
+    let golden = SeededGolden::open(&reference);
+    let model = golden.model();
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("igev.safetensors");
     checkpoint::save_safetensors(&model, &file, &[]).unwrap();
-    let (_, fresh) = model_from_keys(&keys, &device).unwrap();
+    let (_, fresh) = model_from_keys(&golden.keys, &default_device()).unwrap();
     let loaded = checkpoint::load_safetensors(fresh, &file).unwrap_or_else(|e| panic!("{e}"));
-    let refs = verify::read_reference(&reference).unwrap();
-    let f = |k: &str| {
-        let (s, v) = &refs[k];
-        from_vec(v.clone(), [s[0], s[1], s[2], s[3]], &device)
-    };
-    let run = |m: &dgstereo_model::RaftStereo| {
-        let out = m.forward_flow(f("input.left"), f("input.right"), None, 2, Default::default()).unwrap();
-        to_vec(out.flow_up.last().unwrap().clone())
+    let run = |m: &RaftStereo| {
+        let out =
+            m.forward_flow(golden.tensor("input.left"), golden.tensor("input.right"), None, 2, Default::default());
+        to_vec(out.unwrap().flow_up.last().unwrap().clone())
     };
     assert_eq!(run(&model), run(&loaded));
 }

@@ -17,7 +17,7 @@ use burn::tensor::activation::{relu, softmax, tanh};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
-use dgstereo_costvolume::{CombinedGeometryVolume, GeometryEncoding, GeometryVolume};
+use dgstereo_costvolume::{CombinedGeometryVolume, CorrelationImplementation, GeometryEncoding, GeometryVolume};
 use dgstereo_model::seeded::golden_state_dict;
 use dgstereo_model::updater::{
     GateContext, HeadOutput, MotionKind, MultiLevelUpdateBlock, Updater, UpdaterConfig, UpsamplingKind,
@@ -139,7 +139,7 @@ fn the_update_block_matches_the_reference_on_the_recorded_volume() {
     let (left, right) = recorded_features(&refs, &device);
     let (match_left, match_right) = (geometry.match_features(left[0].clone()), geometry.match_features(right));
     let volume: Tensor<5> = tensor(&refs, "cost_agg.call0", &device);
-    let combined = CombinedGeometryVolume::new(match_left, match_right, volume, 2, 4);
+    let combined = CombinedGeometryVolume::new(match_left, match_right, volume, 2, 4, CorrelationImplementation::Reg);
     assert_eq!(combined.channels(), 162);
 
     let config =

@@ -8,10 +8,26 @@
 //! with `align_corners=True` samples. The correlation is the kernels' [`CorrelationPyramid`] of
 //! the left match features scaled by `sqrt(C)`: IGEV-Stereo's correlation is the plain dot
 //! product, the pyramid's divides by `sqrt(C)`.
+//!
+//! Design decision: the correlation half takes the cost volume's implementation choice like
+//! RAFT-Stereo's volume: "reg" stores the all-pairs pyramid, "alt" ([`OnTheFlyCorrelation`])
+//! stores the pooled right features and takes the dot products at each lookup. Pooling the
+//! volume along the right view's columns and pooling the right features are the same sums (the
+//! correlation is linear in the right features), so both give the reference's lookup. The
+//! geometry half has no such form: it is the 3D network's output, stored.
 
 use burn::tensor::{Int, Tensor};
 
-use crate::CorrelationPyramid;
+use crate::{CorrelationImplementation, CorrelationPyramid, OnTheFlyCorrelation};
+
+/// The all-pairs correlation half of the lookup, stored or on the fly.
+#[derive(Debug, Clone)]
+enum AllPairs {
+    /// The materialised pyramid ("reg").
+    Stored(CorrelationPyramid),
+    /// Dot products at each lookup ("alt").
+    OnTheFly(OnTheFlyCorrelation),
+}
 
 /// The two pyramids of one pass.
 ///
@@ -20,7 +36,7 @@ use crate::CorrelationPyramid;
 #[derive(Debug, Clone)]
 pub struct CombinedGeometryVolume {
     geometry: Vec<Tensor<3>>,
-    correlation: CorrelationPyramid,
+    correlation: AllPairs,
     radius: usize,
     /// `[N, H, W]` of the grid.
     grid: [usize; 3],
@@ -28,11 +44,19 @@ pub struct CombinedGeometryVolume {
 
 impl CombinedGeometryVolume {
     /// The pyramids of `levels` levels of the geometry encoding volume `volume` and of the match
-    /// features `match_left` against `match_right`, looked up with `radius`.
+    /// features `match_left` against `match_right` (stored or on the fly, as `implementation`
+    /// says), looked up with `radius`.
     ///
     /// # Shapes
     /// - `match_left`, `match_right`: `[N, C, H, W]`; `volume`: `[N, G, D, H, W]`
-    pub fn new(match_left: Tensor<4>, match_right: Tensor<4>, volume: Tensor<5>, levels: usize, radius: usize) -> Self {
+    pub fn new(
+        match_left: Tensor<4>,
+        match_right: Tensor<4>,
+        volume: Tensor<5>,
+        levels: usize,
+        radius: usize,
+        implementation: CorrelationImplementation,
+    ) -> Self {
         let [n, g, d, h, w] = volume.dims();
         let c = match_left.dims()[1];
         let mut level = volume.permute([0, 3, 4, 1, 2]).reshape([n * h * w, g, d]);
@@ -45,7 +69,14 @@ impl CombinedGeometryVolume {
         }
         geometry.push(level);
         let scaled = match_left.mul_scalar((c as f32).sqrt());
-        let correlation = CorrelationPyramid::new(scaled, match_right, levels, radius);
+        let correlation = match implementation {
+            CorrelationImplementation::Reg => {
+                AllPairs::Stored(CorrelationPyramid::new(scaled, match_right, levels, radius))
+            }
+            CorrelationImplementation::Alt => {
+                AllPairs::OnTheFly(OnTheFlyCorrelation::new(scaled, match_right, levels, radius))
+            }
+        };
         Self { geometry, correlation, radius, grid: [n, h, w] }
     }
 
@@ -63,7 +94,11 @@ impl CombinedGeometryVolume {
         let [n, h, w] = self.grid;
         let taps = 2 * self.radius + 1;
         let levels = self.geometry.len();
-        let correlation = self.correlation.lookup_levels(coords0 - disparity.clone(), levels, self.radius);
+        let at = coords0 - disparity.clone();
+        let correlation = match &self.correlation {
+            AllPairs::Stored(pyramid) => pyramid.lookup_levels(at, levels, self.radius),
+            AllPairs::OnTheFly(on_the_fly) => on_the_fly.lookup_levels(at, levels, self.radius),
+        };
         let flat = disparity.reshape([n * h * w, 1]);
         let mut parts = Vec::with_capacity(2 * levels);
         for (i, volume) in self.geometry.iter().enumerate() {
@@ -136,7 +171,14 @@ mod tests {
         let left = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
         let right = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
         let volume = Tensor::<5>::random([n, g, d, h, w], Distribution::Normal(0.0, 1.0), &device);
-        let combined = CombinedGeometryVolume::new(left.clone(), right.clone(), volume.clone(), 2, 1);
+        let combined = CombinedGeometryVolume::new(
+            left.clone(),
+            right.clone(),
+            volume.clone(),
+            2,
+            1,
+            CorrelationImplementation::Reg,
+        );
         assert_eq!(combined.channels(), 2 * (g + 1) * 3);
         let coords0 = from_vec((0..n * h * w).map(|i| (i % w) as f32).collect(), [n, 1, h, w], &device);
         let disparity = Tensor::<4>::zeros([n, 1, h, w], &device);
@@ -156,5 +198,27 @@ mod tests {
         // Group 0: disparities 0 and 1 of the pixel.
         let pooled = (v[y * w + x] + v[(h + y) * w + x]) / 2.0;
         assert!((out_at(3 * (g + 1) + 1) - pooled).abs() < 1e-6);
+    }
+
+    /// "alt" gives the lookup "reg" gives, at fractional disparities, past both ends of the row
+    /// and on an odd width (whose pooling drops the last column in both forms).
+    #[test]
+    fn the_on_the_fly_correlation_looks_up_what_the_stored_pyramid_holds() {
+        let device = default_device();
+        let (n, c, g, d, h, w) = (2, 8, 2, 12, 3, 13);
+        let left = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+        let right = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+        let volume = Tensor::<5>::random([n, g, d, h, w], Distribution::Normal(0.0, 1.0), &device);
+        let build = |implementation| {
+            CombinedGeometryVolume::new(left.clone(), right.clone(), volume.clone(), 3, 2, implementation)
+        };
+        let coords0 = from_vec((0..n * h * w).map(|i| (i % w) as f32).collect(), [n, 1, h, w], &device);
+        let disparity = Tensor::<4>::random([n, 1, h, w], Distribution::Uniform(-3.0, 16.0), &device);
+        let stored = to_vec(build(CorrelationImplementation::Reg).lookup(coords0.clone(), disparity.clone()));
+        let on_the_fly = to_vec(build(CorrelationImplementation::Alt).lookup(coords0, disparity));
+        let scale = stored.iter().fold(0f32, |m, v| m.max(v.abs()));
+        let worst = stored.iter().zip(&on_the_fly).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+        assert!(scale > 1.0, "the lookup holds values ({scale})");
+        assert!(worst <= 1e-5 * scale, "alt differs from reg by {worst} (largest value {scale})");
     }
 }

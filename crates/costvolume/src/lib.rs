@@ -22,7 +22,8 @@
 //! convolutions gated by the image features ([`GeometryEncoding`]) into a geometry encoding
 //! volume, whose classifier's soft-argmin starts the loop; its lookup
 //! ([`CombinedGeometryVolume`], [`Correlation::Geometry`]) joins that volume sampled at the
-//! disparity with the plain all-pairs correlation sampled at the match.
+//! disparity with the plain all-pairs correlation sampled at the match, the latter stored or on
+//! the fly as the implementation choice says.
 #![deny(missing_docs)]
 
 pub mod basic_conv;

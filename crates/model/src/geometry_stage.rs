@@ -9,19 +9,21 @@
 use burn::tensor::{FloatDType, Tensor};
 use dgstereo_core::Probe;
 use dgstereo_core::tensor::cast_float;
-use dgstereo_costvolume::{CombinedGeometryVolume, Correlation, GeometryEncoding};
+use dgstereo_costvolume::{CombinedGeometryVolume, Correlation, CorrelationImplementation, GeometryEncoding};
 
 use crate::RaftStereo;
 
 impl RaftStereo {
     /// The geometry encoding volume of the left pyramid `left` (finest first) against the right
-    /// view's finest features `right`, as the lookup of the update loop, and the classifier's
-    /// logits (`[N, D, H/4, W/4]`).
+    /// view's finest features `right`, as the lookup of the update loop (its correlation half
+    /// stored or on the fly, as `implementation` says), and the classifier's logits
+    /// (`[N, D, H/4, W/4]`).
     pub(crate) fn geometry_volume(
         &self,
         geometry: &GeometryEncoding,
         left: &[Tensor<4>],
         right: Tensor<4>,
+        implementation: CorrelationImplementation,
         probe: &mut Probe<'_>,
     ) -> (Correlation, Tensor<4>) {
         let out = probe.time("geometry volume", || geometry.forward(left, right));
@@ -44,6 +46,7 @@ impl RaftStereo {
                 cast_float(out.volume, FloatDType::F32),
                 c.levels,
                 c.radius,
+                implementation,
             )
         });
         (Correlation::Geometry(lookup), out.logits)

@@ -255,7 +255,7 @@ impl RaftStereo {
         let implementation = implementation.unwrap_or(self.correlation.implementation);
         let (corr_fn, initial, initial_up) = match (&self.geometry, &pyramid) {
             (Some(geometry), Some(pyramid)) => {
-                let (corr_fn, logits) = self.geometry_volume(geometry, &pyramid.levels, fmap2, probe);
+                let (corr_fn, logits) = self.geometry_volume(geometry, &pyramid.levels, fmap2, implementation, probe);
                 let start = self.geometry_initial(&logits, pyramid, upsample_initial, probe)?;
                 (corr_fn, start.state.or(initial), start.upsampled)
             }
