@@ -1,7 +1,7 @@
 //! Checks the architecture invariants of ARCHITECTURE.md that the sources can show: which crate
 //! may depend on which, no source files importing each other round a loop, no file over the
-//! size limit, the kernels crate's internals named only inside it, no `anyhow` in a library
-//! crate.
+//! size limit, the binary's crate under its own, the kernels crate's internals named only inside
+//! it, no `anyhow` in a library crate.
 
 use std::path::{Path, PathBuf};
 
@@ -11,6 +11,10 @@ const STAGES: [&str; 6] = ["prior", "fusion", "encoder", "costvolume", "updater"
 
 /// The most lines a source file may have.
 const MAX_LINES: usize = 500;
+
+/// The binary's crate (`crates/cli/src`) has fewer lines than this: it parses flags, calls the
+/// libraries and prints.
+const BINARY_LINES_UNDER: usize = 2_500;
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -198,6 +202,31 @@ fn no_source_file_is_over_the_limit() {
         })
         .collect();
     assert!(long.is_empty(), "files over {MAX_LINES} lines:\n{}", long.join("\n"));
+}
+
+/// **Architecture Invariant:** the binary parses flags, calls the libraries and prints: its crate
+/// stays under [`BINARY_LINES_UNDER`] lines, and what is not flag parsing or printing is a
+/// library's, where the Python package and tests reach it too.
+#[test]
+fn the_binary_crate_is_under_its_limit() {
+    let mut files = Vec::new();
+    rust_files(&root().join("crates/cli/src"), &mut files);
+    assert!(files.len() > 5, "the binary's sources are not where this test looks");
+    let lines: usize =
+        files.iter().map(|path| std::fs::read_to_string(path).map(|t| t.lines().count()).unwrap_or(0)).sum();
+    assert!(
+        lines < BINARY_LINES_UNDER,
+        "crates/cli/src has {lines} lines, the limit is under {BINARY_LINES_UNDER}: move what is not flag parsing \
+         or printing into the library crate it belongs to"
+    );
+}
+
+/// **Architecture Invariant:** the process's stop signals are a crate on `core` alone, so the
+/// trainer takes a stop flag and knows no signals.
+#[test]
+fn the_stop_signals_depend_on_core_alone() {
+    assert_eq!(transitive_dependencies("signals"), ["core"]);
+    assert!(!transitive_dependencies("train").iter().any(|d| d == "signals"), "the trainer knows the signals");
 }
 
 /// The kernels crate's internal modules, which only the kernels crate itself may name.

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use dgstereo_inference::working_size::network_size;
 use dgstereo_inference::{
-    CorrChoice, Engine as LibEngine, EngineConfig, MinSize, PredictOptions, PriorMaps, experiment_configs, parse_prior,
+    CorrChoice, Engine as LibEngine, EngineConfig, MinSize, ModelChoice, PredictOptions, PriorMaps,
 };
 use dgstereo_prior::PriorConfig;
 use pyo3::prelude::*;
@@ -68,18 +68,10 @@ impl Engine {
     ) -> PyResult<Self> {
         let device = device.parse().map_err(|e: dgstereo_core::Error| input(format!("`device`: {e}")))?;
         let precision = precision.parse().map_err(|e| input(format!("`precision`: {e}")))?;
-        let explicit_prior = prior.as_deref().map(|p| parse_prior(p).map_err(|e| input(e.to_string()))).transpose()?;
-        let (model, experiment_prior) = match &experiment {
-            Some(path) => {
-                let (m, p) = from_library(experiment_configs(path, run.as_deref()), Kind::Input)?;
-                (Some(m), p)
-            }
-            None if run.is_some() => return Err(input("`run` names a run of an experiment: give `experiment` too")),
-            None => (None, PriorConfig::None {}),
-        };
+        let choice = ModelChoice { experiment, run, prior, prior_weights: None };
+        let (model, prior) = from_library(choice.configs(), Kind::Input)?;
         // Names of official checkpoints become files (fetched on first use, without progress
         // bars); the environment sets the cache, the servers, offline mode and the timeout.
-        let prior = explicit_prior.unwrap_or(experiment_prior);
         let (weights, prior) = from_library(py.detach(|| guarded(|| resolve_names(weights, prior))), Kind::Error)?;
         let config = EngineConfig { weights, model, prior, device, precision, slow_fast_gru, bundled_assets };
         let inner = py.detach(|| guarded(|| LibEngine::load_with_given_priors(&config)));
@@ -143,9 +135,7 @@ impl Engine {
         let result = py.detach(|| {
             guarded(|| {
                 let exported = dgstereo_export::export_onnx(engine.stereo_model(), height, width, iters)?;
-                let tmp = path.with_extension("onnx.tmp");
-                std::fs::write(&tmp, &exported.bytes).map_err(|e| dgstereo_core::Error::io(&tmp, e))?;
-                dgstereo_core::atomic_file::commit_file(&tmp, &path)?;
+                exported.write(&path)?;
                 Ok(exported)
             })
         });

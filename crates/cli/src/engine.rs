@@ -15,12 +15,10 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
 use clap::Args;
 use dgstereo_core::DeviceChoice;
 use dgstereo_core::device::Precision;
-use dgstereo_inference::{CorrChoice, Engine, EngineConfig, MinSize, PredictOptions, experiment_configs, parse_prior};
-use dgstereo_prior::{DEFAULT_INPUT_SIZE, PriorConfig};
+use dgstereo_inference::{CorrChoice, Engine, EngineConfig, MinSize, ModelChoice, PredictOptions, parse_byte_size};
 
 /// The threshold of `--lr-check` given without a value, in pixels
 /// ([`dgstereo_inference::consistency::DEFAULT_THRESHOLD`], as clap takes a default).
@@ -112,48 +110,9 @@ pub fn error_line(e: &anyhow::Error) -> String {
     dgstereo_inference::error_chain(e.as_ref()).replace(['\n', '\r'], " ")
 }
 
-/// Parses a byte size: a number with an optional `B`, `KB`/`KiB`, `MB`/`MiB`, `GB`/`GiB`, `TB`/`TiB`.
-pub fn parse_bytes(s: &str) -> anyhow::Result<u64> {
-    let t = s.trim();
-    let split = t.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(t.len());
-    let (num, unit) = t.split_at(split);
-    let value: f64 = num.parse().with_context(|| format!("--memory-budget '{s}': not a size like 4GiB"))?;
-    let mult: f64 = match unit.trim().to_ascii_lowercase().as_str() {
-        "" | "b" => 1.0,
-        "k" | "kb" => 1e3,
-        "kib" => 1024.0,
-        "m" | "mb" => 1e6,
-        "mib" => 1024f64.powi(2),
-        "g" | "gb" => 1e9,
-        "gib" => 1024f64.powi(3),
-        "t" | "tb" => 1e12,
-        "tib" => 1024f64.powi(4),
-        other => bail!("--memory-budget '{s}': unknown unit '{other}' (use B, MiB, GiB, ...)"),
-    };
-    Ok((value * mult) as u64)
-}
-
-/// `--prior-weights`: the experiment's Depth Anything V2 prior (kept inside a cache) with these
-/// weights, or a plain Depth Anything V2 prior when the experiment names none.
-fn with_prior_weights(config: PriorConfig, weights: &std::path::Path) -> PriorConfig {
-    match config {
-        PriorConfig::DepthAnythingV2 { encoder, input_size, .. } => {
-            PriorConfig::DepthAnythingV2 { weights: weights.to_path_buf(), encoder, input_size }
-        }
-        PriorConfig::Cache { dir, inner } => {
-            PriorConfig::Cache { dir, inner: Box::new(with_prior_weights(*inner, weights)) }
-        }
-        _ => PriorConfig::DepthAnythingV2 {
-            weights: weights.to_path_buf(),
-            encoder: None,
-            input_size: DEFAULT_INPUT_SIZE,
-        },
-    }
-}
-
 /// The option fields the library's errors name, and the flags that set them, written out one
 /// by one (a flag is not always its field's name: `run` is set by `--run NAME`).
-const FLAGS: [(&str, &str); 11] = [
+const FLAGS: [(&str, &str); 14] = [
     ("iters", "--iters"),
     ("run", "--run NAME"),
     ("max_size", "--max-size"),
@@ -165,6 +124,9 @@ const FLAGS: [(&str, &str); 11] = [
     ("prior", "--prior"),
     ("device", "--device"),
     ("precision", "--precision"),
+    ("calib_crop", "--calib-crop X,Y"),
+    ("calib_scale", "--calib-scale S"),
+    ("calib", "--calib FILE"),
 ];
 
 /// The flag that sets the option field `field`.
@@ -187,14 +149,22 @@ fn config_field(e: &dgstereo_core::Error) -> Option<(&str, &str)> {
 }
 
 /// A library error on one line as the command line says it: an invalid option names the flag
-/// that sets it (`--min-size: ...`), and every option field quoted in the message is written as
-/// its flag.
+/// that sets it (`--min-size: ...`), also under what was being done (a pair's names), and every
+/// option field quoted in the message is written as its flag.
 pub fn with_flags(e: dgstereo_core::Error) -> anyhow::Error {
-    let line = match config_field(&e).and_then(|(field, reason)| Some((flag(field)?, reason))) {
+    anyhow::anyhow!(flag_line(&e).replace(['\n', '\r'], " "))
+}
+
+/// [`with_flags`]' line: a context stays before the error it wraps.
+fn flag_line(e: &dgstereo_core::Error) -> String {
+    if let dgstereo_core::Error::Context { context, source } = e {
+        return format!("{}: {}", flag_names(context), flag_line(source));
+    }
+    let line = match config_field(e).and_then(|(field, reason)| Some((flag(field)?, reason))) {
         Some((flag, reason)) => format!("{flag}: {reason}"),
-        None => dgstereo_inference::error_chain(&e),
+        None => dgstereo_inference::error_chain(e),
     };
-    anyhow::anyhow!(flag_names(&line).replace(['\n', '\r'], " "))
+    flag_names(&line)
 }
 
 /// The inference crate's [`Engine`] the model flags describe, and the per-pair options they
@@ -211,20 +181,11 @@ pub fn load_engine(a: &ModelArgs) -> anyhow::Result<(Engine, PredictOptions)> {
     };
     // Checked before the weights load.
     options.validate().map_err(with_flags)?;
-    let options = PredictOptions { memory_budget: parse_bytes(&a.memory_budget)?, ..options };
+    let options = PredictOptions { memory_budget: parse_byte_size(&a.memory_budget).map_err(with_flags)?, ..options };
     let device: DeviceChoice = a.device.parse()?;
-    let (model, experiment_prior) = match &a.experiment {
-        Some(p) => {
-            let (m, pr) = experiment_configs(p, a.run.as_deref()).map_err(with_flags)?;
-            (Some(m), pr)
-        }
-        None => (None, PriorConfig::None {}),
-    };
-    let prior = match (&a.prior, &a.prior_weights) {
-        (Some(spec), _) => parse_prior(spec).map_err(with_flags)?,
-        (None, Some(w)) => with_prior_weights(experiment_prior, w),
-        (None, None) => experiment_prior,
-    };
+    let (experiment, run) = (a.experiment.clone(), a.run.clone());
+    let choice = ModelChoice { experiment, run, prior: a.prior.clone(), prior_weights: a.prior_weights.clone() };
+    let (model, prior) = choice.configs().map_err(with_flags)?;
     // Names of official checkpoints become files (fetched on first use).
     let weights =
         a.weights.as_deref().map(|w| crate::fetching::stereo(w, "weights")).transpose().map_err(with_flags)?;
@@ -251,23 +212,9 @@ pub fn load_engine(a: &ModelArgs) -> anyhow::Result<(Engine, PredictOptions)> {
     Ok((engine, options))
 }
 
-/// The model configuration on one line, with the iterations and where the configuration came
-/// from.
-pub fn describe(engine: &Engine, options: &PredictOptions) -> String {
-    format!("{}, {} iterations ({})", engine.configuration_summary(), options.iters, engine.configuration_source())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn byte_sizes_parse_with_units() {
-        assert_eq!(parse_bytes("4GiB").unwrap(), 4 << 30);
-        assert_eq!(parse_bytes("512 MiB").unwrap(), 512 << 20);
-        assert_eq!(parse_bytes("1.5kb").unwrap(), 1500);
-        assert!(parse_bytes("lots").is_err() && parse_bytes("3 parsecs").is_err());
-    }
 
     #[test]
     fn error_lines_do_not_repeat_causes() {
@@ -284,12 +231,14 @@ mod tests {
         assert_eq!(with_flags(e).to_string(), "--iters: must be at least 1");
         assert_eq!(flag_names("the depth prior runs in f32 only"), "the depth prior runs in f32 only");
         assert_eq!(flag("run"), Some("--run NAME"));
+        let e = dgstereo_core::Error::config("max_size", "must be at least 32").context("a.png + b.png");
+        assert_eq!(with_flags(e).to_string(), "a.png + b.png: --max-size: must be at least 32");
         assert_eq!(DEFAULT_LR_CHECK.parse::<f32>().unwrap(), dgstereo_inference::consistency::DEFAULT_THRESHOLD);
     }
 
     #[test]
     fn prior_specs_parse() {
-        let e = with_flags(parse_prior("magic").unwrap_err()).to_string();
+        let e = with_flags(dgstereo_inference::parse_prior("magic").unwrap_err()).to_string();
         assert!(e.starts_with("--prior: 'magic': expected none"), "{e}");
     }
 }

@@ -1,20 +1,18 @@
-//! The `dgstereo` command-line tool: a thin layer over the library crates.
+//! The `dgstereo` command-line tool: it parses flags, calls the library crates and prints.
 //!
 //! Each subcommand lives in `commands/`; what running a model involves is the inference crate's
-//! ([`dgstereo_inference`]), the binary keeps argument parsing, file reading and writing, and printing; errors are reported as one line naming the file and
-//! the problem, with a non-zero exit status, never a panic message.
+//! ([`dgstereo_inference`]: the engine, the pairs' files and outputs, the timing), the pairs a
+//! user names and the pictures are the data crate's, the stop signals the signals crate's. Errors
+//! are reported as one line naming the file and the problem, with a non-zero exit status, never a
+//! panic message.
 
 mod commands;
 mod engine;
 mod fetching;
-mod inputs;
 mod measurement;
-mod outputs;
 mod sigpipe;
-mod stop_signals;
 mod train_progress;
 mod training;
-mod visualize;
 
 use std::process::ExitCode;
 

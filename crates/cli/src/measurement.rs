@@ -1,15 +1,12 @@
 //! What the timing commands share (`bench`, `bench --train`, `export`'s sizes): the flags of
-//! `bench`, sizes given as `HxW`, the machine line every timing prints, medians, the peak
-//! memory, and model configurations read for timing. A module of its own, so that no command
-//! module imports another.
+//! `bench` and sizes given as `HxW`. A module of its own, so that no command module imports
+//! another; the machine line, medians and the peak memory are the libraries'
+//! ([`dgstereo_kernels::machine_line`], [`dgstereo_core::timing`]).
 
 use anyhow::Context;
 use clap::Args;
 use dgstereo_core::device::Precision;
 use dgstereo_inference::cost_volume::CorrChoice;
-use dgstereo_model::ModelConfig;
-
-use crate::engine::with_flags;
 
 /// Options of `dgstereo bench`.
 #[derive(Args)]
@@ -95,81 +92,9 @@ pub fn parse_size(s: &str) -> anyhow::Result<[usize; 2]> {
     Ok([parse(h, "height")?, parse(w, "width")?])
 }
 
-/// Peak resident memory of this process in bytes (`VmHWM`), when the OS reports it.
-pub fn peak_memory_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
-}
-
-/// The processor's name from the first `model name` line of a `/proc/cpuinfo` text.
-fn cpu_model_name(cpuinfo: &str) -> Option<&str> {
-    let line = cpuinfo.lines().find(|l| l.starts_with("model name"))?;
-    Some(line.split_once(':')?.1.trim()).filter(|name| !name.is_empty())
-}
-
-/// The widest vector instructions the matrix products use on this CPU: the `gemm` crate picks
-/// its AVX-512 kernels where the CPU has them (its `x86-v4` feature), else its AVX2/FMA ones,
-/// else scalar code; on other architectures, the architecture's name.
-fn vector_level() -> &'static str {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            "AVX-512"
-        } else if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-            "AVX2+FMA"
-        } else {
-            "x86-64 without AVX2"
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        std::env::consts::ARCH
-    }
-}
-
-/// One line naming the machine, so that timings from different machines are not compared by
-/// mistake: the processor (Linux), the vector level of the products and the unit of bf16
-/// products (AMX tiles or AVX512-BF16).
-pub fn machine_line() -> String {
-    let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-    let bf16 = dgstereo_kernels::bf16_unit().map_or("no bf16 unit".into(), |unit| format!("bf16 on {unit}"));
-    format!("machine: {}, {}, {bf16}", cpu_model_name(&cpuinfo).unwrap_or("processor not reported"), vector_level())
-}
-
-/// The median of `v` (sorted in place; the mean of the middle two for an even count).
-pub fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 { v[m] } else { 0.5 * (v[m - 1] + v[m]) }
-}
-
-/// `--config`: a `ModelConfig` TOML, or the `[model]` of an experiment file or model card.
-pub fn model_config(path: &std::path::Path) -> anyhow::Result<ModelConfig> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let table: toml::Table = toml::from_str(&text).with_context(|| format!("{}: not TOML", path.display()))?;
-    if table.contains_key("model") || table.contains_key("base") {
-        let (model, _) = dgstereo_inference::experiment_configs(path, None).map_err(with_flags)?;
-        return Ok(model);
-    }
-    toml::from_str::<ModelConfig>(&text).with_context(|| {
-        format!("{}: neither a model configuration nor an experiment file with a [model] table", path.display())
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_processor_is_named_from_cpuinfo() {
-        let cpuinfo = "processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R) Xeon(R) Processor @ 2.50GHz\n\nprocessor\t: 1\nmodel name\t: other\n";
-        assert_eq!(cpu_model_name(cpuinfo), Some("Intel(R) Xeon(R) Processor @ 2.50GHz"));
-        assert_eq!(cpu_model_name("processor\t: 0\n"), None);
-        assert_eq!(cpu_model_name("model name\t:   \n"), None);
-        assert!(machine_line().starts_with("machine: "));
-    }
 
     #[test]
     fn sizes_parse_and_bad_ones_are_named() {
@@ -178,27 +103,6 @@ mod tests {
         for bad in ["375", "0x10", "ax10", "10x"] {
             let e = parse_size(bad).unwrap_err().to_string();
             assert!(e.contains(bad), "{e}");
-        }
-    }
-
-    #[test]
-    fn median_of_even_and_odd_counts() {
-        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
-        assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), 2.5);
-    }
-
-    #[test]
-    fn peak_memory_and_cpu_time_are_read_on_linux() {
-        use dgstereo_core::timing::process_cpu_seconds;
-        if cfg!(all(target_os = "linux", target_env = "gnu")) {
-            assert!(peak_memory_bytes().unwrap() > 0);
-            let before = process_cpu_seconds().unwrap();
-            let mut x = 0u64;
-            for i in 0..50_000_000u64 {
-                x = x.wrapping_mul(6364136223846793005).wrapping_add(i);
-            }
-            std::hint::black_box(x);
-            assert!(process_cpu_seconds().unwrap() >= before);
         }
     }
 }

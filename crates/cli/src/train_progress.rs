@@ -7,7 +7,7 @@ use std::sync::Arc;
 use dgstereo_train::{Progress, ProgressObserver};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::stop_signals::RunPosition;
+use dgstereo_signals::RunPosition;
 
 /// The observer of one run: draws its bar when `show`, and keeps `position` either way.
 pub fn observer(show: bool, position: Arc<RunPosition>) -> ProgressObserver {

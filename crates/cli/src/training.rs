@@ -1,5 +1,6 @@
 //! Training one run from the command line: the trainer's loop with the binary's progress bar,
-//! its stop signals and what it prints when a run ends; `train` and `ablate` both train this way.
+//! its stop signals ([`dgstereo_signals`], said on standard error) and what it prints when a run
+//! ends; `train` and `ablate` both train this way.
 
 use std::path::Path;
 
@@ -7,7 +8,22 @@ use anyhow::Context;
 use dgstereo_collective::Collective;
 use dgstereo_train::{RunOptions, TrainParts};
 
-use crate::stop_signals::StopSignals;
+use dgstereo_signals::{SignalEvent, StopSignals};
+
+/// Receives SIGINT, SIGTERM and SIGUSR1: the first stops the run after its step, a second one (a
+/// second or more later) ends the process at once, saying what that drops.
+pub fn stop_signals() -> anyhow::Result<StopSignals> {
+    Ok(StopSignals::install(|event| match event {
+        SignalEvent::Stopping { signal } => eprintln!(
+            "{signal}: stopping after the current step, with a checkpoint \
+             (a second signal, a second or more from now, stops at once)"
+        ),
+        SignalEvent::StopNow { signal, dropped, status } => {
+            eprintln!("{signal} again: stopped at once; {dropped}");
+            std::process::exit(*status);
+        }
+    })?)
+}
 
 /// How the runs of one command train: where, whether with a progress bar, what stops them and
 /// how the command continues a stopped run.

@@ -7,7 +7,9 @@
 //! backend queues operations and returns at once, so a clock made with [`StageClock::synced`]
 //! waits for the device before and after each stage: slower, but each stage's time is its own.
 //! A clock given a meter ([`StageClock::metered`], e.g. the kernels' operation count) also
-//! attributes to each stage what the meter advanced over its spans.
+//! attributes to each stage what the meter advanced over its spans. Beside the clock, what a
+//! timing of whole runs reads of its process ([`process_cpu_seconds`], [`peak_memory_bytes`])
+//! and how it summarises its runs ([`median`]).
 
 use std::time::Instant;
 
@@ -107,6 +109,26 @@ pub fn process_cpu_seconds() -> Option<f64> {
     }
 }
 
+/// Peak resident memory of this process in bytes (`VmHWM` of `/proc/self/status`), where the
+/// system reports it (Linux).
+pub fn peak_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// The median of `v` (sorted in place; the mean of the middle two for an even count; NaN for
+/// none).
+pub fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 { v[m] } else { 0.5 * (v[m - 1] + v[m]) }
+}
+
 /// Runs `f` under `clock` as stage `name` if there is a clock, else just runs it.
 pub fn timed<T>(clock: &mut Option<&mut StageClock>, name: &'static str, f: impl FnOnce() -> T) -> T {
     match clock.as_deref_mut() {
@@ -171,5 +193,26 @@ mod tests {
         let t = clock.time("ones", || burn::tensor::Tensor::<2>::ones([64, 64], &device).sum());
         assert_eq!(crate::tensor::to_vec(t.reshape([1]))[0], 4096.0);
         assert_eq!(clock.stages()[0].calls, 1);
+    }
+
+    #[test]
+    fn median_of_even_odd_and_no_counts() {
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert!(median(&mut []).is_nan());
+    }
+
+    #[test]
+    fn peak_memory_and_cpu_time_are_read_on_linux() {
+        if cfg!(all(target_os = "linux", target_env = "gnu")) {
+            assert!(peak_memory_bytes().unwrap() > 0);
+            let before = process_cpu_seconds().unwrap();
+            let mut x = 0u64;
+            for i in 0..50_000_000u64 {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(i);
+            }
+            std::hint::black_box(x);
+            assert!(process_cpu_seconds().unwrap() >= before);
+        }
     }
 }

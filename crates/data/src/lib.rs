@@ -11,7 +11,8 @@
 //! The [`synthetic`] generator renders exact stereo scenes by ray casting disparity-linear
 //! surfaces, and [`mod@augment`] reproduces the dense FlowAugmentor, resizing disparity both
 //! bilinearly and by nearest neighbour, and the sparse one ([`augment_sparse`]) that moves the
-//! valid points of real ground truth instead.
+//! valid points of real ground truth instead. [`visualize`] draws disparity maps as pictures (the
+//! turbo colour map with a legend, error images, panels side by side).
 #![deny(missing_docs)]
 
 pub mod augment;
@@ -26,6 +27,7 @@ pub mod pfm;
 pub mod resize;
 pub mod synthetic;
 pub mod text;
+pub mod visualize;
 
 pub use augment::{AugmentConfig, AugmentedSample, augment, augment_sparse};
 pub use datasets::{Dataset, FileDataset, Sample, SampleFiles, SyntheticDataset, ValidRule};

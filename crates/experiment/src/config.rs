@@ -53,6 +53,22 @@ pub struct ExperimentConfig {
 }
 
 impl ExperimentConfig {
+    /// Every section's default (RAFT-Stereo without a prior, its sequence loss and recipe, the
+    /// synthetic data) under the run name `name`: what an experiment file with only a name gives.
+    pub fn named(name: impl Into<String>) -> Self {
+        Self {
+            name: name.into(),
+            description: None,
+            model: ModelConfig::default(),
+            prior: PriorConfig::default(),
+            loss: LossConfig::default(),
+            train: TrainingConfig::default(),
+            data: TrainingDataConfig::default(),
+            benchmarks: Vec::new(),
+            launcher: crate::launcher::LauncherConfig::default(),
+        }
+    }
+
     /// The configuration as a complete TOML file (every key, defaults included); loading it as an
     /// experiment file gives this configuration back.
     pub fn to_toml(&self) -> String {
@@ -154,4 +170,15 @@ fn name_problems(name: &str) -> Vec<Problem> {
         return Vec::new();
     };
     vec![Problem::new("name", reason)]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_named_defaults_are_a_file_with_only_a_name() {
+        let parsed: ExperimentConfig = toml::from_str("name = \"only\"").unwrap();
+        assert_eq!(ExperimentConfig::named("only"), parsed);
+    }
 }

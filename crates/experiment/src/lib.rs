@@ -108,6 +108,14 @@ pub fn load(path: &Path) -> dgstereo_core::Result<Vec<ResolvedRun>> {
     Ok(resolved)
 }
 
+/// The first run of an experiment file ([`load`]): its only run, or a sweep's first.
+///
+/// # Errors
+/// As [`load`]; a file that defines no run ([`dgstereo_core::Error::Format`], naming it).
+pub fn load_first(path: &Path) -> dgstereo_core::Result<ResolvedRun> {
+    load(path)?.into_iter().next().ok_or_else(|| dgstereo_core::Error::format(path, "the file defines no run"))
+}
+
 /// [`load`] for each file, in order, all runs concatenated.
 ///
 /// # Errors
@@ -118,4 +126,21 @@ pub fn load_all(paths: &[PathBuf]) -> dgstereo_core::Result<Vec<ResolvedRun>> {
         runs.extend(load(path)?);
     }
     Ok(runs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_first_run_of_a_file_is_its_only_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("only.toml");
+        std::fs::write(&path, "name = \"only\"\n").unwrap();
+        let run = load_first(&path).unwrap();
+        assert_eq!((run.name.as_str(), run.source.as_path()), ("only", path.as_path()));
+        assert_eq!(run.config.train, TrainingConfig::default());
+        let missing = dir.path().join("missing.toml");
+        assert!(load_first(&missing).unwrap_err().to_string().contains("missing.toml"));
+    }
 }

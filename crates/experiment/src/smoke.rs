@@ -26,6 +26,21 @@ pub struct SmokeReport {
     pub max_abs_disparity: f32,
 }
 
+impl SmokeReport {
+    /// The parameter count as people write it: `11,116,176 (11.12 M)`.
+    pub fn parameters_text(&self) -> String {
+        let digits = self.parameters.to_string();
+        let mut grouped = String::new();
+        for (i, c) in digits.chars().enumerate() {
+            if i > 0 && (digits.len() - i).is_multiple_of(3) {
+                grouped.push(',');
+            }
+            grouped.push(c);
+        }
+        format!("{grouped} ({:.2} M)", self.parameters as f64 / 1e6)
+    }
+}
+
 /// Counts the trainable parameters of a module: every float parameter except frozen BatchNorm
 /// statistics (`running_mean`, `running_var`), which is how the reference counts RAFT-Stereo's
 /// 11.12 M.
@@ -129,4 +144,17 @@ pub fn smoke_test(config: &ExperimentConfig, size: [usize; 2], iters: usize, dev
             .unwrap_or_else(|| "unknown panic".into());
         Err(Error::Internal(format!("the forward pass panicked: {message}")))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parameter_counts_are_grouped_by_thousands() {
+        let report = |parameters| SmokeReport { parameters, iterations: 1, max_abs_disparity: 0.0 };
+        assert_eq!(report(11_116_176).parameters_text(), "11,116,176 (11.12 M)");
+        assert_eq!(report(999).parameters_text(), "999 (0.00 M)");
+        assert_eq!(report(1_000).parameters_text(), "1,000 (0.00 M)");
+    }
 }

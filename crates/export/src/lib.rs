@@ -34,6 +34,19 @@ pub struct OnnxExport {
     pub nodes: usize,
 }
 
+impl OnnxExport {
+    /// Writes the file to `path` whole or not at all: a temporary file beside it, then renamed
+    /// over it ([`dgstereo_core::atomic_file::commit_file`]).
+    ///
+    /// # Errors
+    /// A file that cannot be written ([`Error::Io`], naming it).
+    pub fn write(&self, path: &std::path::Path) -> Result<()> {
+        let tmp = path.with_extension("onnx.tmp");
+        std::fs::write(&tmp, &self.bytes).map_err(|e| Error::io(&tmp, e))?;
+        dgstereo_core::atomic_file::commit_file(&tmp, path)
+    }
+}
+
 /// The ONNX model of `model` for pairs of `height x width` (RGB 0..255), `iters` update
 /// iterations unrolled: inputs `left`, `right` (`1x3xHxW`, and `left_prior`, `right_prior`
 /// `1x1xHxW` for a model with a depth prior), output `disparity` (`1x1xHxW`, positive; the

@@ -245,6 +245,11 @@ impl Engine {
         &self.source
     }
 
+    /// The configuration on one line with the iterations of `options` and where it came from.
+    pub fn describe(&self, options: &PredictOptions) -> String {
+        format!("{}, {} iterations ({})", self.configuration_summary(), options.iters, self.source)
+    }
+
     /// What loading chose on the caller's behalf and the caller may want to tell the user (a
     /// fallback to reference weights, a prior the model does not use).
     pub fn notes(&self) -> &[String] {

@@ -23,8 +23,11 @@
 //! Beside the engine: [`working_size`] (the min/max size policy), [`cost_volume`] (materialised
 //! or on-the-fly volume within a memory budget), [`consistency`] (the left-right check),
 //! [`calibration`] (one [`Calibration`] from Middlebury, JSON or `K.txt` files), [`pointcloud`]
-//! (depth, coloured point clouds, PLY) and [`weights`] (bundled assets, default weights,
-//! loading a checkpoint).
+//! (depth, coloured point clouds, PLY), [`outputs`] (the files written for a pair, one
+//! [`outputs::SaveKind`] a file), [`pair_files`] (one pair from its files to its outputs, its
+//! failure its own), [`timing`] (whole inference timed as a user waits for it), [`specs`] (what
+//! front ends read from their users' words alike) and [`weights`] (bundled assets, default
+//! weights, loading a checkpoint).
 
 #![deny(missing_docs)]
 
@@ -34,9 +37,12 @@ pub mod convert;
 pub mod cost_volume;
 mod engine;
 pub mod options;
+pub mod outputs;
+pub mod pair_files;
 pub mod pointcloud;
 mod prior_maps;
 pub mod specs;
+pub mod timing;
 pub mod weights;
 pub mod working_size;
 
@@ -46,5 +52,7 @@ pub use dgstereo_data::{DisparityMap, Mask, RgbImage};
 pub use engine::{Engine, Prediction, PriorMaps, RunInfo, check_same_size};
 pub use options::{EngineConfig, PredictOptions};
 pub use pointcloud::{PlyEncoding, PointCloud};
-pub use specs::{error_chain, experiment_configs, parse_prior};
+pub use specs::{
+    ModelChoice, error_chain, experiment_configs, model_config_file, parse_byte_size, parse_prior, prior_with_weights,
+};
 pub use working_size::MinSize;

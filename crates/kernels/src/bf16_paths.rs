@@ -1,7 +1,7 @@
 //! The operations whose products take bf16 in CPU inference ([`crate::ProductPrecision::Bf16`]),
 //! each against burn's f32 operation with a bf16 tolerance: the convolution on every host
-//! algorithm, the ConvGRU step (shared Winograd transforms and separate convolutions) and the
-//! correlation volume. Where the processor has no bf16 unit they compare f32 with f32 and say so.
+//! algorithm, the ConvGRU step (shared Winograd transforms and separate convolutions), the
+//! correlation volume and the linear layer (the ViT's projections). Where the processor has no bf16 unit they compare f32 with f32 and say so.
 
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
@@ -10,7 +10,7 @@ use burn::tensor::{Device, Distribution, Tensor};
 use dgstereo_core::tensor::max_abs_diff;
 
 use crate::algorithm::{ConvAlgorithm, GruAlgorithm};
-use crate::dispatch::{Call, ConvCall, GruStepCall, Numerics, Path, ProductPrecision, with_path, with_products};
+use crate::dispatch::{Call, ConvCall, GruStepCall, Numerics, Path, Plan, ProductPrecision, with_path, with_products};
 use crate::ops::conv::conv_options;
 use crate::settings::settings;
 use crate::{CorrelationPyramid, all_pairs, conv_gru_step, conv2d_forward};
@@ -140,4 +140,30 @@ fn the_correlation_with_bf16_products_meets_burns_f32() {
     let error = max_abs_diff(expected, got) / magnitude;
     eprintln!("correlation: error {error:.2e} of the largest sum of |products|");
     assert!(error < BOUND, "{error}");
+}
+
+/// A linear layer with bf16 products against burn's f32 layer: rows over several blocks (the
+/// last one short), a depth and a width off the packing's steps, with a bias. In f32 the layer
+/// is burn's own.
+#[test]
+fn linear_layers_with_bf16_products_meet_burns_f32() {
+    let present = unit_present("linear");
+    let device = Device::flex();
+    let (b, n, d_in, d_out) = (2, 301, 72, 100);
+    let linear = burn::nn::LinearConfig::new(d_in, d_out).init(&device);
+    let x = Tensor::<3>::random([b, n, d_in], Distribution::Normal(0.0, 1.0), &device);
+    let planned = |precision| with_products(precision, || crate::dispatch::plan(&device, &crate::dispatch::LinearCall));
+    assert!(matches!(planned(ProductPrecision::F32), Plan::Stock), "f32 keeps burn's layer");
+    assert_eq!(matches!(planned(ProductPrecision::Bf16), Plan::HostInference(_)), present);
+    let got =
+        with_path(Path::Host, || with_products(ProductPrecision::Bf16, || crate::linear_forward(&linear, x.clone())));
+    let expected = linear.forward(x.clone());
+    let magnitude = x.abs().matmul(linear.weight.val().abs().unsqueeze()).max().into_scalar::<f32>()
+        + linear.bias.as_ref().map_or(0.0, |b| b.val().abs().max().into_scalar::<f32>());
+    let error = max_abs_diff(expected, got) / magnitude;
+    eprintln!("linear: error {error:.2e} of the largest sum of |products|");
+    assert!(error < BOUND, "{error}");
+    if present {
+        assert!(error > 0.0, "the bf16 products round their inputs");
+    }
 }

@@ -23,7 +23,9 @@ mod calls;
 mod conv;
 mod product_forms;
 
-pub(crate) use calls::{ADD_RELU, AllPairsCall, DeformCall, NodeCall, NormCall, NormKind, PlainCall, RECTIFY};
+pub(crate) use calls::{
+    ADD_RELU, AllPairsCall, DeformCall, LinearCall, NodeCall, NormCall, NormKind, PlainCall, RECTIFY,
+};
 pub(crate) use conv::{ConvCall, GruStepCall, host_algorithm};
 #[cfg(test)]
 pub(crate) use conv::{TRAINING_WINOGRAD_MIN_CHANNELS, training_algorithms, winograd_tile};
@@ -70,6 +72,9 @@ pub enum Op {
     GruStep,
     /// Convex upsampling.
     Upsample,
+    /// A linear layer's product over the last axis (the ViT's projections): a host kernel only
+    /// for bf16 products, burn's matrix product otherwise.
+    Linear,
 }
 
 impl Op {
@@ -84,7 +89,8 @@ impl Op {
             | Self::Lookup
             | Self::Deform
             | Self::GruStep
-            | Self::Upsample => true,
+            | Self::Upsample
+            | Self::Linear => true,
         }
     }
 
@@ -101,7 +107,7 @@ impl Op {
             Self::Resize => Some(GpuRoute::Interpolate),
             Self::Lookup => Some(GpuRoute::GatheredLookup),
             Self::GruStep => Some(GpuRoute::SharedColumns),
-            Self::Norm | Self::Pool | Self::Deform | Self::Upsample => None,
+            Self::Norm | Self::Pool | Self::Deform | Self::Upsample | Self::Linear => None,
         }
     }
 }

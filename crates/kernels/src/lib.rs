@@ -11,6 +11,7 @@
 //! the reference every other path is tested against on every path ([`test_paths!`]). The layers
 //! point one way: the face (`ops`) asks `dispatch` and calls `host`, `gpu` or `autodiff`, which
 //! share `geometry`, `product` and `taps`; none of those three is visible outside this crate.
+//! [`machine_line`] names the machine and the products it takes, for every timing to print.
 #![deny(missing_docs)]
 
 mod algorithm;
@@ -23,6 +24,7 @@ pub mod dispatch;
 mod geometry;
 mod gpu;
 mod host;
+mod machine;
 mod ops;
 mod product;
 pub mod settings;
@@ -36,12 +38,14 @@ pub use dispatch::{
     Numerics, Op, Path, ProductPrecision, bf16_unit, path, product_precision, with_path, with_products,
 };
 pub use host::winograd::UpdateLoop;
+pub use machine::machine_line;
 pub use ops::conv::{
     conv_options, conv2d_affine, conv2d_forward, conv2d_forward_then, conv2d_op, conv2d_op_then, conv2d_relu_forward,
     flat_pixels,
 };
 pub use ops::deform::deform_conv2d_forward;
 pub use ops::gru::conv_gru_step;
+pub use ops::linear::linear_forward;
 pub use ops::lookup::{CorrelationPyramid, OnTheFlyCorrelation, all_pairs};
 pub use ops::norm::{Normalization, add_relu, affine_planes, normalize_planes, rectify};
 pub use ops::resample::{average_pool_half, linear_matrix, linear_weights, resize_bilinear};

@@ -4,8 +4,8 @@
 //! face operations themselves, not by a second description of the network that could drift from
 //! it: each operation that multiplies and accumulates (the convolutions, the deformable
 //! convolution, the ConvGRU step, the correlation's matrix product and its on-the-fly dot
-//! products, the convex combination of the upsampling) opens an [`Operation`] with its count as
-//! its first line. A count is the operation's defining arithmetic, the same on every path (a
+//! products, the convex combination of the upsampling, the linear layers) opens an
+//! [`Operation`] with its count as its first line. A count is the operation's defining arithmetic, the same on every path (a
 //! direct convolution's `N·O·(C/groups)·kh·kw·H_out·W_out`, whether the host kernel computes it
 //! by Winograd's algorithm or the GPU by a matrix product), so "achieved GFLOP/s" (2 FLOP per
 //! MAC) compares directly with a machine's peak. Element-wise and memory-bound operations (norms,
@@ -117,6 +117,11 @@ pub(crate) fn conv_module_macs(conv: &Conv2d, x: [usize; 4]) -> u64 {
         }
     };
     conv_macs(x, weight, &ConvOptions::new_with_padding(conv.stride, padding, conv.dilation, conv.groups))
+}
+
+/// MACs of a linear layer of weight `[d_in, d_out]` over `rows` rows.
+pub(crate) fn linear_macs(rows: usize, [d_in, d_out]: [usize; 2]) -> u64 {
+    (rows * d_in) as u64 * d_out as u64
 }
 
 /// MACs of a ConvGRU step on a state of dims `h`: its convolutions' (`[h, x]` in, the state's

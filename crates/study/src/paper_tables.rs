@@ -108,6 +108,18 @@ pub const GENERALISATION_COLUMNS: [PaperColumn; 14] = [
     rate(PaperBenchmark::Eth3d),
 ];
 
+/// The run names of the ablation tables' rows, each once, in the tables' order: the runs a
+/// study names to fill them.
+pub fn paper_run_names() -> Vec<&'static str> {
+    let mut names: Vec<&'static str> = Vec::new();
+    for row in PAPER_TABLES.iter().flat_map(|t| t.rows) {
+        if !names.contains(&row.run) {
+            names.push(row.run);
+        }
+    }
+    names
+}
+
 /// The paper's four ablation tables, in its order.
 pub const PAPER_TABLES: [PaperTable; 4] = [
     PaperTable {
@@ -183,3 +195,16 @@ pub const PAPER_TABLES: [PaperTable; 4] = [
         ],
     },
 ];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_run_name_is_listed_once_in_table_order() {
+        let names = paper_run_names();
+        assert_eq!(names[..2], ["baseline", "+dgia"]);
+        assert_eq!(names.iter().filter(|n| **n == "+dgia").count(), 1, "{names:?}");
+        assert_eq!(names.len(), 10, "{names:?}");
+    }
+}

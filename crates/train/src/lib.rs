@@ -56,6 +56,7 @@ pub mod run_log;
 pub mod schedule;
 pub mod start_weights;
 pub mod step_timing;
+pub mod timed_steps;
 pub mod trainer;
 pub mod validate;
 pub mod verify_step;

@@ -58,3 +58,19 @@ fn tiny_model_overfits_one_synthetic_pair() {
     });
     assert_eq!(bn_before, bn_after, "frozen BatchNorm statistics changed during training");
 }
+
+#[test]
+fn timed_steps_report_each_step_and_the_forwards_work() {
+    let device = default_device();
+    let mut trainer = Trainer::new(common::tiny_parts(10, 2, 2e-3, Some(1), 1), &device).unwrap();
+    let batch = dgstereo_train::step_timing::random_batch(1, [32, 64], 8.0, trainer.autodiff_device());
+    let single = dgstereo_collective::SingleProcess;
+    let timing = dgstereo_train::timed_steps::time_steps(&mut trainer, &batch, &single, 1, 2).unwrap();
+    assert_eq!(timing.steps.len(), 2);
+    for (wall, parts) in &timing.steps {
+        assert!(*wall > 0.0 && parts.forward > 0.0 && parts.backward > 0.0, "{timing:?}");
+        assert!(parts.total() <= *wall, "{timing:?}");
+    }
+    assert!(timing.macs > 0);
+    assert_eq!(trainer.completed_steps(), 3, "the warm-up steps too");
+}

@@ -30,14 +30,13 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 use dgstereo_core::DeviceChoice;
 use dgstereo_experiment::ResolvedRun;
-use dgstereo_study::paper_tables::PAPER_TABLES;
+use dgstereo_study::paper_tables::paper_run_names;
 use dgstereo_study::scores::SYNTHETIC;
 use dgstereo_study::slurm::{ArrayJob, Submission};
 use dgstereo_study::task::{Scoring, Training, check_run, score_into_folder, training};
 use dgstereo_study::{Collected, Study, check_distinct_folders, parts_of, run_folder};
 
-use crate::stop_signals::StopSignals;
-use crate::training::{Session, train_one};
+use crate::training::{Session, stop_signals, train_one};
 
 /// Where the runs of a study train.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -110,7 +109,7 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
             }
         }
     }
-    let stop = StopSignals::install()?;
+    let stop = stop_signals()?;
     let runs = dgstereo_experiment::load_all(&a.files)?;
     check_distinct_folders(&runs)?;
     // Everything every run reads, and every run's folder, checked before the first one trains
@@ -134,7 +133,7 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
     for run in &runs {
         if stop.requested() {
             eprintln!("{}: stopped before run '{}'; run the same command again to continue", stop.name(), run.name);
-            return Ok(stop.exit_code());
+            return Ok(ExitCode::from(stop.exit_status()));
         }
         let status = train_and_score(run, &a, &stop)?;
         if status != ExitCode::SUCCESS {
@@ -147,7 +146,11 @@ pub fn run(a: AblateArgs) -> anyhow::Result<ExitCode> {
 
 /// Trains (or reuses, or resumes) one run into its folder and stores its scores there; a run
 /// stopped by a signal returns the signal's status.
-fn train_and_score(run: &ResolvedRun, a: &AblateArgs, stop: &StopSignals) -> anyhow::Result<ExitCode> {
+fn train_and_score(
+    run: &ResolvedRun,
+    a: &AblateArgs,
+    stop: &dgstereo_signals::StopSignals,
+) -> anyhow::Result<ExitCode> {
     let device = a.device.device()?;
     let session = Session {
         device: &device,
@@ -168,7 +171,7 @@ fn train_and_score(run: &ResolvedRun, a: &AblateArgs, stop: &StopSignals) -> any
         }
         Training::Train { resume } => {
             if train_one(parts.clone(), &out, resume, &session)?.stopped {
-                return Ok(stop.exit_code());
+                return Ok(ExitCode::from(stop.exit_status()));
             }
         }
     }
@@ -249,12 +252,7 @@ fn show_collected(collected: &Collected, study: &Study, out: &std::path::Path) -
             numbers.join(",")
         );
     } else if study.paper {
-        let mut names: Vec<&str> = Vec::new();
-        for row in PAPER_TABLES.iter().flat_map(|t| t.rows) {
-            if !names.contains(&row.run) {
-                names.push(row.run);
-            }
-        }
+        let names = paper_run_names();
         println!(
             "--paper: no row of this study is one of the paper's (its rows are the runs named {}, and the runs of \
              Table 1's models: RAFT-Stereo, DEFOM-Stereo, the paper's model), so there is nothing to set beside \

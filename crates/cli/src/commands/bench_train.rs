@@ -1,29 +1,26 @@
-//! `dgstereo bench --train`: timing of whole training steps.
-//!
-//! Design decision: a step is timed through [`Trainer::step_on`], the call `dgstereo train`
-//! makes (forward with every iteration, the experiment's loss, backward, clipping, AdamW and the
-//! one-cycle schedule), on a batch of random pairs of the requested size, so the figure is what a
-//! training run pays per step without its data loading; the split comes from the trainer's own
-//! clock ([`Trainer::last_step_seconds`]). The operation count is three times the forward's, as
-//! its operations counted it in the step ([`dgstereo_kernels::count_work`]; the backward's
-//! products are twice the forward's), an estimate. `--stages` runs each stage
-//! alone as well ([`dgstereo_model::stage_backward`]), since one backward pass cannot be split by
-//! stage. Under `mpirun` (a build with the `mpi` feature) `--batch` is the global batch, each
-//! rank steps on its part ([`Trainer::step_on_among`]), and the gradient exchange's seconds,
-//! bytes and share of the step are reported.
+//! `dgstereo bench --train`: timing of whole training steps
+//! ([`dgstereo_train::timed_steps::time_steps`]: the call `dgstereo train` makes, on a batch of
+//! random pairs of the requested size, without data loading, split by the trainer's own clock).
+//! The operation count is three times the forward's (the backward's products are twice the
+//! forward's), an estimate. `--stages` runs each stage alone as well
+//! ([`dgstereo_model::stage_backward`]), since one backward pass cannot be split by stage. Under
+//! `mpirun` (a build with the `mpi` feature) `--batch` is the global batch, each rank steps on its
+//! part, and the gradient exchange's seconds, bytes and share of the step are reported.
 
 use std::process::ExitCode;
-use std::time::Instant;
 
 use anyhow::{Context, bail};
 use dgstereo_collective::Collective;
 use dgstereo_core::DeviceChoice;
-use dgstereo_kernels::{Op, Path, Settings, count_work, path};
+use dgstereo_core::timing::{median, peak_memory_bytes};
+use dgstereo_inference::model_config_file;
+use dgstereo_kernels::{Op, Path, Settings, machine_line, path};
 use dgstereo_train::batch::TensorBatch;
 use dgstereo_train::step_timing::{StageBackward, StepSeconds, random_batch};
+use dgstereo_train::timed_steps::time_steps;
 use dgstereo_train::{TrainParts, Trainer};
 
-use crate::measurement::{BenchArgs, machine_line, median, model_config, parse_size, peak_memory_bytes};
+use crate::measurement::{BenchArgs, parse_size};
 
 /// Times `a.runs` training steps after `a.warmup` (`dgstereo bench --train`).
 pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
@@ -44,17 +41,12 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
     }
     dgstereo_train::data_parallel::check_batch_divides(a.batch, world.size()).context("--batch")?;
     let config = match &a.experiment {
-        Some(p) => {
-            let runs = dgstereo_experiment::load(p)?;
-            let Some(run) = runs.into_iter().next() else { bail!("{}: no run", p.display()) };
-            run.config
-        }
-        None => toml::from_str::<dgstereo_experiment::ExperimentConfig>("name = \"bench\"")
-            .context("the default experiment")?,
+        Some(p) => dgstereo_experiment::load_first(p)?.config,
+        None => dgstereo_experiment::ExperimentConfig::named("bench"),
     };
     let mut parts = TrainParts::from(config);
     if let Some(p) = &a.config {
-        parts.model = model_config(p)?;
+        parts.model = model_config_file(p).map_err(crate::engine::with_flags)?;
     }
     parts.train.iters = a.iters;
     parts.train.batch_size = a.batch;
@@ -65,19 +57,8 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<ExitCode> {
         Path::Host => "host convolution backward",
         Path::Gpu | Path::Stock => "stock",
     };
-    // The forward's work, counted by its operations in each step.
-    let mut macs = 0;
-    let mut step = || -> anyhow::Result<(f64, StepSeconds)> {
-        let start = Instant::now();
-        let (stepped, work) = count_work(|| trainer.step_on_among(&batch, &world, None));
-        stepped?;
-        macs = work.macs;
-        Ok((start.elapsed().as_secs_f64(), trainer.last_step_seconds()))
-    };
-    for _ in 0..a.warmup {
-        step()?;
-    }
-    let runs = (0..a.runs).map(|_| step()).collect::<anyhow::Result<Vec<_>>>()?;
+    let timing = time_steps(&mut trainer, &batch, &world, a.warmup, a.runs)?;
+    let (runs, macs) = (&timing.steps, timing.macs);
     let mut times: Vec<f64> = runs.iter().map(|r| r.0).collect();
     let part = |f: fn(&StepSeconds) -> f64| median(&mut runs.iter().map(|r| f(&r.1)).collect::<Vec<_>>());
     let (forward, backward, optimizer) = (part(|s| s.forward), part(|s| s.backward), part(|s| s.optimizer));

@@ -13,7 +13,7 @@ use dgstereo_inference::MinSize;
 use dgstereo_inference::weights::asset;
 
 use crate::engine::{DEFAULT_LR_CHECK, ModelArgs, load_engine, with_flags};
-use crate::visualize::{colorize, error_image, side_by_side};
+use dgstereo_data::visualize::{colorize, error_image, side_by_side};
 
 /// Options of the demo.
 #[derive(Args)]

@@ -26,7 +26,7 @@ use dgstereo_data::Dataset;
 use dgstereo_data::datasets::{DrivingStereoWeather, FlyingThingsTestSubset, MiddleburySplit, middeval3_splits_in};
 use dgstereo_eval::{BenchmarkConfig, DatasetKind, evaluate_dataset, published};
 
-use crate::engine::{ModelArgs, describe, error_line, flag_names, load_engine};
+use crate::engine::{ModelArgs, error_line, flag_names, load_engine};
 
 /// Options of `dgstereo eval`.
 #[derive(Args)]
@@ -145,7 +145,7 @@ fn eval(a: EvalArgs) -> anyhow::Result<ExitCode> {
     let names: Vec<String> = dataset.files.iter().map(|f| f.name.clone()).collect();
     let protocol = dataset_kind.protocol();
     let (engine, options) = load_engine(&a.model)?;
-    eprintln!("configuration: {}", describe(&engine, &options));
+    eprintln!("configuration: {}", engine.describe(&options));
     std::fs::create_dir_all(&a.out)
         .map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", a.out.display()))?;
     eprintln!(

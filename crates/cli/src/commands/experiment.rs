@@ -18,7 +18,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::Subcommand;
 
-use crate::visualize::{colorize, display_range, side_by_side};
+use dgstereo_data::visualize::{colorize, display_range, side_by_side};
 
 /// Experiment-file tools.
 #[derive(Subcommand)]
@@ -83,7 +83,7 @@ pub fn run(command: ExperimentCommand) -> anyhow::Result<ExitCode> {
 }
 
 fn validate(file: &Path, weights: Option<&Path>) -> anyhow::Result<ExitCode> {
-    let run = first_run(file)?;
+    let run = dgstereo_experiment::load_first(file)?;
     let weights = match weights.map(Path::to_path_buf).or_else(|| run.config.train.init.clone()) {
         Some(w) => w,
         None => anyhow::bail!("{}: no --weights given and the experiment has no train.init", file.display()),
@@ -104,15 +104,8 @@ fn validate(file: &Path, weights: Option<&Path>) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn first_run(file: &Path) -> anyhow::Result<dgstereo_experiment::ResolvedRun> {
-    dgstereo_experiment::load(file)?
-        .into_iter()
-        .next()
-        .ok_or_else(|| anyhow::anyhow!("{}: the file defines no run", file.display()))
-}
-
 fn samples(file: &Path, out: &Path, count: usize) -> anyhow::Result<ExitCode> {
-    let run = first_run(file)?;
+    let run = dgstereo_experiment::load_first(file)?;
     let (data_config, train) = (&run.config.data, &run.config.train);
     let data = dgstereo_train::batch::TrainingData::new(data_config, train)
         .with_context(|| format!("{}: training data", file.display()))?;
@@ -154,7 +147,7 @@ fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool, config_o
             };
             let checked = on_disk.and_then(|()| dgstereo_experiment::smoke_test(&run.config, size, iters, &device));
             match checked {
-                Ok(report) => println!("{:<44} {:>22}  OK", run.name, parameters(report.parameters)),
+                Ok(report) => println!("{:<44} {:>22}  OK", run.name, report.parameters_text()),
                 Err(e) => {
                     failures += 1;
                     println!("{:<44} {:>22}  error: {}: {e}", run.name, "-", run.source.display());
@@ -177,29 +170,14 @@ fn check(files: &[PathBuf], size: [usize; 2], iters: usize, show: bool, config_o
     Ok(ExitCode::SUCCESS)
 }
 
-/// `11116176` → `11,116,176 (11.12 M)`.
-fn parameters(count: usize) -> String {
-    let digits = count.to_string();
-    let mut grouped = String::new();
-    for (i, c) in digits.chars().enumerate() {
-        if i > 0 && (digits.len() - i).is_multiple_of(3) {
-            grouped.push(',');
-        }
-        grouped.push(c);
-    }
-    format!("{grouped} ({:.2} M)", count as f64 / 1e6)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn sizes_and_counts_format() {
+    fn sizes_parse() {
         assert_eq!(parse_size("64x96"), Ok([64, 96]));
         assert!(parse_size("64").is_err());
         assert!(parse_size("4x96").is_err());
-        assert_eq!(parameters(11_116_176), "11,116,176 (11.12 M)");
-        assert_eq!(parameters(999), "999 (0.00 M)");
     }
 }

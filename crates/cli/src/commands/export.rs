@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use anyhow::{Context, bail};
+use anyhow::bail;
 use clap::{Args, Subcommand};
 use dgstereo_inference::{Engine, EngineConfig, experiment_configs};
 
@@ -78,9 +78,7 @@ pub fn run(cmd: ExportCommand) -> anyhow::Result<ExitCode> {
     );
     let start = Instant::now();
     let exported = dgstereo_export::export_onnx(engine.stereo_model(), height, width, iters)?;
-    let tmp = a.output.with_extension("onnx.tmp");
-    std::fs::write(&tmp, &exported.bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    dgstereo_core::atomic_file::commit_file(&tmp, &a.output)?;
+    exported.write(&a.output)?;
     let shapes = |v: &[(String, Vec<usize>)]| {
         v.iter()
             .map(|(n, s)| format!("{n} {}", s.iter().map(usize::to_string).collect::<Vec<_>>().join("x")))

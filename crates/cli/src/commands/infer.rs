@@ -7,21 +7,20 @@
 //! status is non-zero. A panic inside the model is caught and reported the same way, as an
 //! internal error of that pair.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use dgstereo_data::load_rgb;
-use dgstereo_inference::calibration::{Adjustment, Calibration, Rescaled};
+use dgstereo_data::datasets::pair_list::{PairList, PairProblem, from_folder, from_left_right, from_list};
+use dgstereo_inference::calibration::{Adjustment, Calibration};
+use dgstereo_inference::outputs::{OutputOptions, SaveKind, calibration_beside};
+use dgstereo_inference::pair_files::{PairFiles, PairReport};
 use dgstereo_inference::pointcloud::PlyEncoding;
-use dgstereo_inference::{Engine, PredictOptions, check_same_size};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::engine::{ModelArgs, describe, error_line, flag_names, load_engine, with_flags};
-use crate::inputs::{PairList, PairPaths, from_folder, from_left_right, from_list};
-use crate::outputs::{OutputOptions, SaveKind, calibration_beside, write_outputs};
+use crate::engine::{ModelArgs, error_line, load_engine, with_flags};
 
 /// Options of inference.
 #[derive(Args)]
@@ -105,26 +104,13 @@ fn parse_scale(s: &str) -> Result<(f64, f64), String> {
 
 fn find_pairs(a: &InferArgs) -> anyhow::Result<PairList> {
     match (&a.pairs, &a.list) {
-        (Some(dir), _) => from_folder(dir),
-        (None, Some(list)) => from_list(list),
-        (None, None) => from_left_right(&a.left, &a.right),
-    }
-}
-
-/// A failed pair: the file at fault (or the pair) and the problem, on one line.
-struct Failure {
-    what: PathBuf,
-    message: String,
-}
-
-impl Failure {
-    /// `FILE: problem`, without naming the file twice when the message already does.
-    fn line(&self) -> String {
-        if self.message.contains(&*self.what.to_string_lossy()) {
-            self.message.clone()
-        } else {
-            format!("{}: {}", self.what.display(), self.message)
+        (Some(dir), _) if !dir.is_dir() => bail!("{}: --pairs needs a folder", dir.display()),
+        (Some(dir), _) => Ok(from_folder(dir)?),
+        (None, Some(list)) => Ok(from_list(list)?),
+        (None, None) if a.left.is_empty() || a.right.is_empty() => {
+            bail!("give both -l/--left and -r/--right images (files or glob patterns), or --pairs DIR, or --list FILE")
         }
+        (None, None) => Ok(from_left_right(&a.left, &a.right)?),
     }
 }
 
@@ -141,7 +127,9 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
     {
         bail!("--max-depth must be a positive number of metres");
     }
-    let kinds = dedup(&a.save);
+    // Each kind once, in the order first given.
+    let kinds: Vec<SaveKind> =
+        a.save.iter().enumerate().filter(|(i, k)| !a.save[..*i].contains(k)).map(|(_, k)| *k).collect();
     let adjustment = Adjustment { crop: a.calib_crop, scale: a.calib_scale };
     if !adjustment.is_none() && !kinds.iter().any(|k| k.needs_calibration()) {
         bail!(
@@ -172,16 +160,21 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
     let (engine, options) = load_engine(&a.model)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the output folder", a.out.display()))?;
     let opts = OutputOptions { dir: a.out.clone(), kinds, max_depth: a.max_depth, ply: a.ply_encoding };
-    let calibration = CalibrationChoice { global: global_calib.as_ref(), adjustment };
+    let job = PairFiles {
+        engine: &engine,
+        options: &options,
+        outputs: &opts,
+        calibration: global_calib.as_ref(),
+        adjustment,
+    };
     let mut notes: Vec<String> = Vec::new();
 
-    let mut failures: Vec<Failure> =
-        list.problems.iter().map(|p| Failure { what: p.path.clone(), message: p.message.clone() }).collect();
+    let mut failures = list.problems.clone();
     for f in &failures {
         eprintln!("error: {}", f.line());
     }
     let total = list.pairs.len();
-    eprintln!("configuration: {}", describe(&engine, &options));
+    eprintln!("configuration: {}", engine.describe(&options));
     eprintln!(
         "{total} pair(s), weights {}, {} iterations, output {}",
         engine.weights().display(),
@@ -199,36 +192,20 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
     let mut done = 0usize;
     for pair in &list.pairs {
         bar.set_message(pair.name.clone());
-        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            process_pair(&engine, &options, pair, &opts, &calibration)
-        }));
-        match outcome {
-            Ok(Ok((line, note))) => {
+        match job.run(pair) {
+            Ok(report) => {
                 done += 1;
                 // A rescaled calibration is said once for each size it was rescaled to.
-                if let Some(note) = note.map(|n| n.to_string())
+                if let Some(note) = report.rescaled.as_ref().map(|n| n.to_string())
                     && !notes.contains(&note)
                 {
                     bar.suspend(|| eprintln!("note: {note}"));
                     notes.push(note);
                 }
-                bar.suspend(|| println!("{line}"));
+                bar.suspend(|| println!("{}", report_line(&pair.name, &report)));
             }
-            Ok(Err(e)) => {
-                let f = Failure { what: pair.left.clone(), message: error_line(&e) };
-                bar.suspend(|| eprintln!("error: {}", f.line()));
-                failures.push(f);
-            }
-            Err(panic) => {
-                let msg = panic
-                    .downcast_ref::<String>()
-                    .cloned()
-                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-                    .unwrap_or_else(|| "unknown panic".into());
-                let f = Failure {
-                    what: pair.left.clone(),
-                    message: format!("{}: internal error: {}", pair.left.display(), msg.replace(['\n', '\r'], " ")),
-                };
+            Err(e) => {
+                let f = PairProblem { path: pair.left.clone(), message: error_line(&with_flags(e)) };
                 bar.suspend(|| eprintln!("error: {}", f.line()));
                 failures.push(f);
             }
@@ -255,90 +232,20 @@ fn infer(a: InferArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::FAILURE)
 }
 
-fn dedup(kinds: &[SaveKind]) -> Vec<SaveKind> {
-    let mut out = Vec::new();
-    for k in kinds {
-        if !out.contains(k) {
-            out.push(*k);
-        }
-    }
-    out
-}
-
-/// The calibration of the run: `--calib` (else the file beside each left image) and how the
-/// pairs were made from the calibrated images.
-struct CalibrationChoice<'a> {
-    global: Option<&'a Calibration>,
-    adjustment: Adjustment,
-}
-
-/// Reads, predicts and writes one pair; returns the line reporting it and the notice of a
-/// calibration rescaled to the pair's size.
-fn process_pair(
-    engine: &Engine,
-    options: &PredictOptions,
-    pair: &PairPaths,
-    opts: &OutputOptions,
-    calibration: &CalibrationChoice<'_>,
-) -> anyhow::Result<(String, Option<Rescaled>)> {
-    let t0 = Instant::now();
-    let left = load_rgb(&pair.left)?;
-    let right = load_rgb(&pair.right)?;
-    let both = || format!("{} + {}", pair.left.display(), pair.right.display());
-    check_same_size(&left, &right).map_err(|e| anyhow::Error::from(e).context(both()))?;
-    let (calib, note) = if opts.kinds.iter().any(|k| k.needs_calibration()) {
-        let loaded = calibration_for(&pair.left, calibration.global)?;
-        let (calib, note) = loaded.adjusted(&calibration.adjustment, left.width, left.height).map_err(|e| {
-            let hint = match &e {
-                dgstereo_core::Error::Shape(_) if calibration.adjustment.is_none() => {
-                    ": --calib-crop X,Y and/or --calib-scale S"
-                }
-                _ => "",
-            };
-            anyhow::anyhow!("{}{hint}", flag_names(&e.to_string()))
-        })?;
-        (Some(calib), note)
-    } else {
-        (None, None)
-    };
-    let prediction = engine.predict(&left, &right, &pair.name, options).map_err(|e| with_flags(e).context(both()))?;
-    let (disp, info) = (prediction.disparity, prediction.info);
-    let written = write_outputs(opts, &pair.name, &left, &disp, calib.as_ref(), info.rejected.as_ref())?;
+/// The line reporting a pair that was done.
+fn report_line(name: &str, r: &PairReport) -> String {
     // Depth is `inf` where the disparity gives no point in front of the cameras: say how often.
-    let no_depth = calib.as_ref().map_or(0, |c| disp.data.iter().filter(|d| c.depth(**d).is_infinite()).count());
-    let no_depth = if no_depth > 0 {
-        format!(", {no_depth} px without depth (disparity unknown or <= -doffs: inf)")
-    } else {
-        String::new()
+    let no_depth = match r.without_depth {
+        0 => String::new(),
+        n => format!(", {n} px without depth (disparity unknown or <= -doffs: inf)"),
     };
     let files: Vec<String> =
-        written.iter().map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()).collect();
+        r.written.iter().map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()).collect();
+    let info = &r.info;
     let checked =
         info.rejected_share().map_or(String::new(), |s| format!(", left-right check replaced {:.1} %", 100.0 * s));
     let prior = info.prior_seconds.map_or(String::new(), |s| format!(" (depth prior {s:.2} s)"));
-    let line = format!(
-        "{}: {}x{} (network {}x{}, {:?} volume{checked}{no_depth}) {:.2} s{prior} -> {}",
-        pair.name,
-        left.width,
-        left.height,
-        info.network_size.0,
-        info.network_size.1,
-        info.corr,
-        t0.elapsed().as_secs_f64(),
-        files.join(", ")
-    );
-    Ok((line, note))
-}
-
-fn calibration_for(left: &Path, global: Option<&Calibration>) -> anyhow::Result<Calibration> {
-    if let Some(c) = global {
-        return Ok(c.clone());
-    }
-    match calibration_beside(left) {
-        Some(p) => Ok(Calibration::load(&p)?),
-        None => bail!(
-            "{}: depth and ply outputs need a calibration: pass --calib FILE (or put calib.txt beside the image)",
-            left.display()
-        ),
-    }
+    let ((w, h), (nw, nh)) = (r.size, info.network_size);
+    let volume = format!("{:?} volume{checked}{no_depth}", info.corr);
+    format!("{name}: {w}x{h} (network {nw}x{nh}, {volume}) {:.2} s{prior} -> {}", r.seconds, files.join(", "))
 }

@@ -22,8 +22,7 @@ use dgstereo_core::DeviceChoice;
 use dgstereo_distributed::World;
 use dgstereo_study::{check_distinct_folders, folder_name, parts_of};
 
-use crate::stop_signals::StopSignals;
-use crate::training::{Session, train_one_among};
+use crate::training::{Session, stop_signals, train_one_among};
 
 /// Options of `dgstereo train`.
 #[derive(Args)]
@@ -70,7 +69,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<ExitCode> {
 }
 
 fn train_all(a: &TrainArgs, world: &World) -> anyhow::Result<ExitCode> {
-    let stop = StopSignals::install()?;
+    let stop = stop_signals()?;
     let runs = dgstereo_experiment::load(&a.experiment)?;
     check_distinct_folders(&runs)?;
     let device = a.device.device_for_local_rank(world.local_rank(), world.local_size())?;
@@ -84,12 +83,12 @@ fn train_all(a: &TrainArgs, world: &World) -> anyhow::Result<ExitCode> {
     for run in runs {
         if world.size() == 1 && stop.requested() {
             eprintln!("{}: stopped before run '{}'; {}", stop.name(), run.name, session.continue_with);
-            return Ok(stop.exit_code());
+            return Ok(ExitCode::from(stop.exit_status()));
         }
         let out = if several { a.out.join(folder_name(&run.name)) } else { a.out.clone() };
         let summary = train_one_among(parts_of(run.config, a.steps), &out, a.resume, &session, world)?;
         if summary.stopped {
-            return Ok(stop.exit_code());
+            return Ok(ExitCode::from(stop.exit_status()));
         }
     }
     Ok(ExitCode::SUCCESS)

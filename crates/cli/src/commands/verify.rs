@@ -127,24 +127,8 @@ pub fn run(cmd: VerifyCommand) -> anyhow::Result<ExitCode> {
 /// The trainer's parts of `experiment`'s first run, or of an experiment that sets nothing.
 fn recipe(experiment: Option<&Path>) -> anyhow::Result<TrainParts> {
     let config = match experiment {
-        Some(file) => {
-            dgstereo_experiment::load(file)?
-                .into_iter()
-                .next()
-                .ok_or_else(|| anyhow::anyhow!("{}: the file defines no run", file.display()))?
-                .config
-        }
-        None => dgstereo_experiment::ExperimentConfig {
-            name: "defaults".into(),
-            description: None,
-            model: Default::default(),
-            prior: Default::default(),
-            loss: Default::default(),
-            train: Default::default(),
-            data: Default::default(),
-            benchmarks: Vec::new(),
-            launcher: Default::default(),
-        },
+        Some(file) => dgstereo_experiment::load_first(file)?.config,
+        None => dgstereo_experiment::ExperimentConfig::named("defaults"),
     };
-    Ok(dgstereo_train::TrainParts::from(config))
+    Ok(TrainParts::from(config))
 }

@@ -5,7 +5,8 @@
 //! [`flyingthings_test`], [`drivingstereo`], [`kitti`], [`folder_pairs`]) only walk folders, so
 //! listing is cheap and reading can happen on worker threads ([`crate::loader`]).
 //! [`SyntheticDataset`] renders samples instead of reading. Which files of a plain folder are
-//! pairs is one rule, [`pair_finder`], shared with `dgstereo infer --pairs`.
+//! pairs is one rule, [`pair_finder`], shared with the pairs a user names ([`pair_list`]: folders, lists
+//! of files or patterns, list files, and the names of their outputs), which `dgstereo infer` reads.
 
 mod drivingstereo;
 mod flyingthings_subset;
@@ -13,6 +14,7 @@ mod layouts;
 mod middeval3;
 mod numpy_permutation;
 pub mod pair_finder;
+pub mod pair_list;
 mod sceneflow;
 
 pub use drivingstereo::{DrivingStereoWeather, drivingstereo};

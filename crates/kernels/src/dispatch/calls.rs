@@ -19,6 +19,12 @@ pub(crate) struct PlainCall(pub(crate) Op);
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct AllPairsCall;
 
+/// A linear layer's product (`x · W + b` over the last axis): the host kernel only in CPU
+/// inference with bf16 products, where the calling thread asks for them and the processor has a
+/// unit; burn's matrix product everywhere else (it is as fast as ours in f32).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LinearCall;
+
 /// An element-wise step that has a training node of its own but no host pass for inference,
 /// where it runs inside a fused kernel or as burn's operation: the ReLU ([`RECTIFY`]) and the
 /// ConvGRU's gates and blend ([`NodeCall`]`(Op::GruStep)`).
@@ -100,6 +106,27 @@ impl Call for AllPairsCall {
 
     fn gpu(&self, _: &Settings, _: &Device) -> Option<()> {
         Some(())
+    }
+}
+
+impl Call for LinearCall {
+    type Inference = Bf16Unit;
+    type Training = ();
+    type Gpu = ();
+    fn op(&self) -> Op {
+        Op::Linear
+    }
+
+    fn inference(&self, settings: &Settings) -> Option<Bf16Unit> {
+        products_unit(settings)
+    }
+
+    fn training(&self, _: &Settings) -> Option<()> {
+        None
+    }
+
+    fn gpu(&self, _: &Settings, _: &Device) -> Option<()> {
+        None
     }
 }
 

@@ -12,6 +12,7 @@ pub(crate) mod few_outputs;
 pub(crate) mod fresh;
 pub(crate) mod gru;
 pub(crate) mod gru_backward;
+pub(crate) mod linear;
 pub(crate) mod norm;
 pub(crate) mod norm_backward;
 pub(crate) mod on_the_fly_lookup;

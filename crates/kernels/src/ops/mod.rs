@@ -5,6 +5,7 @@
 pub(crate) mod conv;
 pub(crate) mod deform;
 pub(crate) mod gru;
+pub(crate) mod linear;
 pub(crate) mod lookup;
 pub(crate) mod norm;
 pub(crate) mod resample;

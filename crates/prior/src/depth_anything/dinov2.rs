@@ -16,6 +16,7 @@ use burn::tensor::ops::AttentionModuleOptions;
 use burn::tensor::{Device, Tensor};
 
 use super::cubic::resize_bicubic_with_ratio;
+use dgstereo_kernels::linear_forward;
 
 /// The patch size of every DINOv2 variant.
 pub const PATCH_SIZE: usize = 14;
@@ -66,7 +67,7 @@ impl Attention {
     fn forward(&self, x: Tensor<3>) -> Tensor<3> {
         let [b, n, c] = x.dims();
         let head_dim = c / self.heads;
-        let qkv = self.qkv.forward(x).reshape([b, n, 3, self.heads, head_dim]).permute([2, 0, 3, 1, 4]);
+        let qkv = linear_forward(&self.qkv, x).reshape([b, n, 3, self.heads, head_dim]).permute([2, 0, 3, 1, 4]);
         let take = |i: usize| qkv.clone().narrow(0, i, 1).squeeze_dim::<4>(0);
         let (q, k, v) = (take(0), take(1), take(2));
         // burn's fused attention (scale 1/sqrt(head_dim) by default): on the CPU its flash kernel
@@ -75,7 +76,7 @@ impl Attention {
         // of a 900x750 pair).
         let out = attention(q, k, v, None, None, AttentionModuleOptions::default());
         let out = out.swap_dims(1, 2).reshape([b, n, c]);
-        self.proj.forward(out)
+        linear_forward(&self.proj, out)
     }
 }
 
@@ -128,8 +129,8 @@ impl Block {
     /// - `x`: `[B, N, C]` -> `[B, N, C]`
     fn forward(&self, x: Tensor<3>) -> Tensor<3> {
         let x = x.clone() + self.ls1.forward(self.attn.forward(self.norm1.forward(x)));
-        let hidden = gelu(self.mlp.fc1.forward(self.norm2.forward(x.clone())));
-        x + self.ls2.forward(self.mlp.fc2.forward(hidden))
+        let hidden = gelu(linear_forward(&self.mlp.fc1, self.norm2.forward(x.clone())));
+        x + self.ls2.forward(linear_forward(&self.mlp.fc2, hidden))
     }
 }
 

@@ -1,7 +1,13 @@
-//! Pictures of disparity maps: the turbo colour map with a legend, and side-by-side panels.
+//! Pictures of disparity maps: the turbo colour map with a legend of its range, the error
+//! against ground truth, and panels side by side (what `dgstereo infer --save color`, the demo
+//! and `experiment samples` write).
+//!
+//! Design decision: a picture is an [`RgbImage`] like any image of this crate, so it is written
+//! with [`crate::save_rgb`] and its legend is drawn with the crate's own bitmap font
+//! ([`crate::text`]); nothing here reads or writes files.
 
-use dgstereo_data::text::{GLYPH_HEIGHT, format_value, text_width};
-use dgstereo_data::{DisparityMap, RgbImage};
+use crate::image::{DisparityMap, RgbImage};
+use crate::text::{GLYPH_HEIGHT, format_value, text_width};
 
 /// Google's Turbo colour map (polynomial fit by its authors), `t` in 0..1, RGB 0..255.
 pub fn turbo(t: f32) -> [f32; 3] {
@@ -102,10 +108,10 @@ pub fn legend_labels(width: usize, scale: usize, (lo, hi): (f32, f32)) -> Vec<(S
     labels.into_iter().map(|(label, x, _)| (label, x)).collect()
 }
 
-/// Draws `s` in white with its top-left corner at `(x0, y0)` (see [`dgstereo_data::text`]);
+/// Draws `s` in white with its top-left corner at `(x0, y0)` (see [`crate::text`]);
 /// what falls outside the image is clipped.
 fn draw_text(img: &mut RgbImage, s: &str, x0: usize, y0: usize, scale: usize) {
-    dgstereo_data::text::draw_text(s, x0, y0, scale, |x, y| {
+    crate::text::draw_text(s, x0, y0, scale, |x, y| {
         if x < img.width && y < img.height {
             img.set(x, y, [255.0; 3]);
         }

@@ -1,4 +1,5 @@
-//! The files `dgstereo infer --save KINDS` writes for one pair named `NAME` in the output folder.
+//! The files written for one pair named `NAME` in an output folder (`dgstereo infer --save
+//! KINDS`), one [`SaveKind`] a file.
 //!
 //! | kind | file | content |
 //! |---|---|---|
@@ -7,25 +8,24 @@
 //! | `png16` | `NAME_disparity_png16.png` | KITTI-style 16-bit PNG, disparity × 256, 0 = invalid |
 //! | `color` | `NAME_disparity_color.png` | turbo colour map with a legend of its range (px) |
 //! | `depth` | `NAME_depth.pfm` | float32 depth in metres, `inf` where the disparity is unknown or `d + doffs <= 0` (negative: no point in front of the cameras) (needs calibration) |
-//! | `ply` | `NAME_points.ply` | coloured point cloud, see [`dgstereo_inference::pointcloud`] (needs calibration) |
-//! | `rejected` | `NAME_rejected.png` | 255 where `--lr-check` replaced the disparity, else 0 (needs `--lr-check`) |
+//! | `ply` | `NAME_points.ply` | coloured point cloud, see [`crate::pointcloud`] (needs calibration) |
+//! | `rejected` | `NAME_rejected.png` | 255 where the left-right check replaced the disparity, else 0 (needs the check) |
 //!
-//! Design decision: the kind decides the suffix, the pair decides `NAME` (see [`crate::inputs`]),
-//! so two kinds or two pairs never write the same file.
+//! Design decision: the kind decides the suffix, the pair decides `NAME` (see
+//! [`dgstereo_data::datasets::pair_list`]), so two kinds or two pairs never write the same file.
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
-use clap::ValueEnum;
+use dgstereo_core::{Error, Result};
+use dgstereo_data::visualize::{colorize, display_range, side_by_side};
 use dgstereo_data::{DisparityMap, Mask, RgbImage, save_mask, save_rgb, write_disparity};
 
-use dgstereo_inference::calibration::Calibration;
-use dgstereo_inference::pointcloud::{PlyEncoding, depth_map, point_cloud, write_ply};
-
-use crate::visualize::{colorize, display_range, side_by_side};
+use crate::calibration::Calibration;
+use crate::pointcloud::{PlyEncoding, depth_map, point_cloud, write_ply};
 
 /// One kind of output.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum SaveKind {
     /// Float disparity as PFM.
     Pfm,
@@ -91,6 +91,10 @@ impl OutputOptions {
 /// Writes the requested outputs of one pair; returns the files written. `calib` must be given
 /// (already fitted to the image, see [`Calibration::adjusted`]) when a kind needs it, and
 /// `rejected` (the left-right check's mask) for `rejected`.
+///
+/// # Errors
+/// A file that cannot be written, or a kind without what it needs (keyed `calib` or
+/// `lr_check`).
 pub fn write_outputs(
     opts: &OutputOptions,
     name: &str,
@@ -98,7 +102,7 @@ pub fn write_outputs(
     disp: &DisparityMap,
     calib: Option<&Calibration>,
     rejected: Option<&Mask>,
-) -> anyhow::Result<Vec<PathBuf>> {
+) -> Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     let mut depth: Option<DisparityMap> = None;
     for &kind in &opts.kinds {
@@ -108,10 +112,12 @@ pub fn write_outputs(
             SaveKind::Color => save_rgb(&path, &colorize(disp, display_range(disp), true))?,
             SaveKind::Preview => save_rgb(&path, &side_by_side(&[left, &colorize(disp, display_range(disp), false)]))?,
             SaveKind::Rejected => {
-                save_mask(&path, rejected.context("the rejected mask needs --lr-check")?)?;
+                let rejected = rejected
+                    .ok_or_else(|| Error::config("lr_check", "the rejected mask needs the left-right check"))?;
+                save_mask(&path, rejected)?;
             }
             SaveKind::Depth | SaveKind::Ply => {
-                let calib = calib.context("depth and point clouds need a calibration: pass --calib FILE")?;
+                let calib = calib.ok_or_else(|| Error::config("calib", "depth and point clouds need a calibration"))?;
                 let depth = depth.get_or_insert_with(|| depth_map(disp, calib));
                 if kind == SaveKind::Depth {
                     write_disparity(&path, depth)?;
@@ -130,4 +136,39 @@ pub fn write_outputs(
 pub fn calibration_beside(image: &Path) -> Option<PathBuf> {
     let dir = image.parent()?;
     ["calib.txt", "K.txt"].iter().map(|n| dir.join(n)).find(|p| p.is_file())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_kind_writes_its_own_file_and_refuses_without_what_it_needs() {
+        let dir = tempfile::tempdir().unwrap();
+        let kinds = vec![SaveKind::Pfm, SaveKind::Npy, SaveKind::Png16, SaveKind::Color, SaveKind::Preview];
+        let opts = OutputOptions { dir: dir.path().to_path_buf(), kinds, max_depth: None, ply: PlyEncoding::Ascii };
+        let disp = DisparityMap { width: 8, height: 6, data: (0..48).map(|i| 1.0 + (i % 8) as f32).collect() };
+        let left = RgbImage::new(8, 6);
+        let written = write_outputs(&opts, "desk", &left, &disp, None, None).unwrap();
+        let names: Vec<String> =
+            written.iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
+        assert_eq!(
+            names,
+            [
+                "desk_disparity.pfm",
+                "desk_disparity.npy",
+                "desk_disparity_png16.png",
+                "desk_disparity_color.png",
+                "desk_preview.png"
+            ]
+        );
+        assert!(written.iter().all(|p| p.is_file()));
+        assert_eq!(dgstereo_data::read_disparity(&written[0]).unwrap().data, disp.data);
+        for (kind, key) in [(SaveKind::Depth, "calib"), (SaveKind::Ply, "calib"), (SaveKind::Rejected, "lr_check")] {
+            let opts = OutputOptions { kinds: vec![kind], ..opts.clone() };
+            let e = write_outputs(&opts, "desk", &left, &disp, None, None).unwrap_err();
+            assert!(matches!(&e, Error::Config(p) if p.key == key), "{kind:?}: {e}");
+            assert_eq!(kind.needs_calibration(), key == "calib");
+        }
+    }
 }

@@ -1,11 +1,12 @@
-//! Finding the stereo pairs of `dgstereo infer` and naming their outputs.
+//! The stereo pairs a user names (`dgstereo infer`) and the names of their outputs.
 //!
-//! Pairs come from `-l/-r` files or glob patterns (each side sorted, then zipped, as the
-//! reference demo does), from a folder (`--pairs DIR`: `*left*`/`*right*` or `im0`/`im1` names,
-//! searched recursively, by the same rule as `eval --dataset folder`) or from a list file (`--list FILE`: one `LEFT RIGHT` pair per line).
+//! Pairs come from two lists of files or glob patterns (each side sorted, then zipped, as the
+//! reference demo does; [`from_left_right`]), from a folder (`*left*`/`*right*` or `im0`/`im1`
+//! names, searched recursively, by the [`super::pair_finder`] rule the `folder` data set follows
+//! too; [`from_folder`]) or from a list file (one `LEFT RIGHT` pair per line; [`from_list`]).
 //! Problems that concern one pair (a left image without its right image) become a
 //! [`PairProblem`] so the other pairs still run; problems that concern the whole request (a
-//! pattern matching nothing, an unreadable list) are errors.
+//! pattern matching nothing, an unreadable list) are errors naming the pattern or file.
 //!
 //! Design decision: an output name is the *unique part* of the left image's path. Paths are taken
 //! relative to the deepest folder common to all left images, the extension and the words that only
@@ -13,10 +14,12 @@
 //! names get a `-2`, `-3`, ... suffix, so two pairs never write the same file.
 
 use std::collections::HashMap;
+use std::io::ErrorKind;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
-use dgstereo_data::datasets::pair_finder::{SIDE_WORDS, Side, find_folder_pairs, side_key};
+use dgstereo_core::{Error, Result};
+
+use super::pair_finder::{SIDE_WORDS, Side, find_folder_pairs, side_key};
 
 /// One stereo pair to process.
 #[derive(Clone, Debug, PartialEq)]
@@ -29,13 +32,24 @@ pub struct PairPaths {
     pub name: String,
 }
 
-/// A pair that cannot be formed (reported and counted as a failure).
+/// A pair that cannot be formed (reported and counted as a failure), or one that failed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PairProblem {
     /// The file concerned.
     pub path: PathBuf,
     /// What is wrong.
     pub message: String,
+}
+
+impl PairProblem {
+    /// `FILE: problem` on one line, without naming the file twice when the message already does.
+    pub fn line(&self) -> String {
+        if self.message.contains(&*self.path.to_string_lossy()) {
+            self.message.clone()
+        } else {
+            format!("{}: {}", self.path.display(), self.message)
+        }
+    }
 }
 
 /// The pairs found, and the ones that could not be formed.
@@ -51,19 +65,28 @@ fn has_glob_chars(s: &str) -> bool {
     s.contains(['*', '?', '['])
 }
 
+/// An error about the glob pattern `pattern` (named as the path at fault).
+fn pattern_error(pattern: &str, kind: ErrorKind, message: String) -> Error {
+    Error::io(pattern, std::io::Error::new(kind, message))
+}
+
 /// Expands files and glob patterns, each pattern's matches sorted. A plain path is kept as given
 /// (a missing file is then reported when it is read, naming it).
-pub fn expand_patterns(patterns: &[String]) -> anyhow::Result<Vec<PathBuf>> {
+///
+/// # Errors
+/// A pattern that is not valid or matches no file ([`Error::Io`], naming the pattern).
+pub fn expand_patterns(patterns: &[String]) -> Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     for pattern in patterns {
         if !has_glob_chars(pattern) {
             out.push(PathBuf::from(pattern));
             continue;
         }
-        let paths = glob::glob(pattern).with_context(|| format!("'{pattern}' is not a valid glob pattern"))?;
+        let paths = glob::glob(pattern)
+            .map_err(|e| pattern_error(pattern, ErrorKind::InvalidInput, format!("not a valid glob pattern: {e}")))?;
         let mut matched: Vec<PathBuf> = paths.filter_map(Result::ok).filter(|p| p.is_file()).collect();
         if matched.is_empty() {
-            bail!("'{pattern}' matches no file");
+            return Err(pattern_error(pattern, ErrorKind::NotFound, "matches no file".into()));
         }
         matched.sort();
         out.extend(matched);
@@ -73,10 +96,16 @@ pub fn expand_patterns(patterns: &[String]) -> anyhow::Result<Vec<PathBuf>> {
 
 /// Pairs `-l` with `-r` inputs: zipped in order when both sides have as many files, otherwise
 /// matched by the data crate's side words (`left`↔`right`, `im0`↔`im1`, `image_2`↔`image_3`,
-/// [`dgstereo_data::datasets::pair_finder::side_key`]), unmatched files being problems.
-pub fn from_left_right(left: &[String], right: &[String]) -> anyhow::Result<PairList> {
-    if left.is_empty() || right.is_empty() {
-        bail!("give both -l/--left and -r/--right images (files or glob patterns), or --pairs DIR, or --list FILE");
+/// [`side_key`]), unmatched files being problems.
+///
+/// # Errors
+/// A side without files or patterns (keyed `left` or `right`), or a pattern
+/// [`expand_patterns`] refuses.
+pub fn from_left_right(left: &[String], right: &[String]) -> Result<PairList> {
+    for (key, given) in [("left", left), ("right", right)] {
+        if given.is_empty() {
+            return Err(Error::config(key, "no images given: both sides need files or glob patterns"));
+        }
     }
     let lefts = expand_patterns(left)?;
     let rights = expand_patterns(right)?;
@@ -104,18 +133,21 @@ pub fn from_left_right(left: &[String], right: &[String]) -> anyhow::Result<Pair
     Ok(named(pairs, problems))
 }
 
-/// The pairs of a folder (recursive), by the data crate's one pair rule
-/// ([`dgstereo_data::datasets::pair_finder`], which `eval --dataset folder` follows too):
+/// The pairs of a folder (recursive), by the crate's one pair rule ([`super::pair_finder`],
+/// which the `folder` data set follows too):
 /// `<x>left<y>.<ext>` with `<x>right<y>.<ext>` and `im0.<ext>` with `im1.<ext>`, names holding
 /// `disp`, `occ`, `mask` or `depth` not being views. A left image without its right image is a
 /// problem.
-pub fn from_folder(dir: &Path) -> anyhow::Result<PairList> {
+///
+/// # Errors
+/// `dir` is not a folder, or holds no view of a pair ([`Error::Format`], naming it).
+pub fn from_folder(dir: &Path) -> Result<PairList> {
     if !dir.is_dir() {
-        bail!("{}: --pairs needs a folder", dir.display());
+        return Err(Error::io(dir, std::io::Error::new(ErrorKind::NotADirectory, "not a folder")));
     }
     let found = find_folder_pairs(dir)?;
     if found.pairs.is_empty() && found.unpaired.is_empty() {
-        bail!("{}: no stereo pairs found (expected *left*/*right* or im0/im1 image names)", dir.display());
+        return Err(Error::format(dir, "no stereo pairs found (expected *left*/*right* or im0/im1 image names)"));
     }
     let pairs = found.pairs.into_iter().map(|p| (p.left, p.right)).collect();
     let problems = found
@@ -131,9 +163,13 @@ pub fn from_folder(dir: &Path) -> anyhow::Result<PairList> {
 
 /// The pairs of a list file: one `LEFT RIGHT` pair per line (whitespace or a comma between),
 /// paths relative to the list's folder, `#` starting a comment. A line with one path is a problem.
-pub fn from_list(list: &Path) -> anyhow::Result<PairList> {
-    let text =
-        std::fs::read_to_string(list).with_context(|| format!("{}: cannot read the pair list", list.display()))?;
+///
+/// # Errors
+/// The list cannot be read, a line holds more than two paths, or the list holds none
+/// (naming the list, and the line).
+pub fn from_list(list: &Path) -> Result<PairList> {
+    let text = std::fs::read_to_string(list)
+        .map_err(|e| Error::io(list, std::io::Error::new(e.kind(), format!("cannot read the pair list: {e}"))))?;
     let base = list.parent().unwrap_or(Path::new(""));
     let mut pairs = Vec::new();
     let mut problems = Vec::new();
@@ -149,11 +185,14 @@ pub fn from_list(list: &Path) -> anyhow::Result<PairList> {
                 path: base.join(l),
                 message: format!("missing right image ({} line {})", list.display(), i + 1),
             }),
-            _ => bail!("{} line {}: expected 'LEFT RIGHT', found {} fields", list.display(), i + 1, fields.len()),
+            _ => {
+                let message = format!("line {}: expected 'LEFT RIGHT', found {} fields", i + 1, fields.len());
+                return Err(Error::format(list, message));
+            }
         }
     }
     if pairs.is_empty() && problems.is_empty() {
-        bail!("{}: the pair list is empty", list.display());
+        return Err(Error::format(list, "the pair list is empty"));
     }
     Ok(named(pairs, problems))
 }
@@ -178,7 +217,7 @@ fn common_folder(paths: &[&Path]) -> PathBuf {
     common.unwrap_or_default().into_iter().collect()
 }
 
-/// Drops the words that only say "left" from a name (the data crate's left side words, and `l`
+/// Drops the words that only say "left" from a name (the crate's left side words, and `l`
 /// as in `scene_l.png`); separators left dangling are removed.
 fn without_side_words(name: &str) -> String {
     let seps = ['_', '-', '.', ' '];
@@ -281,7 +320,7 @@ mod tests {
             std::fs::write(dir.path().join(f), b"").unwrap();
         }
         let infer = from_folder(dir.path()).unwrap();
-        let eval = dgstereo_data::datasets::folder_pairs(dir.path()).unwrap();
+        let eval = super::super::folder_pairs(dir.path()).unwrap();
         let infer_pairs: Vec<(PathBuf, PathBuf)> =
             infer.pairs.iter().map(|p| (p.left.clone(), p.right.clone())).collect();
         let eval_pairs: Vec<(PathBuf, PathBuf)> =
@@ -305,7 +344,36 @@ mod tests {
         assert_eq!(list.pairs[0].name, "a");
         assert_eq!(list.problems.len(), 1);
         assert!(list.problems[0].path.ends_with("b_left.png"));
+        assert_eq!(list.problems[0].line(), format!("{d}/b_left.png: missing right image: no -r file matches it"));
+        let named = PairProblem { path: "x.png".into(), message: "x.png: truncated".into() };
+        assert_eq!(named.line(), "x.png: truncated");
         let folder = from_folder(dir.path()).unwrap();
         assert_eq!((folder.pairs.len(), folder.problems.len()), (1, 1));
+    }
+
+    #[test]
+    fn whole_request_problems_are_typed_and_name_their_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let pattern = format!("{}/*_left.png", dir.path().display());
+        let e = expand_patterns(std::slice::from_ref(&pattern)).unwrap_err();
+        assert!(
+            matches!(&e, Error::Io { path, source } if path == Path::new(&pattern) && source.kind() == ErrorKind::NotFound),
+            "{e}"
+        );
+        let e = from_left_right(&[], &[pattern]).unwrap_err();
+        assert!(matches!(&e, Error::Config(p) if p.key == "left"), "{e}");
+        let list = dir.path().join("pairs.txt");
+        std::fs::write(&list, "# only a comment\n").unwrap();
+        assert_eq!(from_list(&list).unwrap_err().to_string(), format!("{}: the pair list is empty", list.display()));
+        std::fs::write(&list, "a.png b.png\na.png b.png c.png\n").unwrap();
+        let e = from_list(&list).unwrap_err();
+        assert!(
+            matches!(&e, Error::Format { path, message } if path == &list && message.starts_with("line 2:")),
+            "{e}"
+        );
+        let e = from_folder(&list).unwrap_err();
+        assert!(matches!(&e, Error::Io { source, .. } if source.kind() == ErrorKind::NotADirectory), "{e}");
+        let e = from_folder(dir.path()).unwrap_err();
+        assert!(e.to_string().contains("no stereo pairs found"), "{e}");
     }
 }

@@ -1,24 +1,33 @@
 //! SIGINT, SIGTERM and SIGUSR1 during training: the first asks the run to stop after its
-//! current step, with a checkpoint; a second one, a second or more later, ends the process at
-//! once and says what it dropped. SIGUSR1 is what a Slurm batch script passes on at a preemption
+//! current step, with a checkpoint; a second one, a second or more later, asks to end the process
+//! at once, with what that drops. SIGUSR1 is what a Slurm batch script passes on at a preemption
 //! notice or before a time limit (`--signal=B:USR1@120`).
 //!
 //! A training step cannot be cut short without losing it, and the steps since the last
 //! checkpoint (up to `checkpoint_every - 1`) are lost with it, so the first signal only sets the
-//! run's stop flag ([`dgstereo_train::RunOptions::stop`]); the exit status is still the
+//! run's stop flag (the trainer's `RunOptions::stop`); the exit status is still the
 //! conventional `128 + signal` (130, 143, 138), so scripts see an interrupted run.
 //!
 //! Design decision: one request can arrive as several signals. coreutils `timeout` sends SIGTERM
 //! to its child and then to its process group, which holds the child, and a terminal's Ctrl-C
 //! reaches every process of the foreground group; so signals within [`REPEAT_WINDOW`] of the
 //! first are that same request. The signals are received on a thread of their own
-//! (`signal_hook`'s iterator), which may print and exit, unlike a signal handler; the position it
-//! reports ([`RunPosition`]) is kept by the progress observer of the run in progress.
+//! (`signal_hook`'s iterator), which calls the caller's function with each request
+//! ([`SignalEvent`]); unlike a signal handler, that function may print and end the process. The
+//! position a request to stop at once reports ([`RunPosition`]) is kept by the progress observer
+//! of the run in progress.
+//!
+//! A crate of its own: the trainer takes a stop flag as an argument and knows no signals (a
+//! library takes its settings as arguments), a process's signals belong to the front end that
+//! owns the process, and the binary only prints; so the rule of what a signal means, tested here,
+//! sits on `core` alone, beside none of the pipeline's crates.
+#![deny(missing_docs)]
 
-use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
+
+use dgstereo_core::{Error, Result};
 
 /// Signals this close to the first one are the same request.
 pub const REPEAT_WINDOW: Duration = Duration::from_secs(1);
@@ -124,6 +133,26 @@ pub fn dropped_work(training: bool, done: usize, checkpoint: Option<usize>) -> S
     }
 }
 
+/// A request the signals made, for the caller to say (and, for [`StopNow`](Self::StopNow), to
+/// carry out).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SignalEvent {
+    /// The first signal: the stop flag is set, the run stops after its current step.
+    Stopping {
+        /// The signal's name (`SIGINT`).
+        signal: &'static str,
+    },
+    /// A second request: the process should end at once.
+    StopNow {
+        /// The signal's name.
+        signal: &'static str,
+        /// What stopping now drops ([`RunPosition::dropped`]).
+        dropped: String,
+        /// The conventional exit status, `128 + signal`.
+        status: i32,
+    },
+}
+
 /// The stop flag the signals set, which signal set it, and the position a second one reports.
 pub struct StopSignals {
     requested: Arc<AtomicBool>,
@@ -132,40 +161,49 @@ pub struct StopSignals {
 }
 
 impl StopSignals {
-    /// Starts receiving SIGINT, SIGTERM and SIGUSR1 (on a thread of their own).
-    pub fn install() -> anyhow::Result<Self> {
+    /// Starts receiving SIGINT, SIGTERM and SIGUSR1 (on a thread of their own), calling
+    /// `on_signal` with each request (a repeat within [`REPEAT_WINDOW`] is none).
+    ///
+    /// # Errors
+    /// The signals cannot be received on this system ([`Error::Unsupported`]).
+    pub fn install(on_signal: impl Fn(&SignalEvent) + Send + 'static) -> Result<Self> {
         let requested = Arc::new(AtomicBool::new(false));
         let signal = Arc::new(AtomicUsize::new(0));
         let position = Arc::new(RunPosition::default());
         #[cfg(unix)]
         {
             use signal_hook::consts::{SIGINT, SIGTERM, SIGUSR1};
-            let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGUSR1])?;
+            let refused =
+                |e: std::io::Error| Error::unsupported("receiving SIGINT, SIGTERM and SIGUSR1", e.to_string());
+            let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGUSR1]).map_err(refused)?;
             let (requested, signal, position) = (Arc::clone(&requested), Arc::clone(&signal), Arc::clone(&position));
-            std::thread::Builder::new().name("stop-signals".into()).spawn(move || {
-                let mut first = None;
-                for sig in signals.forever() {
-                    let now = Instant::now();
-                    let name = signal_name(sig as usize);
-                    match arrival(first, now) {
-                        Arrival::First => {
-                            first = Some(now);
-                            signal.store(sig as usize, Ordering::SeqCst);
-                            requested.store(true, Ordering::SeqCst);
-                            eprintln!(
-                                "{name}: stopping after the current step, with a checkpoint \
-                                 (a second signal, a second or more from now, stops at once)"
-                            );
-                        }
-                        Arrival::Repeat => {}
-                        Arrival::Again => {
-                            eprintln!("{name} again: stopped at once; {}", position.dropped());
-                            std::process::exit(128 + sig);
+            std::thread::Builder::new()
+                .name("stop-signals".into())
+                .spawn(move || {
+                    let mut first = None;
+                    for sig in signals.forever() {
+                        let now = Instant::now();
+                        let name = signal_name(sig as usize);
+                        match arrival(first, now) {
+                            Arrival::First => {
+                                first = Some(now);
+                                signal.store(sig as usize, Ordering::SeqCst);
+                                requested.store(true, Ordering::SeqCst);
+                                on_signal(&SignalEvent::Stopping { signal: name });
+                            }
+                            Arrival::Repeat => {}
+                            Arrival::Again => on_signal(&SignalEvent::StopNow {
+                                signal: name,
+                                dropped: position.dropped(),
+                                status: 128 + sig,
+                            }),
                         }
                     }
-                }
-            })?;
+                })
+                .map_err(refused)?;
         }
+        #[cfg(not(unix))]
+        drop(on_signal);
         Ok(Self { requested, signal, position })
     }
 
@@ -189,13 +227,14 @@ impl StopSignals {
         signal_name(self.signal.load(Ordering::SeqCst))
     }
 
-    /// `128 + signal`: 130 for SIGINT, 143 for SIGTERM, 138 for SIGUSR1.
-    pub fn exit_code(&self) -> ExitCode {
+    /// The exit status of a run the signal stopped, `128 + signal`: 130 for SIGINT, 143 for
+    /// SIGTERM, 138 for SIGUSR1.
+    pub fn exit_status(&self) -> u8 {
         let signal = match self.signal.load(Ordering::SeqCst) {
             0 => 2,
             s => s,
         };
-        ExitCode::from(128 + signal as u8)
+        128 + signal as u8
     }
 }
 
@@ -235,5 +274,19 @@ mod tests {
         assert!(position.dropped().starts_with("dropped steps 41..43"), "{}", position.dropped());
         position.ended();
         assert_eq!(position.dropped(), "no training step was in progress");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_signal_sets_the_flag_and_is_reported() {
+        use signal_hook::consts::SIGUSR1;
+        let (sender, received) = std::sync::mpsc::channel();
+        let stop = StopSignals::install(move |event| sender.send(event.clone()).unwrap()).unwrap();
+        assert!(!stop.requested());
+        signal_hook::low_level::raise(SIGUSR1).unwrap();
+        let event = received.recv_timeout(Duration::from_secs(60)).unwrap();
+        assert_eq!(event, SignalEvent::Stopping { signal: "SIGUSR1" });
+        assert!(stop.requested() && stop.flag().load(Ordering::SeqCst));
+        assert_eq!((stop.name(), stop.exit_status()), ("SIGUSR1", 138));
     }
 }
