@@ -12,10 +12,11 @@
 use std::path::PathBuf;
 
 use dgstereo_core::default_device;
+use dgstereo_core::tensor::{max_abs_diff, to_vec};
 use dgstereo_costvolume::CorrelationImplementation;
-use dgstereo_model::checkpoint_config::{self, OfficialPreset, config_from_keys};
+use dgstereo_model::checkpoint_config::{self, OfficialPreset, config_from_keys, model_from_keys};
 use dgstereo_model::verify_igev::{DISPARITY_TOLERANCE, verify_igev};
-use dgstereo_model::{ForwardOptions, InitialDisparity};
+use dgstereo_model::{ForwardOptions, InitialDisparity, RaftStereo, checkpoint, padded_training_disparities};
 use dgstereo_suite::shared_dir_for_test;
 
 #[path = "support/official_pth.rs"]
@@ -111,4 +112,55 @@ fn an_official_igev_pth_file_loads_and_gives_the_reference_disparity() {
     let alt = ForwardOptions { implementation: Some(CorrelationImplementation::Alt), ..Default::default() };
     let error = golden.disparity_error(&model, 4, alt, "disparity.iter3");
     assert!(error <= DISPARITY_TOLERANCE, "with the on-the-fly correlation the model is off by {error} px");
+}
+
+/// A training pass also returns the official `init_disp`: the soft-argmin start upsampled by the
+/// initial superpixel heads (`spx_4`, `spx_2`, `spx`), which IGEV-Stereo's loss supervises. Its
+/// iterations are the inference pass's, and a start that is not the soft-argmin gives none.
+#[test]
+fn a_training_pass_returns_the_official_initial_disparity() {
+    let Some(reference) = golden("a_training_pass_returns_the_official_initial_disparity") else { return };
+    let golden = SeededGolden::open(&reference);
+    let config = config_from_keys(&golden.keys, &default_device()).unwrap_or_else(|e| panic!("{e}")).model;
+    let (left, right) = (golden.tensor("input.left"), golden.tensor("input.right"));
+    let train =
+        |model: &RaftStereo| padded_training_disparities(model, &config, left.clone(), right.clone(), None, 4).unwrap();
+    let mut model = golden.model();
+    let training = train(&model);
+    let initial = training.initial.clone().expect("IGEV-Stereo's training pass gives its initial disparity");
+    assert_eq!(initial.dims(), [1, 1, 96, 128]);
+    let error = max_abs_diff(initial, golden.tensor("disparity.init"));
+    assert!(error <= DISPARITY_TOLERANCE, "the initial disparity is off by {error} px");
+    assert_eq!(training.iterations.len(), 4);
+    for (k, disparity) in training.iterations.iter().enumerate() {
+        let error = max_abs_diff(disparity.clone(), golden.tensor(&format!("disparity.iter{k}")));
+        assert!(error <= DISPARITY_TOLERANCE, "iteration {k} is off by {error} px");
+    }
+    let inference = model.forward_flow(left.clone(), right.clone(), None, 4, Default::default()).unwrap();
+    assert!(inference.initial_flow_up.is_none(), "inference does not upsample the start");
+    let last = to_vec(inference.flow_up.last().unwrap().clone().neg());
+    assert_eq!(last, to_vec(training.iterations[3].clone()), "the training pass changes the iterations");
+    model.initial_disparity = InitialDisparity::Zero {};
+    assert!(train(&model).initial.is_none());
+}
+
+/// Our own safetensors file of an IGEV-Stereo network (what training writes: `model.safetensors`,
+/// checkpoints) keeps the pyramid encoders' keys (`feature.*`, `stem_2.*`) and loads back into a
+/// fresh network, giving the same disparity bit for bit.
+#[test]
+fn an_igev_safetensors_file_round_trips() {
+    let Some(reference) = golden("an_igev_safetensors_file_round_trips") else { return };
+    let golden = SeededGolden::open(&reference);
+    let model = golden.model();
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("igev.safetensors");
+    checkpoint::save_safetensors(&model, &file, &[]).unwrap();
+    let (_, fresh) = model_from_keys(&golden.keys, &default_device()).unwrap();
+    let loaded = checkpoint::load_safetensors(fresh, &file).unwrap_or_else(|e| panic!("{e}"));
+    let run = |m: &RaftStereo| {
+        let out =
+            m.forward_flow(golden.tensor("input.left"), golden.tensor("input.right"), None, 2, Default::default());
+        to_vec(out.unwrap().flow_up.last().unwrap().clone())
+    };
+    assert_eq!(run(&model), run(&loaded));
 }

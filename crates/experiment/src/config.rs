@@ -110,7 +110,8 @@ impl ExperimentConfig {
     }
 
     /// A depth prior needs a consumer and fusion or guidance needs a prior; training crops fit
-    /// the network's output grid.
+    /// the network's output grid; pretrained weights need the network they load into, and a loss
+    /// on the initial disparity a network that gives one.
     fn combination_problems(&self) -> Vec<Problem> {
         let mut problems = Vec::new();
         // Unpadded, the network's full-resolution output is the crop rounded up to a multiple of
@@ -128,6 +129,17 @@ impl ExperimentConfig {
             let reason =
                 "the model has no monocular network to load into: set model.monocular (kind = \"depth-anything-v2\")";
             problems.push(Problem::new("train.monocular_init", reason));
+        }
+        if self.train.feature_init.is_some() && !self.model.has_mobilenet_features() {
+            let reason = "the model has no MobileNetV2 feature network to load into: set \
+                          model.encoder.layout = \"mobilenet-pyramid\" (IGEV-Stereo)";
+            problems.push(Problem::new("train.feature_init", reason));
+        }
+        if self.loss.needs_initial_disparity() && !self.model.outputs_initial_disparity() {
+            let reason = "supervises the initial disparity the network upsamples itself, and this one has none: \
+                          only model.initial_disparity kind = \"soft-argmin\" with model.updater.upsampling = \
+                          \"superpixel\" (IGEV-Stereo) gives one";
+            problems.push(Problem::new("loss.initial_disparity", reason));
         }
         let gives = self.prior.gives_prior();
         if let Err(Error::Config(problem)) = self.model.check_prior(gives) {

@@ -13,8 +13,9 @@ use toml::{Table, Value};
 
 /// The keys that hold paths, as dotted keys where `[]` stands for every element of an array of
 /// tables; the prior's keys hold at every depth of a cache's `inner` provider too.
-pub const PATH_KEYS: [&str; 7] = [
+pub const PATH_KEYS: [&str; 8] = [
     "train.init",
+    "train.feature_init",
     "prior.weights",
     "prior.dir",
     "data.sources[].root",

@@ -56,7 +56,8 @@ fn combination() -> impl Strategy<Value = Combination> {
         (0.8f64..0.95).prop_map(|gamma| LossConfig::SequenceL1 {
             gamma,
             max_disparity: 700.0,
-            gamma_adjustment: Default::default()
+            gamma_adjustment: Default::default(),
+            initial_disparity: Default::default(),
         }),
         (0.1f64..3.0).prop_map(|tau| LossConfig::EdgeAware { tau, gamma: 0.9, max_disparity: 700.0 }),
     ];

@@ -5,7 +5,7 @@ use dgstereo_core::Result;
 
 use crate::mask::{edge_mask, sanitized, supervised_mask};
 use crate::sequence::{check_inputs, sequence_weights, weighted_sum};
-use crate::{DisparityLoss, LossTarget, LossTerms};
+use crate::{DisparityLoss, LossTarget, LossTerms, Predictions};
 
 /// Edge-aware loss suppression (the paper's EALS).
 ///
@@ -22,7 +22,8 @@ use crate::{DisparityLoss, LossTarget, LossTerms};
 ///
 /// `L_k` divides by every pixel of the batch (`B` images of `H x W`), not by the supervised count:
 /// the per-image `sum / (H * W)` of the paper, averaged over the batch's images. `gamma` is used as
-/// given (no RAFT-Stereo `15/(N-1)` adjustment), so the last prediction has weight 1.
+/// given (no RAFT-Stereo `15/(N-1)` adjustment), so the last prediction has weight 1. An initial
+/// disparity among the predictions is not supervised.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EdgeAwareLoss {
     /// Largest `|D_bili - D_near|` still supervised.
@@ -49,7 +50,9 @@ impl DisparityLoss for EdgeAwareLoss {
     /// # Shapes
     /// - `predictions`: each `[N, 1, H, W]`
     /// - output: `[1]`
-    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Result<Tensor<1>> {
+    fn loss<'a>(&self, predictions: impl Into<Predictions<'a>>, target: &LossTarget) -> Result<Tensor<1>> {
+        let predictions: Predictions<'_> = predictions.into();
+        let predictions = predictions.iterations;
         check_inputs(predictions, target)?;
         let mask = self.mask(target);
         let gt = sanitized(target.disparity_bilinear.clone(), mask.clone().greater_elem(0.5));
@@ -60,7 +63,9 @@ impl DisparityLoss for EdgeAwareLoss {
     }
 
     /// The sum over the supervised pixels and the count of all pixels (`B * H * W`).
-    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Result<LossTerms> {
+    fn terms<'a>(&self, predictions: impl Into<Predictions<'a>>, target: &LossTarget) -> Result<LossTerms> {
+        let predictions: Predictions<'_> = predictions.into();
+        let predictions = predictions.iterations;
         check_inputs(predictions, target)?;
         let mask = self.mask(target);
         let gt = sanitized(target.disparity_bilinear.clone(), mask.clone().greater_elem(0.5));

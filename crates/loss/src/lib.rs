@@ -7,10 +7,15 @@
 //! - `sequence-l1` ([`SequenceL1Loss`]): RAFT-Stereo's loss, mean L1 over the valid pixels,
 //!   weights `gamma'^(N-k)` with `gamma' = gamma^(15/(N-1))`, or with `gamma_adjustment =
 //!   "defom-stereo"` DEFOM-Stereo's `gamma'^(N-k+1)` with `gamma' = gamma^(15/N)`
-//!   ([`GammaAdjustment`]);
+//!   ([`GammaAdjustment`]); with `initial_disparity = "smooth-l1"` IGEV-Stereo's, which adds the
+//!   smooth-L1 mean of the network's initial disparity ([`InitialDisparityTerm`]);
 //! - `edge-aware` ([`EdgeAwareLoss`]): the paper's EALS, which additionally drops pixels where the
 //!   bilinearly and nearest-resized ground truths disagree by more than `tau` ([`edge_mask`]),
 //!   normalises each term by the full pixel count and weights it `gamma^(N-k)`.
+//!
+//! A loss reads [`Predictions`]: every iteration's disparity and, from a network that has one
+//! (IGEV-Stereo), the initial disparity at full resolution. A slice of disparities converts into
+//! predictions without an initial one.
 //!
 //! In both, ground truth that is invalid (`valid < 0.5`), at or above `max_disparity` in
 //! magnitude, or not finite is excluded, and cannot leak NaN into the loss or its gradient.
@@ -21,6 +26,7 @@
 //! kind = "edge-aware"      # or "sequence-l1" (default)
 //! tau = 0.9                # edge-aware only
 //! # gamma_adjustment = "defom-stereo"   # sequence-l1 only; "raft-stereo" by default
+//! # initial_disparity = "smooth-l1"      # sequence-l1 only; "none" by default
 //! gamma = 0.9
 //! max_disparity = 700.0
 //! ```
@@ -31,10 +37,12 @@
 #![deny(missing_docs)]
 
 pub mod edge_aware;
+pub mod initial;
 pub mod mask;
 pub mod sequence;
 
 pub use edge_aware::EdgeAwareLoss;
+pub use initial::{InitialDisparityTerm, smooth_l1};
 pub use mask::{edge_mask, supervised_mask};
 pub use sequence::{GammaAdjustment, SequenceL1Loss, check_inputs, sequence_weights};
 
@@ -56,6 +64,40 @@ pub struct LossTarget {
     pub valid: Tensor<4>,
 }
 
+/// What a network predicted, as a loss reads it.
+///
+/// # Shapes
+/// All `[N, 1, H, W]`, the ground truth's: positive disparity.
+#[derive(Debug, Clone, Copy)]
+pub struct Predictions<'a> {
+    /// The disparity after each iteration, first first.
+    pub iterations: &'a [Tensor<4>],
+    /// The disparity the loop started from, upsampled to full resolution by the network itself
+    /// (IGEV-Stereo's soft-argmin start); `None` from a network without one.
+    pub initial: Option<&'a Tensor<4>>,
+}
+
+impl<'a> From<&'a [Tensor<4>]> for Predictions<'a> {
+    /// The iterations' disparities without an initial one.
+    fn from(iterations: &'a [Tensor<4>]) -> Self {
+        Self { iterations, initial: None }
+    }
+}
+
+impl<'a> From<&'a Vec<Tensor<4>>> for Predictions<'a> {
+    /// The iterations' disparities without an initial one.
+    fn from(iterations: &'a Vec<Tensor<4>>) -> Self {
+        Self { iterations, initial: None }
+    }
+}
+
+impl<'a, const N: usize> From<&'a [Tensor<4>; N]> for Predictions<'a> {
+    /// The iterations' disparities without an initial one.
+    fn from(iterations: &'a [Tensor<4>; N]) -> Self {
+        Self { iterations, initial: None }
+    }
+}
+
 /// A loss split into a sum and the count it is divided by, both additive over the batch's
 /// images.
 ///
@@ -74,13 +116,24 @@ pub struct LossTerms {
 /// The stage trait.
 ///
 /// Both methods fail with [`dgstereo_core::Error::Shape`] when there is no prediction or a
-/// prediction's shape is not the ground truth's ([`check_inputs`]).
+/// prediction's shape is not the ground truth's ([`check_inputs`]), and with
+/// [`dgstereo_core::Error::Config`] when the loss supervises an initial disparity the
+/// predictions lack ([`InitialDisparityTerm::input`]).
 pub trait DisparityLoss {
-    /// The scalar loss of `predictions` (one `[N, 1, H, W]` positive disparity per iteration).
-    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> dgstereo_core::Result<Tensor<1>>;
+    /// The scalar loss of `predictions` ([`Predictions`], or a slice of one `[N, 1, H, W]`
+    /// positive disparity per iteration).
+    fn loss<'a>(
+        &self,
+        predictions: impl Into<Predictions<'a>>,
+        target: &LossTarget,
+    ) -> dgstereo_core::Result<Tensor<1>>;
 
     /// The same loss as [`LossTerms`]: `loss` equals `sum / max(count, 1)` up to rounding.
-    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> dgstereo_core::Result<LossTerms>;
+    fn terms<'a>(
+        &self,
+        predictions: impl Into<Predictions<'a>>,
+        target: &LossTarget,
+    ) -> dgstereo_core::Result<LossTerms>;
 }
 
 /// Which loss an experiment uses.
@@ -99,6 +152,10 @@ pub enum LossConfig {
         /// DEFOM-Stereo's.
         #[serde(default)]
         gamma_adjustment: GammaAdjustment,
+        /// Whether the network's initial disparity is supervised too: not at all (default) or
+        /// IGEV-Stereo's smooth-L1 term.
+        #[serde(default)]
+        initial_disparity: InitialDisparityTerm,
     },
     /// Edge-aware loss suppression ([`EdgeAwareLoss`]).
     EdgeAware {
@@ -120,6 +177,8 @@ pub const DEFAULT_GAMMA: f64 = 0.9;
 pub const DEFAULT_MAX_DISPARITY: f64 = 700.0;
 /// Default EALS threshold.
 pub const DEFAULT_TAU: f64 = 0.9;
+/// IGEV-Stereo's largest supervised disparity (`--max_disp`).
+pub const IGEV_MAX_DISPARITY: f64 = 192.0;
 
 fn default_gamma() -> f64 {
     DEFAULT_GAMMA
@@ -137,6 +196,7 @@ impl Default for LossConfig {
             gamma: DEFAULT_GAMMA,
             max_disparity: DEFAULT_MAX_DISPARITY,
             gamma_adjustment: GammaAdjustment::RaftStereo,
+            initial_disparity: InitialDisparityTerm::None,
         }
     }
 }
@@ -145,6 +205,23 @@ impl LossConfig {
     /// EALS with the paper's defaults (`tau = 0.9`, `gamma = 0.9`, `max_disparity = 700`).
     pub fn edge_aware() -> Self {
         Self::EdgeAware { tau: DEFAULT_TAU, gamma: DEFAULT_GAMMA, max_disparity: DEFAULT_MAX_DISPARITY }
+    }
+
+    /// IGEV-Stereo's `sequence_loss` (`train_stereo.py`): RAFT-Stereo's weights with `gamma =
+    /// 0.9`, ground truth at or above `max_disp` = 192 unsupervised, and the smooth-L1 term of the
+    /// initial disparity.
+    pub fn igev_stereo() -> Self {
+        Self::SequenceL1 {
+            gamma: DEFAULT_GAMMA,
+            max_disparity: IGEV_MAX_DISPARITY,
+            gamma_adjustment: GammaAdjustment::RaftStereo,
+            initial_disparity: InitialDisparityTerm::SmoothL1,
+        }
+    }
+
+    /// Whether the loss reads [`Predictions::initial`], the network's initial disparity.
+    pub fn needs_initial_disparity(&self) -> bool {
+        matches!(self, Self::SequenceL1 { initial_disparity, .. } if initial_disparity.needs_initial())
     }
 
     /// Whether the loss reads [`LossTarget::disparity_nearest`] (the data pipeline may then skip
@@ -200,10 +277,15 @@ impl LossConfig {
 }
 
 impl DisparityLoss for LossConfig {
-    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> dgstereo_core::Result<Tensor<1>> {
+    fn loss<'a>(
+        &self,
+        predictions: impl Into<Predictions<'a>>,
+        target: &LossTarget,
+    ) -> dgstereo_core::Result<Tensor<1>> {
         match *self {
-            Self::SequenceL1 { gamma, max_disparity, gamma_adjustment } => {
-                SequenceL1Loss { gamma, max_disparity, adjustment: gamma_adjustment }.loss(predictions, target)
+            Self::SequenceL1 { gamma, max_disparity, gamma_adjustment, initial_disparity } => {
+                SequenceL1Loss { gamma, max_disparity, adjustment: gamma_adjustment, initial: initial_disparity }
+                    .loss(predictions, target)
             }
             Self::EdgeAware { tau, gamma, max_disparity } => {
                 EdgeAwareLoss { tau, gamma, max_disparity }.loss(predictions, target)
@@ -211,10 +293,15 @@ impl DisparityLoss for LossConfig {
         }
     }
 
-    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> dgstereo_core::Result<LossTerms> {
+    fn terms<'a>(
+        &self,
+        predictions: impl Into<Predictions<'a>>,
+        target: &LossTarget,
+    ) -> dgstereo_core::Result<LossTerms> {
         match *self {
-            Self::SequenceL1 { gamma, max_disparity, gamma_adjustment } => {
-                SequenceL1Loss { gamma, max_disparity, adjustment: gamma_adjustment }.terms(predictions, target)
+            Self::SequenceL1 { gamma, max_disparity, gamma_adjustment, initial_disparity } => {
+                SequenceL1Loss { gamma, max_disparity, adjustment: gamma_adjustment, initial: initial_disparity }
+                    .terms(predictions, target)
             }
             Self::EdgeAware { tau, gamma, max_disparity } => {
                 EdgeAwareLoss { tau, gamma, max_disparity }.terms(predictions, target)

@@ -4,8 +4,9 @@ use burn::tensor::Tensor;
 use dgstereo_core::{Error, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::initial::{InitialDisparityTerm, smooth_l1};
 use crate::mask::{sanitized, supervised_mask};
-use crate::{DisparityLoss, LossTarget, LossTerms};
+use crate::{DisparityLoss, LossTarget, LossTerms, Predictions};
 
 /// The per-iteration weights `w_k = gamma^(N-k)`, `k = 1..N`: the last prediction gets 1.
 ///
@@ -101,8 +102,9 @@ pub(crate) fn weighted_sum(
 /// RAFT-Stereo's loss: `sum_k w_k * mean_{supervised} |D_k - D_gt|` with the weights of its
 /// [`GammaAdjustment`] (RAFT-Stereo's `gamma'^(N-k)`, `gamma' = gamma^(15/(N-1))`, or
 /// DEFOM-Stereo's), the mean over the supervised pixels of the whole batch
-/// (`valid >= 0.5`, `|D_gt| < max_disparity`) and `D_gt` the bilinear ground truth.
-/// A batch without supervised pixels gives 0.
+/// (`valid >= 0.5`, `|D_gt| < max_disparity`) and `D_gt` the bilinear ground truth; with
+/// [`InitialDisparityTerm::SmoothL1`] IGEV-Stereo's, plus `mean_{supervised} smooth_l1(D_0 - D_gt)`
+/// of the initial disparity `D_0`. A batch without supervised pixels gives 0.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SequenceL1Loss {
     /// Base decay, adjusted to the iteration count.
@@ -111,37 +113,59 @@ pub struct SequenceL1Loss {
     pub max_disparity: f64,
     /// How `gamma` is adjusted to the number of predictions.
     pub adjustment: GammaAdjustment,
+    /// Whether the initial disparity is supervised too.
+    pub initial: InitialDisparityTerm,
+}
+
+impl SequenceL1Loss {
+    /// The ground truth with unsupervised pixels zeroed and the 0/1 map of the supervised
+    /// pixels (`valid >= 0.5`, `|D_gt| < max_disparity`), both `[N, 1, H, W]`.
+    fn supervision(&self, target: &LossTarget) -> (Tensor<4>, Tensor<4>) {
+        let gt = target.disparity_bilinear.clone();
+        let supervised = supervised_mask(gt.clone(), target.valid.clone(), self.max_disparity);
+        (sanitized(gt, supervised.clone()), supervised.float())
+    }
+
+    /// `initial_term + sum_k w_k * term(D_k)`, where `term` turns a per-pixel error map into
+    /// the value this form adds up (a sum, or a sum over the count), for predictions that passed
+    /// [`check_inputs`]; the initial disparity is checked here ([`InitialDisparityTerm::input`]).
+    fn combined(
+        &self,
+        predictions: Predictions<'_>,
+        target: &LossTarget,
+        term: impl Fn(Tensor<4>, &Tensor<4>) -> Tensor<1>,
+    ) -> Result<Tensor<1>> {
+        let initial = self.initial.input(predictions.initial, target.disparity_bilinear.dims())?;
+        let (gt, supervised) = self.supervision(target);
+        let weights = self.adjustment.weights(predictions.iterations.len(), self.gamma);
+        let sequence = weighted_sum(predictions.iterations, &weights, |prediction| {
+            term((prediction.clone() - gt.clone()).abs(), &supervised)
+        })?;
+        Ok(match initial {
+            // IGEV-Stereo's: the initial disparity's term plus the iterations'.
+            Some(initial) => term(smooth_l1(initial.clone() - gt), &supervised) + sequence,
+            None => sequence,
+        })
+    }
 }
 
 impl DisparityLoss for SequenceL1Loss {
     /// # Shapes
     /// - `predictions`: each `[N, 1, H, W]`
     /// - output: `[1]`
-    fn loss(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Result<Tensor<1>> {
-        check_inputs(predictions, target)?;
-        let gt = target.disparity_bilinear.clone();
-        let supervised = supervised_mask(gt.clone(), target.valid.clone(), self.max_disparity);
-        let gt = sanitized(gt, supervised.clone());
-        let supervised = supervised.float();
-        let count = supervised.clone().sum().clamp_min(1.0);
-        let weights = self.adjustment.weights(predictions.len(), self.gamma);
-        weighted_sum(predictions, &weights, |prediction| {
-            ((prediction.clone() - gt.clone()).abs() * supervised.clone()).sum() / count.clone()
-        })
+    fn loss<'a>(&self, predictions: impl Into<Predictions<'a>>, target: &LossTarget) -> Result<Tensor<1>> {
+        let predictions: Predictions<'_> = predictions.into();
+        check_inputs(predictions.iterations, target)?;
+        let count = self.supervision(target).1.sum().clamp_min(1.0);
+        self.combined(predictions, target, |error, supervised| (error * supervised.clone()).sum() / count.clone())
     }
 
     /// The sum over the supervised pixels and their count.
-    fn terms(&self, predictions: &[Tensor<4>], target: &LossTarget) -> Result<LossTerms> {
-        check_inputs(predictions, target)?;
-        let gt = target.disparity_bilinear.clone();
-        let supervised = supervised_mask(gt.clone(), target.valid.clone(), self.max_disparity);
-        let gt = sanitized(gt, supervised.clone());
-        let supervised = supervised.float();
-        let count = f64::from(dgstereo_core::tensor::to_vec(supervised.clone().sum())[0]);
-        let weights = self.adjustment.weights(predictions.len(), self.gamma);
-        let sum = weighted_sum(predictions, &weights, |prediction| {
-            ((prediction.clone() - gt.clone()).abs() * supervised.clone()).sum()
-        })?;
+    fn terms<'a>(&self, predictions: impl Into<Predictions<'a>>, target: &LossTarget) -> Result<LossTerms> {
+        let predictions: Predictions<'_> = predictions.into();
+        check_inputs(predictions.iterations, target)?;
+        let sum = self.combined(predictions, target, |error, supervised| (error * supervised.clone()).sum())?;
+        let count = f64::from(dgstereo_core::tensor::to_vec(self.supervision(target).1.sum())[0]);
         Ok(LossTerms { sum, count })
     }
 }

@@ -4,7 +4,8 @@ use burn::tensor::{Device, Tensor};
 use dgstereo_core::default_device;
 use dgstereo_core::tensor::{from_vec, to_vec};
 use dgstereo_loss::{
-    DisparityLoss, EdgeAwareLoss, GammaAdjustment, LossConfig, LossTarget, SequenceL1Loss, edge_mask, sequence_weights,
+    DisparityLoss, EdgeAwareLoss, GammaAdjustment, InitialDisparityTerm, LossConfig, LossTarget, SequenceL1Loss,
+    edge_mask, sequence_weights,
 };
 use proptest::prelude::*;
 
@@ -74,7 +75,12 @@ fn eals_averages_over_the_batch_images() {
 #[test]
 fn sequence_l1_matches_hand_computation() {
     let device = default_device();
-    let loss = SequenceL1Loss { gamma: 0.9, max_disparity: 700.0, adjustment: GammaAdjustment::RaftStereo };
+    let loss = SequenceL1Loss {
+        gamma: 0.9,
+        max_disparity: 700.0,
+        adjustment: GammaAdjustment::RaftStereo,
+        initial: InitialDisparityTerm::None,
+    };
     // Supervised: (0,0), (0,1), (0,2), (1,1) with ground truth 1, 2, 3, 5.
     // L_1 = 11 / 4, L_2 = 1; weights 0.9^15 and 1.
     let value = scalar(loss.loss(&example_predictions(&device), &example(&device)).unwrap());
@@ -115,7 +121,12 @@ fn defom_weights_are_the_official_ones() {
 #[test]
 fn sequence_l1_with_defom_adjustment_matches_hand_computation() {
     let device = default_device();
-    let loss = SequenceL1Loss { gamma: 0.9, max_disparity: 700.0, adjustment: GammaAdjustment::DefomStereo };
+    let loss = SequenceL1Loss {
+        gamma: 0.9,
+        max_disparity: 700.0,
+        adjustment: GammaAdjustment::DefomStereo,
+        initial: InitialDisparityTerm::None,
+    };
     // L_1 = 11 / 4, L_2 = 1 (as above); N = 2: gamma' = 0.9^7.5, weights 0.9^15 and 0.9^7.5.
     let value = scalar(loss.loss(&example_predictions(&device), &example(&device)).unwrap());
     let expected = 0.9f64.powi(15) * 2.75 + 0.9f64.powf(7.5);
@@ -208,7 +219,12 @@ fn configs_read_from_toml() {
     let config: LossConfig = toml::from_str("kind = \"sequence-l1\"\ngamma = 0.8\nmax_disparity = 192.0").unwrap();
     assert_eq!(
         config,
-        LossConfig::SequenceL1 { gamma: 0.8, max_disparity: 192.0, gamma_adjustment: GammaAdjustment::RaftStereo }
+        LossConfig::SequenceL1 {
+            gamma: 0.8,
+            max_disparity: 192.0,
+            gamma_adjustment: GammaAdjustment::RaftStereo,
+            initial_disparity: InitialDisparityTerm::None,
+        }
     );
     assert!(!config.needs_nearest());
     assert!(toml::from_str::<LossConfig>("kind = \"sequence-l1\"\ntau = 0.5").is_err());
@@ -289,7 +305,8 @@ fn invalid_values_are_keyed_problems() {
         keys(LossConfig::SequenceL1 {
             gamma: 0.0,
             max_disparity: f64::NAN,
-            gamma_adjustment: GammaAdjustment::RaftStereo
+            gamma_adjustment: GammaAdjustment::RaftStereo,
+            initial_disparity: InitialDisparityTerm::SmoothL1,
         }),
         ["gamma", "max_disparity"]
     );

@@ -5,7 +5,9 @@
 use burn::tensor::{Distribution, Tensor};
 use dgstereo_core::tensor::to_vec;
 use dgstereo_core::{Error, default_device};
-use dgstereo_loss::{DisparityLoss, EdgeAwareLoss, GammaAdjustment, LossConfig, LossTarget, SequenceL1Loss};
+use dgstereo_loss::{
+    DisparityLoss, EdgeAwareLoss, GammaAdjustment, InitialDisparityTerm, LossConfig, LossTarget, SequenceL1Loss,
+};
 
 const SHAPE: [usize; 4] = [2, 1, 6, 9];
 
@@ -36,7 +38,12 @@ fn conforms<L: DisparityLoss>(loss: &L, name: &str) {
 
 #[test]
 fn every_loss_keeps_the_stage_contract() {
-    let sequence = SequenceL1Loss { gamma: 0.9, max_disparity: 700.0, adjustment: GammaAdjustment::default() };
+    let sequence = SequenceL1Loss {
+        gamma: 0.9,
+        max_disparity: 700.0,
+        adjustment: GammaAdjustment::default(),
+        initial: InitialDisparityTerm::None,
+    };
     conforms(&sequence, "sequence-l1");
     conforms(&EdgeAwareLoss { tau: 0.9, gamma: 0.9, max_disparity: 700.0 }, "edge-aware");
     for config in LossConfig::variants() {

@@ -162,6 +162,19 @@ impl ModelConfig {
         Ok(())
     }
 
+    /// Whether the feature network is IGEV-Stereo's MobileNetV2 pyramid, whose trunk takes
+    /// timm's ImageNet weights (`train.feature_init`).
+    pub fn has_mobilenet_features(&self) -> bool {
+        self.encoder.layout == EncoderLayout::MobilenetPyramid
+    }
+
+    /// Whether a training pass returns the initial disparity at full resolution, for a loss to
+    /// supervise ([`crate::TrainingDisparities::initial`]): IGEV-Stereo's soft-argmin start,
+    /// which its superpixel heads upsample.
+    pub fn outputs_initial_disparity(&self) -> bool {
+        self.initial_disparity.needs_geometry() && self.updater.upsampling == UpsamplingKind::Superpixel
+    }
+
     /// The upsampling factor `2^n_downsample`.
     pub fn factor(&self) -> usize {
         1 << self.updater.n_downsample

@@ -81,12 +81,25 @@ impl StereoModel {
     }
 }
 
+/// What a training pass gives its loss ([`padded_training_disparities`]).
+///
+/// # Shapes
+/// - each disparity: `[N, 1, H, W]`, the input's size
+#[derive(Debug, Clone)]
+pub struct TrainingDisparities {
+    /// Positive disparity after every iteration, first first.
+    pub iterations: Vec<Tensor<4>>,
+    /// The positive disparity the loop started from, upsampled by the network itself (IGEV-Stereo's
+    /// `init_disp`); `None` for a network whose start is not upsampled (RAFT-Stereo's zero,
+    /// DEFOM-Stereo's scaled inverse depth, which its official loss does not supervise).
+    pub initial: Option<Tensor<4>>,
+}
+
 /// Runs `network` on inputs of any size: pads them (and the prior) by replicating the border to
 /// a multiple of [`ModelConfig::pad_divisor`], and returns positive disparity, cropped back, for
 /// every iteration kept (`options`: the cost volume, every iteration or the last, a probe; the
 /// initial flow is at the padded grid). Inputs are not checked: [`StereoModel::predict`] is the
-/// checked entry point; training calls this directly on batches it built itself, and the ONNX
-/// exporter records it.
+/// checked entry point; the ONNX exporter records this.
 ///
 /// # Errors
 /// As [`RaftStereo::forward_flow`]: the fusion needs the prior and `prior` is `None`.
@@ -103,10 +116,43 @@ pub fn padded_disparities(
     iters: usize,
     options: ForwardOptions<'_>,
 ) -> Result<Vec<Tensor<4>>> {
+    padded_pass(network, config, left, right, prior, iters, options).map(|d| d.iterations)
+}
+
+/// The training pass of `network` on a batch it built itself, of any size (padded as
+/// [`padded_disparities`] does): every iteration's disparity and the upsampled initial one.
+///
+/// # Errors
+/// As [`RaftStereo::forward_flow`].
+pub fn padded_training_disparities(
+    network: &RaftStereo,
+    config: &ModelConfig,
+    left: Tensor<4>,
+    right: Tensor<4>,
+    prior: Option<&DepthPrior>,
+    iters: usize,
+) -> Result<TrainingDisparities> {
+    let options = ForwardOptions { all_iterations: true, upsample_initial: true, ..ForwardOptions::default() };
+    padded_pass(network, config, left, right, prior, iters, options)
+}
+
+fn padded_pass(
+    network: &RaftStereo,
+    config: &ModelConfig,
+    left: Tensor<4>,
+    right: Tensor<4>,
+    prior: Option<&DepthPrior>,
+    iters: usize,
+    options: ForwardOptions<'_>,
+) -> Result<TrainingDisparities> {
     let [_, _, h, w] = left.dims();
     let padder = InputPadder::new(h, w, config.pad_divisor());
     let padded_prior =
         prior.map(|p| DepthPrior { left: padder.pad(p.left.clone()), right: padder.pad(p.right.clone()) });
     let out = network.forward_flow(padder.pad(left), padder.pad(right), padded_prior.as_ref(), iters, options)?;
-    Ok(out.flow_up.into_iter().map(|f| padder.unpad(f).neg()).collect())
+    let disparity = |flow: Tensor<4>| padder.unpad(flow).neg();
+    Ok(TrainingDisparities {
+        iterations: out.flow_up.into_iter().map(disparity).collect(),
+        initial: out.initial_flow_up.map(disparity),
+    })
 }

@@ -40,7 +40,7 @@ pub mod verify_defom;
 pub mod verify_igev;
 
 pub use config::{EncoderConfig, ModelConfig};
-pub use inference::{StereoModel, padded_disparities};
+pub use inference::{StereoModel, TrainingDisparities, padded_disparities, padded_training_disparities};
 pub use initial_disparity::InitialDisparity;
 pub use network::{FlowOutput, ForwardOptions, Probe, RaftStereo, Trace};
 /// The stage crates, re-exported so benchmarks and tools can drive single stages of a model

@@ -100,6 +100,9 @@ pub struct ForwardOptions<'a> {
     pub implementation: Option<CorrelationImplementation>,
     /// Upsample and return the flow after every iteration (training), not the last one only.
     pub all_iterations: bool,
+    /// Also return the loop's start upsampled by the network's own weights (training, for a
+    /// loss on it: IGEV-Stereo's soft-argmin start through its initial superpixel heads).
+    pub upsample_initial: bool,
     /// Where intermediate tensors are recorded, under the names of the reference activations
     /// (`fnet.left`, `context.hidden.0`, `iter.3.flow_up`, ...), and stages timed
     /// (`feature encoder`, `correlation lookup`, `GRU 1/4`, ...); [`Probe::none`] by default.
@@ -154,6 +157,10 @@ pub struct FlowOutput {
     pub flow_up: Vec<Tensor<4>>,
     /// x flow at the update grid after the last iteration.
     pub flow_lowres: Tensor<4>,
+    /// With [`ForwardOptions::upsample_initial`], the x flow the loop started from at full
+    /// resolution, where the network upsamples its start itself (IGEV-Stereo's `init_disp`);
+    /// `None` otherwise (RAFT-Stereo's zero, DEFOM-Stereo's scaled inverse depth).
+    pub initial_flow_up: Option<Tensor<4>>,
 }
 
 impl ModelConfig {
@@ -242,16 +249,17 @@ impl RaftStereo {
         iters: usize,
         options: ForwardOptions<'_>,
     ) -> dgstereo_core::Result<FlowOutput> {
-        let ForwardOptions { flow_init, implementation, all_iterations, mut probe } = options;
+        let ForwardOptions { flow_init, implementation, all_iterations, upsample_initial, mut probe } = options;
         let probe = &mut probe;
         let Encodings { fmap1, fmap2, mut hidden, gates, initial, pyramid } = self.encode(left, right, prior, probe)?;
         let implementation = implementation.unwrap_or(self.correlation.implementation);
-        let (corr_fn, initial) = match (&self.geometry, &pyramid) {
+        let (corr_fn, initial, initial_up) = match (&self.geometry, &pyramid) {
             (Some(geometry), Some(pyramid)) => {
                 let (corr_fn, logits) = self.geometry_volume(geometry, &pyramid.levels, fmap2, implementation, probe);
-                (corr_fn, self.geometry_initial(&logits, pyramid, probe)?.or(initial))
+                let start = self.geometry_initial(&logits, pyramid, upsample_initial, probe)?;
+                (corr_fn, start.state.or(initial), start.upsampled)
             }
-            _ => (self.correlation_volume(fmap1, fmap2, implementation, probe), initial),
+            _ => (self.correlation_volume(fmap1, fmap2, implementation, probe), initial, None),
         };
         let grid = self.update_grid(&hidden[0], prior, pyramid.map(|p| p.stem_2), probe)?;
         // The loop's state: the x flow, or a positive disparity (`MotionKind`), in f32.
@@ -305,7 +313,8 @@ impl RaftStereo {
                 flow_up.push(up);
             }
         }
-        Ok(FlowOutput { flow_up, flow_lowres: flow_of_state(self.motion, state) })
+        let initial_flow_up = initial_up.map(|disparity| disparity.neg());
+        Ok(FlowOutput { flow_up, flow_lowres: flow_of_state(self.motion, state), initial_flow_up })
     }
 
     /// Stage 2, the cost volume of `fmap1` against `fmap2` (`[N, C, H/f, W/f]`) by

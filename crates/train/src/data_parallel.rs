@@ -16,7 +16,8 @@ use burn::optim::GradientsParams;
 use dgstereo_collective::{Collective, agree};
 use dgstereo_core::{Error, Result};
 use dgstereo_eval::MetricSums;
-use dgstereo_loss::{DisparityLoss, LossTerms};
+use dgstereo_loss::{DisparityLoss, LossTerms, Predictions};
+use dgstereo_model::TrainingDisparities;
 use rayon::prelude::*;
 
 use crate::batch::{TensorBatch, to_tensors};
@@ -46,7 +47,7 @@ pub fn check_batch_divides(batch_size: usize, ranks: usize) -> Result<()> {
 
 /// What one rank computed of a step before the exchange.
 struct Shard {
-    predictions: Vec<burn::tensor::Tensor<4>>,
+    predictions: TrainingDisparities,
     loss_sum: burn::tensor::Tensor<1>,
     /// `[count, loss sum, valid pixels, absolute error, bad x5, d1]`.
     numbers: [f64; SHARD_NUMBERS],
@@ -123,7 +124,9 @@ impl Trainer {
         let backward_done = Instant::now();
         let (grads, exchange) = sum_gradients(&self.model, grads, ranks);
         if let Some(observe) = observe {
-            observe(StepInternals { model: &self.model, predictions: &shard.predictions, grads: &grads });
+            let predictions = &shard.predictions;
+            let (initial, predictions) = (predictions.initial.as_ref(), predictions.iterations.as_slice());
+            observe(StepInternals { model: &self.model, predictions, initial, grads: &grads });
         }
         self.last_exchange_bytes = exchange.bytes;
         let seconds = StepSeconds {
@@ -144,17 +147,18 @@ impl Trainer {
     fn shard(&self, batch: &TensorBatch, ranks: &dyn Collective) -> Result<Shard> {
         let step = self.step;
         let predictions = self.predictions(batch)?;
+        let read = Predictions { iterations: &predictions.iterations, initial: predictions.initial.as_ref() };
         let terms = if ranks.size() == 1 {
-            LossTerms { sum: self.parts.loss.loss(&predictions, &batch.target)?, count: 1.0 }
+            LossTerms { sum: self.parts.loss.loss(read, &batch.target)?, count: 1.0 }
         } else {
-            self.parts.loss.terms(&predictions, &batch.target)?
+            self.parts.loss.terms(read, &batch.target)?
         };
         let loss_sum = f64::from(dgstereo_core::tensor::to_vec(terms.sum.clone().detach())[0]);
         if !loss_sum.is_finite() {
             let what = format!("the loss ({loss_sum}; pairs: {})", batch.names.join(", "));
             return Err(Error::not_finite(what).context(stopping_at(step)));
         }
-        let last = predictions.last().expect("at least one iteration").clone().detach();
+        let last = predictions.iterations.last().expect("at least one iteration").clone().detach();
         let sums = batch_metrics(last, batch.target.disparity_bilinear.clone(), batch.target.valid.clone())?;
         Ok(Shard { predictions, loss_sum: terms.sum, numbers: sums_to_numbers(terms.count, loss_sum, &sums) })
     }

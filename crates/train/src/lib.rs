@@ -15,7 +15,10 @@
 //! that keep the last N.
 //! DEFOM-Stereo's recipe adds two keys: `train.monocular_init` loads Depth Anything V2 weights
 //! into the monocular network ([`monocular_init`]) and `train.frozen` keeps parameters out of
-//! training ([`frozen`]).
+//! training ([`frozen`]). IGEV-Stereo's adds `train.feature_init`, timm's ImageNet MobileNetV2 in
+//! the feature trunk ([`feature_init`]); [`start_weights`] loads what a fresh run starts from. Its
+//! loss reads the network's upsampled initial disparity beside the iterations' (the loss
+//! crate's `Predictions`, the model's `TrainingDisparities`).
 //! `train.ema_decay` adds a moving average of the weights ([`ema`]) that validation, checkpoints'
 //! model weights and the final model use. [`verify_step`] checks two steps against the official
 //! training loop. A study of many runs (scores, tables, the paper's layout) is the
@@ -39,6 +42,7 @@ pub mod checkpoint;
 pub mod clip;
 pub mod data_parallel;
 pub mod ema;
+pub mod feature_init;
 pub mod frozen;
 pub mod gradient_exchange;
 pub mod monocular_init;
@@ -50,6 +54,7 @@ pub mod run;
 pub mod run_identity;
 pub mod run_log;
 pub mod schedule;
+pub mod start_weights;
 pub mod step_timing;
 pub mod timed_steps;
 pub mod trainer;

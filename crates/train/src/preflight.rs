@@ -28,7 +28,8 @@ fn absolute(path: &std::path::Path) -> std::path::PathBuf {
 }
 
 /// Checks that every file and folder a run of `parts` scored on `benchmarks` reads is there:
-/// the training sources (listed, with ground truth), `train.init` and `train.monocular_init`, and each benchmark (its
+/// the training sources (listed, with ground truth), `train.init`, `train.monocular_init` and
+/// `train.feature_init`, and each benchmark (its
 /// folder holds pairs with ground truth, and every sample it scores passes
 /// [`SampleFiles::check_headers`](dgstereo_data::SampleFiles::check_headers)).
 ///
@@ -40,7 +41,10 @@ pub fn preflight(parts: &TrainParts, benchmarks: &[BenchmarkConfig]) -> Result<P
     TrainingData::new(&parts.data, &parts.train)?;
     // Weights names were resolved by the front end (`TrainParts::with_named_weights`).
     parts.check_named_weights_resolved()?;
-    for (key, weights) in [("train.init", &parts.train.init), ("train.monocular_init", &parts.train.monocular_init)] {
+    let t = &parts.train;
+    let weights =
+        [("train.init", &t.init), ("train.monocular_init", &t.monocular_init), ("train.feature_init", &t.feature_init)];
+    for (key, weights) in weights {
         if let Some(file) = weights
             && !file.is_file()
         {

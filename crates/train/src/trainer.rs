@@ -12,16 +12,16 @@ use dgstereo_data::DisparityMap;
 use dgstereo_eval::{MetricSums, ValidOptions, accumulate};
 use dgstereo_experiment::{ExperimentConfig, TrainingConfig, TrainingDataConfig};
 use dgstereo_loss::LossConfig;
-use dgstereo_model::{ModelConfig, RaftStereo};
+use dgstereo_model::{ModelConfig, RaftStereo, TrainingDisparities};
 use dgstereo_prior::{Prior, PriorConfig, PriorInput, PriorProvider};
 
 use crate::batch::{TensorBatch, TrainingData};
 use crate::clip::clip_global_norm;
 use crate::ema::Ema;
 use crate::frozen::freeze;
-use crate::monocular_init::load_monocular_init;
 use crate::params::materialize;
 use crate::schedule::OneCycleLr;
+use crate::start_weights::load_start_weights;
 use crate::step_timing::StepSeconds;
 
 /// Everything a run is made of: the experiment's parts and its resolved text
@@ -124,6 +124,9 @@ pub struct StepInternals<'a> {
     pub model: &'a RaftStereo,
     /// Positive disparity after every iteration, `[N, 1, H, W]` each.
     pub predictions: &'a [Tensor<4>],
+    /// The initial disparity the loss read, `[N, 1, H, W]` (IGEV-Stereo's upsampled start);
+    /// `None` for a network that gives none.
+    pub initial: Option<&'a Tensor<4>>,
     /// The gradients, before clipping.
     pub grads: &'a GradientsParams,
 }
@@ -261,37 +264,13 @@ pub fn batch_metrics(prediction: Tensor<4>, gt: Tensor<4>, valid: Tensor<4>) -> 
 }
 
 impl Trainer {
-    /// A fresh run: weights initialised from `train.seed` on `device`, then the monocular
-    /// network's from `train.monocular_init` and the network's from `train.init`, as given.
+    /// A fresh run: weights initialised from `train.seed` on `device`, then those the recipe
+    /// names ([`load_start_weights`]: `train.monocular_init`, `train.feature_init`, `train.init`).
     pub fn new(parts: TrainParts, device: &Device) -> Result<Self> {
         parts.validate()?;
         parts.check_named_weights_resolved()?;
         let model = init_model(&parts.model, device, Some(parts.train.seed))?;
-        let mut notices = Vec::new();
-        let model = match &parts.train.monocular_init {
-            Some(weights) => {
-                let (model, notice) = load_monocular_init(model, weights)?;
-                notices.push(notice);
-                model
-            }
-            None => model,
-        };
-        let model = match &parts.train.init {
-            Some(path) => {
-                let (model, missing) = dgstereo_model::checkpoint::load_weights(model, path, parts.train.init_strict)
-                    .map_err(|e| Error::config("train.init", e.to_string()))?;
-                if !missing.is_empty() {
-                    notices.push(format!(
-                        "train.init: {} parameter(s) not in {} keep their initialisation (e.g. {})",
-                        missing.len(),
-                        path.display(),
-                        missing.iter().take(3).cloned().collect::<Vec<_>>().join(", ")
-                    ));
-                }
-                model
-            }
-            None => model,
-        };
+        let (model, notices) = load_start_weights(model, &parts.train)?;
         let optimizer = adamw(&parts.train);
         let mut trainer = Self::with_model(parts, model, device, optimizer, 0)?;
         trainer.notices = notices;
@@ -355,17 +334,17 @@ impl Trainer {
         self.step_on_among(batch, &SingleProcess, observe)
     }
 
-    /// The batch's prior and the network's disparity after every training iteration.
-    pub(crate) fn predictions(&self, batch: &TensorBatch) -> Result<Vec<Tensor<4>>> {
+    /// The batch's prior and the network's training pass: the disparity after every training
+    /// iteration and, from a network that upsamples its start, the initial disparity.
+    pub(crate) fn predictions(&self, batch: &TensorBatch) -> Result<TrainingDisparities> {
         let prior = batch_prior(&self.prior, self.parts.model.needs_prior(), batch)?;
-        forward_disparities(
+        dgstereo_model::padded_training_disparities(
             &self.model,
             &self.parts.model,
             batch.left.clone(),
             batch.right.clone(),
             prior.as_ref(),
             self.parts.train.iters,
-            true,
         )
     }
 

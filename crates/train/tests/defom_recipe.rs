@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use dgstereo_core::default_device;
 use dgstereo_core::shared::shared_dir_for_test;
 use dgstereo_experiment::{ExperimentConfig, load};
-use dgstereo_loss::{GammaAdjustment, LossConfig};
+use dgstereo_loss::{GammaAdjustment, InitialDisparityTerm, LossConfig};
 use dgstereo_train::batch::{TrainingData, to_tensors};
 use dgstereo_train::checkpoint::{list_checkpoints, load_checkpoint};
 use dgstereo_train::run::{RunOptions, checkpoint_dir, train};
@@ -70,7 +70,12 @@ fn the_recipe_file_holds_the_official_defaults() {
     assert_eq!(t.frozen, ["monocular.pretrained", "monocular.depth_head"]);
     assert_eq!(
         config.loss,
-        LossConfig::SequenceL1 { gamma: 0.9, max_disparity: 700.0, gamma_adjustment: GammaAdjustment::DefomStereo }
+        LossConfig::SequenceL1 {
+            gamma: 0.9,
+            max_disparity: 700.0,
+            gamma_adjustment: GammaAdjustment::DefomStereo,
+            initial_disparity: InitialDisparityTerm::None,
+        }
     );
     assert_eq!(config.data.sources.len(), 6);
 }
@@ -85,11 +90,16 @@ fn a_step_leaves_the_frozen_network_bit_identical_while_the_rest_moves() {
     let before = common::weights(&trainer.inference_model());
     let pairs = TrainingData::new(&parts.data, &parts.train).unwrap().batch(0, 1).unwrap();
     let batch = to_tensors(&pairs, trainer.autodiff_device()).unwrap();
-    let mut predictions = 0;
-    let mut observe = |i: dgstereo_train::StepInternals<'_>| predictions = i.predictions.len();
+    let (mut predictions, mut initial) = (0, true);
+    let mut observe = |i: dgstereo_train::StepInternals<'_>| {
+        predictions = i.predictions.len();
+        initial = i.initial.is_some();
+    };
     trainer.step_on(&batch, Some(&mut observe)).unwrap();
-    // Every iteration is supervised, the two scale iterations included.
+    // Every iteration is supervised, the two scale iterations included; the scaled inverse depth
+    // the loop starts from is not handed to the loss (the official DEFOM loss does not read it).
     assert_eq!(predictions, 3);
+    assert!(!initial);
     let after = common::weights(&trainer.inference_model());
     assert!(identical_under(&before, &after, "monocular.pretrained."));
     assert!(identical_under(&before, &after, "monocular.depth_head."));

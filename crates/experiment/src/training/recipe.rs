@@ -60,6 +60,13 @@ pub struct TrainingConfig {
     /// which the file lacks, keeps its initialisation, and keys the network lacks are ignored.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub monocular_init: Option<PathBuf>,
+    /// timm's ImageNet `mobilenetv2_100` weights loaded into IGEV-Stereo's MobileNetV2 feature
+    /// trunk before `init` (the official `Feature`'s `pretrained=True`): a state dict in timm
+    /// 0.5.4's layout (`conv_stem`, `bn1`, `blocks.*`), `.pth` or `.safetensors`. Every tensor
+    /// of the trunk must be in the file; its head and last stage are ignored, the decoder keeps
+    /// its initialisation.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub feature_init: Option<PathBuf>,
     /// Module paths whose parameters do not train (no gradient, never changed by the
     /// optimiser, its weight decay included): each entry is a path prefix such as
     /// `monocular.pretrained`, and must name at least one parameter of the model.
@@ -95,6 +102,7 @@ impl Default for TrainingConfig {
             init: None,
             init_strict: true,
             monocular_init: None,
+            feature_init: None,
             frozen: Vec::new(),
             ema_decay: None,
         }
