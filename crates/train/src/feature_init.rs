@@ -6,7 +6,7 @@
 //! ImageNet checkpoint `mobilenetv2_100_ra-b33bc2c4.pth`, or `.safetensors`): `conv_stem`, `bn1`
 //! and `blocks.{stage}.{block}`. IGEV-Stereo regroups timm's stages (`layers = [1, 2, 3, 5, 6]`):
 //! `block0` is stage 0, `block1` stage 1, `block2` stage 2, `block3` stages 3 and 4 and `block4`
-//! stage 5 ([`TIMM_STAGES`]). Stage 6, `conv_head`, `bn2`, the classifier and the batch norms'
+//! stage 5 (the official-key table [`TIMM_MOBILENET_TRUNK`]). Stage 6, `conv_head`, `bn2`, the classifier and the batch norms'
 //! `num_batches_tracked` are not in the network and are ignored. Every tensor of the trunk must
 //! come from the file with its shape, so a file that does not fit is an error naming
 //! `train.feature_init`, the file and the timm key; the decoder (`deconv*`, `conv4`) keeps its
@@ -15,17 +15,17 @@
 use std::path::Path;
 
 use burn::store::{
-    ApplyError, ApplyResult, ModuleSnapshot, ModuleStore, PyTorchToBurnAdapter, PytorchStore, SafetensorsStore,
+    ApplyError, ApplyResult, KeyRemapper, ModuleSnapshot, ModuleStore, PyTorchToBurnAdapter, PytorchStore,
+    SafetensorsStore,
 };
+use dgstereo_core::key_notation::{self, load_patterns, save_patterns};
 use dgstereo_core::{Error, Result};
 use dgstereo_encoder::{Encoders, MobileNetPyramid};
 use dgstereo_model::RaftStereo;
+use dgstereo_model::official_keys::TIMM_MOBILENET_TRUNK;
 
 /// The key the errors name.
 const KEY: &str = "train.feature_init";
-
-/// For each of the trunk's groups `block0..block4`, the timm stages it holds, in order.
-pub const TIMM_STAGES: [&[usize]; 5] = [&[0], &[1], &[2], &[3, 4], &[5]];
 
 /// The module paths of the trunk (below the feature network), which must come from the file.
 const TRUNK: [&str; 7] = ["conv_stem.", "bn1.", "block0.", "block1.", "block2.", "block3.", "block4."];
@@ -33,15 +33,8 @@ const TRUNK: [&str; 7] = ["conv_stem.", "bn1.", "block0.", "block1.", "block2.",
 /// The timm key of a path of the feature network's trunk (`block3.1.0.conv_pw.weight` is
 /// `blocks.4.0.conv_pw.weight`); other paths are their own.
 pub fn timm_key(path: &str) -> String {
-    let mut parts = path.splitn(3, '.');
-    let (Some(group), Some(index), Some(rest)) = (parts.next(), parts.next(), parts.next()) else {
-        return path.to_string();
-    };
-    let group = group.strip_prefix("block").and_then(|g| g.parse::<usize>().ok());
-    match (group.and_then(|g| TIMM_STAGES.get(g)), index.parse::<usize>()) {
-        (Some(stages), Ok(i)) if i < stages.len() => format!("blocks.{}.{rest}", stages[i]),
-        _ => path.to_string(),
-    }
+    let remapper = KeyRemapper::from_patterns(save_patterns(TIMM_MOBILENET_TRUNK)).expect("the table compiles");
+    key_notation::apply(&remapper, path)
 }
 
 /// `model` with the timm ImageNet weights of `weights` in its MobileNetV2 trunk, and a notice of
@@ -95,16 +88,7 @@ pub fn load_feature_init(mut model: RaftStereo, weights: &Path) -> Result<(RaftS
 /// Loads the tensors of `weights` (`.safetensors`, else a PyTorch pickle) that the trunk has,
 /// their timm keys renamed to the trunk's paths.
 fn load_trunk(network: &mut MobileNetPyramid, weights: &Path) -> std::result::Result<ApplyResult, String> {
-    let renames: Vec<(String, String)> = TIMM_STAGES
-        .iter()
-        .enumerate()
-        .flat_map(|(group, stages)| {
-            stages
-                .iter()
-                .enumerate()
-                .map(move |(i, stage)| (format!(r"^blocks\.{stage}\."), format!("block{group}.{i}.")))
-        })
-        .collect();
+    let renames = load_patterns(TIMM_MOBILENET_TRUNK);
     if weights.extension().is_some_and(|e| e == "safetensors") {
         let mut store = SafetensorsStore::from_file(weights)
             .with_from_adapter(PyTorchToBurnAdapter)

@@ -23,7 +23,7 @@ use dgstereo_core::{Error, Result};
 
 pub use dgstereo_core::key_notation::Rename;
 use dgstereo_core::key_notation::{self as notation, apply};
-pub use renames::{ENCODER_MODULES, IGEV_STEREO, RAFT_STEREO, ignored_by_loader};
+pub use renames::{ENCODER_MODULES, IGEV_STEREO, RAFT_STEREO, TIMM_MOBILENET_TRUNK, ignored_by_loader};
 
 use dgstereo_prior::depth_anything::checkpoint::KEY_RENAMES as DEPTH_ANYTHING_V2;
 

@@ -64,6 +64,20 @@ pub const IGEV_STEREO: &[Rename] = &[
     Rename::new("^{feature|stem_2|stem_4}.", "^encoder.{feature|stem_2|stem_4}."),
 ];
 
+/// timm's `mobilenetv2_100` (timm 0.5.4) state dict into IGEV-Stereo's feature trunk (paths below
+/// the feature network), for the ImageNet weights a training run starts from: IGEV-Stereo's
+/// `Feature` regroups timm's stages as `layers = [1, 2, 3, 5, 6]`, so `block0` is stage 0,
+/// `block1` stage 1, `block2` stage 2, `block3` stages 3 and 4 and `block4` stage 5; `conv_stem`
+/// and `bn1` keep their names.
+pub const TIMM_MOBILENET_TRUNK: &[Rename] = &[
+    Rename::new("^blocks.0.", "^block0.0."),
+    Rename::new("^blocks.1.", "^block1.0."),
+    Rename::new("^blocks.2.", "^block2.0."),
+    Rename::new("^blocks.3.", "^block3.0."),
+    Rename::new("^blocks.4.", "^block3.1."),
+    Rename::new("^blocks.5.", "^block4.0."),
+];
+
 /// The top-level modules of every encoder layout, which our paths hold under `encoder.<layout>`
 /// and files (official and ours) at their top level.
 pub const ENCODER_MODULES: [&str; 6] = ["fnet", "cnet", "conv2", "feature", "stem_2", "stem_4"];
