@@ -13,8 +13,6 @@ use dgstereo_core::shared::shared_dir_for_test;
 use dgstereo_experiment::{ExperimentConfig, load};
 use dgstereo_loss::{GammaAdjustment, InitialDisparityTerm, LossConfig};
 use dgstereo_train::batch::{TrainingData, to_tensors};
-use dgstereo_train::checkpoint::{list_checkpoints, load_checkpoint};
-use dgstereo_train::run::{RunOptions, checkpoint_dir, train};
 use dgstereo_train::{TrainParts, Trainer};
 
 const DEPTH_ANYTHING: &str = "golden/depth_anything_v2_vits_random.pth";
@@ -42,19 +40,6 @@ fn smoke_parts(weights: &Path, steps: usize) -> TrainParts {
     };
     config.data = tiny.data;
     TrainParts::from(config)
-}
-
-/// Whether every tensor under `prefix` is bit-identical in `a` and `b` (and there is one).
-fn identical_under(a: &[(String, Vec<f32>)], b: &[(String, Vec<f32>)], prefix: &str) -> bool {
-    let pick = |w: &[(String, Vec<f32>)]| -> Vec<(String, Vec<u32>)> {
-        w.iter()
-            .filter(|(n, _)| n.starts_with(prefix))
-            .map(|(n, v)| (n.clone(), v.iter().map(|x| x.to_bits()).collect()))
-            .collect()
-    };
-    let (a, b) = (pick(a), pick(b));
-    assert!(!a.is_empty(), "no parameter under {prefix}");
-    a == b
 }
 
 #[test]
@@ -101,10 +86,10 @@ fn a_step_leaves_the_frozen_network_bit_identical_while_the_rest_moves() {
     assert_eq!(predictions, 3);
     assert!(!initial);
     let after = common::weights(&trainer.inference_model());
-    assert!(identical_under(&before, &after, "monocular.pretrained."));
-    assert!(identical_under(&before, &after, "monocular.depth_head."));
+    assert!(common::identical_under(&before, &after, "monocular.pretrained."));
+    assert!(common::identical_under(&before, &after, "monocular.depth_head."));
     for trains in ["monocular.depth_feat.", "encoder.fnet.", "encoder.cnet.", "update_block.", "scale_update_block."] {
-        assert!(!identical_under(&before, &after, trains), "{trains} did not train");
+        assert!(!common::identical_under(&before, &after, trains), "{trains} did not train");
     }
     // Without `train.frozen` the same step changes the ViT: the check above can fail.
     let unfrozen =
@@ -112,7 +97,7 @@ fn a_step_leaves_the_frozen_network_bit_identical_while_the_rest_moves() {
     let mut trainer = Trainer::new(unfrozen, &device).unwrap();
     let batch = to_tensors(&pairs, trainer.autodiff_device()).unwrap();
     trainer.step_on(&batch, None).unwrap();
-    assert!(!identical_under(&before, &common::weights(&trainer.inference_model()), "monocular.pretrained."));
+    assert!(!common::identical_under(&before, &common::weights(&trainer.inference_model()), "monocular.pretrained."));
 }
 
 #[test]
@@ -128,11 +113,11 @@ fn monocular_init_loads_the_vit_and_head_and_keeps_the_feature_trunk() {
     };
     let (a, b, random) = (seeded(1, Some(&file)), seeded(2, Some(&file)), seeded(1, None));
     // The file decides the ViT and the depth head whatever the seed; the trunk keeps the seed's.
-    assert!(identical_under(&a, &b, "monocular.pretrained."));
-    assert!(identical_under(&a, &b, "monocular.depth_head."));
-    assert!(!identical_under(&a, &random, "monocular.pretrained."));
-    assert!(!identical_under(&a, &b, "monocular.depth_feat."));
-    assert!(identical_under(&a, &random, "monocular.depth_feat."));
+    assert!(common::identical_under(&a, &b, "monocular.pretrained."));
+    assert!(common::identical_under(&a, &b, "monocular.depth_head."));
+    assert!(!common::identical_under(&a, &random, "monocular.pretrained."));
+    assert!(!common::identical_under(&a, &b, "monocular.depth_feat."));
+    assert!(common::identical_under(&a, &random, "monocular.depth_feat."));
 
     // A file that does not fit: the error names the key, the file and what is wrong.
     let error = |init: PathBuf| {
@@ -175,38 +160,11 @@ fn frozen_paths_and_monocular_init_are_checked() {
 fn a_smoke_run_checkpoints_and_resumes_bit_exactly() {
     let Some(shared) = shared_dir_for_test("defom_smoke_resume", DEPTH_ANYTHING) else { return };
     let device = default_device();
-    let mut parts = smoke_parts(&shared.join(DEPTH_ANYTHING), 3);
-    parts.train.checkpoint_every = 1;
+    let parts = smoke_parts(&shared.join(DEPTH_ANYTHING), 3);
     let dir = tempfile::tempdir().unwrap();
-    let (full, split) = (dir.path().join("full"), dir.path().join("split"));
-    let options = |out: &Path, resume: bool, stop_after: Option<usize>| RunOptions {
-        out: out.to_path_buf(),
-        resume,
-        stop_after,
-        progress: None,
-        notice: |_| {},
-        stop: None,
-    };
-    assert!(train(parts.clone(), &device, &options(&full, false, None)).unwrap().finished);
-    let first = train(parts.clone(), &device, &options(&split, false, Some(2))).unwrap();
-    assert_eq!((first.finished, first.steps), (false, 2));
-    // Checkpoints are written atomically: no temporary file is left beside them.
-    let names: Vec<String> = std::fs::read_dir(checkpoint_dir(&split))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    assert!(names.iter().all(|n| n.ends_with(".safetensors")), "{names:?}");
-    assert!(train(parts.clone(), &device, &options(&split, true, None)).unwrap().finished);
-    let newest = |out: &Path| {
-        let (step, path) = list_checkpoints(&checkpoint_dir(out)).unwrap().pop().unwrap();
-        assert_eq!(step, 3);
-        load_checkpoint(parts.clone(), &path, &device).unwrap()
-    };
-    let (a, b) =
-        (common::weights(&newest(&full).inference_model()), common::weights(&newest(&split).inference_model()));
-    assert!(identical_under(&a, &b, ""), "the resumed run differs from the uninterrupted one");
+    let a = common::resumed_run_matches_uninterrupted(parts.clone(), &device, dir.path());
     // The frozen network is still the file's after three steps and a resume.
     let fresh = common::weights(&Trainer::new(parts, &device).unwrap().inference_model());
-    assert!(identical_under(&a, &fresh, "monocular.pretrained."));
-    assert!(!identical_under(&a, &fresh, "encoder.fnet."));
+    assert!(common::identical_under(&a, &fresh, "monocular.pretrained."));
+    assert!(!common::identical_under(&a, &fresh, "encoder.fnet."));
 }

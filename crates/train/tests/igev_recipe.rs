@@ -17,9 +17,7 @@ use dgstereo_experiment::{ExperimentConfig, load};
 use dgstereo_loss::{InitialDisparityTerm, LossConfig};
 use dgstereo_model::seeded::{StateDict, StateTensor};
 use dgstereo_train::batch::{TrainingData, to_tensors};
-use dgstereo_train::checkpoint::{list_checkpoints, load_checkpoint};
 use dgstereo_train::feature_init::load_feature_init;
-use dgstereo_train::run::{RunOptions, checkpoint_dir, train};
 use dgstereo_train::trainer::init_model;
 use dgstereo_train::{TrainParts, Trainer};
 
@@ -120,19 +118,6 @@ fn values_of(weights: &[(String, Vec<f32>)], path: &str) -> Vec<f32> {
     weights.iter().find(|(n, _)| n == path).unwrap_or_else(|| panic!("no parameter {path}")).1.clone()
 }
 
-/// Whether every tensor under `prefix` is bit-identical in `a` and `b` (and there is one).
-fn identical_under(a: &[(String, Vec<f32>)], b: &[(String, Vec<f32>)], prefix: &str) -> bool {
-    let pick = |w: &[(String, Vec<f32>)]| -> Vec<(String, Vec<u32>)> {
-        w.iter()
-            .filter(|(n, _)| n.starts_with(prefix))
-            .map(|(n, v)| (n.clone(), v.iter().map(|x| x.to_bits()).collect()))
-            .collect()
-    };
-    let (a, b) = (pick(a), pick(b));
-    assert!(!a.is_empty(), "no parameter under {prefix}");
-    a == b
-}
-
 #[test]
 fn the_recipe_file_holds_the_official_defaults() {
     let config = recipe();
@@ -202,7 +187,7 @@ fn feature_init_loads_the_timm_trunk_and_keeps_the_decoder() {
     for kept in
         ["encoder.feature.deconv32_16.", "encoder.feature.conv4.", "encoder.stem_2.", "geometry.", "update_block."]
     {
-        assert!(identical_under(&before, &after, kept), "{kept} changed");
+        assert!(common::identical_under(&before, &after, kept), "{kept} changed");
     }
     assert!(notice.contains("train.feature_init") && notice.contains("6 key(s) of the file ignored"), "{notice}");
 }
@@ -268,9 +253,9 @@ fn the_initial_term_alone_trains_the_classifier() {
     for trains in
         ["geometry.classifier.", "superpixel.spx_4.", "superpixel.spx.", "superpixel.spx_gru.", "encoder.feature."]
     {
-        assert!(!identical_under(&before, &after, trains), "{trains} did not train");
+        assert!(!common::identical_under(&before, &after, trains), "{trains} did not train");
     }
-    assert!(identical_under(&before, &after, "encoder.feature.bn1.running_mean"));
+    assert!(common::identical_under(&before, &after, "encoder.feature.bn1.running_mean"));
     let LossConfig::SequenceL1 { gamma, max_disparity, gamma_adjustment, .. } = parts.loss else { unreachable!() };
     let initial_disparity = InitialDisparityTerm::None;
     let without = TrainParts {
@@ -278,9 +263,9 @@ fn the_initial_term_alone_trains_the_classifier() {
         ..parts
     };
     let (before, after, _) = step(without);
-    assert!(identical_under(&before, &after, "geometry.classifier."));
-    assert!(identical_under(&before, &after, "superpixel.spx."));
-    assert!(!identical_under(&before, &after, "superpixel.spx_gru."));
+    assert!(common::identical_under(&before, &after, "geometry.classifier."));
+    assert!(common::identical_under(&before, &after, "superpixel.spx."));
+    assert!(!common::identical_under(&before, &after, "superpixel.spx_gru."));
 }
 
 #[test]
@@ -290,35 +275,8 @@ fn a_smoke_run_checkpoints_and_resumes_bit_exactly() {
     // timm's ImageNet checkpoint is a PyTorch file: a plain state dict, no prefix.
     let file = dir.path().join("mobilenetv2_100_ra.pth");
     official_pth::write_pth(&timm_state(|_, shape| Some(shape)), "", &file);
-    let mut parts = smoke_parts(Some(&file), 3, 2);
-    parts.train.checkpoint_every = 1;
-    let (full, split) = (dir.path().join("full"), dir.path().join("split"));
-    let options = |out: &Path, resume: bool, stop_after: Option<usize>| RunOptions {
-        out: out.to_path_buf(),
-        resume,
-        stop_after,
-        progress: None,
-        notice: |_| {},
-        stop: None,
-    };
-    assert!(train(parts.clone(), &device, &options(&full, false, None)).unwrap().finished);
-    let first = train(parts.clone(), &device, &options(&split, false, Some(2))).unwrap();
-    assert_eq!((first.finished, first.steps), (false, 2));
-    // Checkpoints are written atomically: no temporary file is left beside them.
-    let names: Vec<String> = std::fs::read_dir(checkpoint_dir(&split))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    assert!(names.iter().all(|n| n.ends_with(".safetensors")), "{names:?}");
-    assert!(train(parts.clone(), &device, &options(&split, true, None)).unwrap().finished);
-    let newest = |out: &Path| {
-        let (step, path) = list_checkpoints(&checkpoint_dir(out)).unwrap().pop().unwrap();
-        assert_eq!(step, 3);
-        load_checkpoint(parts.clone(), &path, &device).unwrap()
-    };
-    let (a, b) =
-        (common::weights(&newest(&full).inference_model()), common::weights(&newest(&split).inference_model()));
-    assert!(identical_under(&a, &b, ""), "the resumed run differs from the uninterrupted one");
+    let parts = smoke_parts(Some(&file), 3, 2);
+    let a = common::resumed_run_matches_uninterrupted(parts.clone(), &device, dir.path());
     // Three steps moved the network away from its start, the ImageNet trunk included.
     let trainer = Trainer::new(parts, &device).unwrap();
     assert!(trainer.notices().iter().any(|n| n.starts_with("train.feature_init:")), "{:?}", trainer.notices());
@@ -326,6 +284,6 @@ fn a_smoke_run_checkpoints_and_resumes_bit_exactly() {
     let file_state = timm_state(|_, shape| Some(shape));
     let file_values = &file_state.iter().find(|t| t.key == "blocks.4.1.conv_dw.weight").unwrap().values;
     assert_eq!(&values_of(&fresh, "encoder.feature.block3.1.1.conv_dw.weight"), file_values, "the .pth file loaded");
-    assert!(!identical_under(&a, &fresh, "encoder.feature.block3."));
-    assert!(!identical_under(&a, &fresh, "geometry.classifier."));
+    assert!(!common::identical_under(&a, &fresh, "encoder.feature.block3."));
+    assert!(!common::identical_under(&a, &fresh, "geometry.classifier."));
 }
