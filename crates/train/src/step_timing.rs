@@ -1,8 +1,11 @@
 //! What the parts of a training step took, and random pairs to time steps on.
 
-use burn::tensor::{Device, Distribution, Tensor};
+use burn::tensor::{Device, Tensor};
+use dgstereo_core::tensor::from_vec;
 use dgstereo_loss::LossTarget;
 pub use dgstereo_model::stage_backward::{StageBackward, profile_backward};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 use crate::batch::TensorBatch;
 
@@ -29,12 +32,21 @@ impl StepSeconds {
 /// A batch of `n` random `h x w` pairs (values 0..255) with random ground truth in `0..max
 /// disparity`, every pixel valid, on `device` (the trainer's autodiff device): what a step
 /// costs does not depend on the values.
+///
+/// The values come from a generator of its own (ChaCha8, seed 0), not from the backend's
+/// process-wide one: a draw from that generator while another thread initialises a seeded run
+/// would change that run's initial weights.
 pub fn random_batch(n: usize, [h, w]: [usize; 2], max_disparity: f32, device: &Device) -> TensorBatch {
-    let image = || Tensor::<4>::random([n, 3, h, w], Distribution::Uniform(0.0, 255.0), device);
-    let disparity = Tensor::<4>::random([n, 1, h, w], Distribution::Uniform(0.0, max_disparity as f64), device);
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let mut uniform = |shape: [usize; 4], high: f32| {
+        let values = (0..shape.iter().product()).map(|_| rng.r#gen::<f32>() * high).collect();
+        from_vec(values, shape, device)
+    };
+    let (left, right) = (uniform([n, 3, h, w], 255.0), uniform([n, 3, h, w], 255.0));
+    let disparity = uniform([n, 1, h, w], max_disparity);
     TensorBatch {
-        left: image(),
-        right: image(),
+        left,
+        right,
         target: LossTarget {
             disparity_bilinear: disparity.clone(),
             disparity_nearest: disparity,
