@@ -100,13 +100,6 @@ pub fn guarded<T>(f: impl FnOnce() -> Result<T, Error>) -> Result<T, Error> {
     GUARDED.with(|g| g.set(outer));
     match outcome {
         Ok(result) => result,
-        Err(panic) => {
-            let message = panic
-                .downcast_ref::<String>()
-                .cloned()
-                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-                .unwrap_or_else(|| "unknown panic".into());
-            Err(Error::Internal(message))
-        }
+        Err(panic) => Err(Error::Internal(Error::panic_message(&*panic))),
     }
 }

@@ -116,6 +116,16 @@ pub enum Error {
 }
 
 impl Error {
+    /// The message of a caught panic's payload (`catch_unwind`'s `Err`): the `String` or `&str`
+    /// it was raised with, "unknown panic" otherwise.
+    pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+        payload
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| payload.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_else(|| "unknown panic".into())
+    }
+
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Self::Io { path: path.into(), source }
@@ -266,5 +276,17 @@ mod tests {
         assert!(matches!(e.root(), Error::Fetch { url, .. } if url.ends_with("x.pth")));
         let keyed = Error::config("tau", "must be positive").context("loss").within("model");
         assert!(matches!(keyed.root(), Error::Config(p) if p.key == "model.tau"), "{keyed}");
+    }
+
+    /// A caught panic reads as the text it was raised with, formatted or literal.
+    #[test]
+    fn a_panics_payload_gives_its_message() {
+        let caught = |f: fn()| std::panic::catch_unwind(f).expect_err("it panics");
+        let formatted = caught(|| panic!("row {} of {}", 3, 4));
+        let literal = caught(|| panic!("a literal"));
+        let other = caught(|| std::panic::panic_any(7u8));
+        assert_eq!(Error::panic_message(&*formatted), "row 3 of 4");
+        assert_eq!(Error::panic_message(&*literal), "a literal");
+        assert_eq!(Error::panic_message(&*other), "unknown panic");
     }
 }

@@ -137,12 +137,7 @@ pub fn smoke_test(config: &ExperimentConfig, size: [usize; 2], iters: usize, dev
     // A panic inside the network is a bug of a stage, but `check` should report it as this run's
     // failure and go on with the others.
     catch_unwind(AssertUnwindSafe(run)).unwrap_or_else(|panic| {
-        let message = panic
-            .downcast_ref::<String>()
-            .cloned()
-            .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-            .unwrap_or_else(|| "unknown panic".into());
-        Err(Error::Internal(format!("the forward pass panicked: {message}")))
+        Err(Error::Internal(format!("the forward pass panicked: {}", Error::panic_message(&*panic))))
     })
 }
 

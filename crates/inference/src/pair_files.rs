@@ -66,12 +66,7 @@ impl PairFiles<'_> {
         match catch_unwind(AssertUnwindSafe(|| self.run_unguarded(pair))) {
             Ok(result) => result,
             Err(panic) => {
-                let message = panic
-                    .downcast_ref::<String>()
-                    .cloned()
-                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-                    .unwrap_or_else(|| "unknown panic".into());
-                let internal = Error::Internal(message.replace(['\n', '\r'], " "));
+                let internal = Error::Internal(Error::panic_message(&*panic).replace(['\n', '\r'], " "));
                 Err(internal.context(pair.left.display().to_string()))
             }
         }
