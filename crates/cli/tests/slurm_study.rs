@@ -5,6 +5,8 @@
 //!   byte-identical to a local `ablate`'s.
 //! - A task signalled with `scancel --signal=USR1 --batch` mid-run checkpoints, requeues, resumes
 //!   and ends with a `model.safetensors` byte-identical to an uninterrupted local run's.
+//! - The collecting job does not collect while a task of its array is still queued (as a
+//!   requeued task is, where Slurm's `afterany` counted its first end).
 //! - An invalid run among valid ones submits nothing and names the file and the key.
 
 mod common;
@@ -145,4 +147,44 @@ fn an_invalid_run_submits_nothing_and_names_the_file_and_key() {
     assert!(said.contains("bad.toml") && said.contains("loss.tau"), "{said}");
     assert!(!study.join("slurm").exists(), "nothing is written");
     assert_eq!(jobs(), before, "nothing is submitted");
+}
+
+#[test]
+fn the_collecting_job_waits_while_a_task_of_its_array_is_queued() {
+    let _one = CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(conf) = local_slurm() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let exp = experiment(dir.path(), "pair", 3, "");
+    let study = dir.path().join("study");
+    let o = dgstereo(&conf, &["ablate", exp.to_str().unwrap(), "--out", study.to_str().unwrap(), "--quiet"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let table = study.join("ablation.csv");
+    std::fs::remove_file(&table).unwrap();
+    // A held job stands in for a requeued task waiting for its begin time.
+    let held = slurm(&conf, "sbatch", &["--parsable", "--hold", "--output=/dev/null", "--wrap", "true"]);
+    let held = held.trim().to_string();
+    assert!(!held.is_empty(), "sbatch --hold printed no job id");
+    let script = study.join("slurm/collect.sbatch");
+    std::fs::create_dir_all(script.parent().unwrap()).unwrap();
+    let exe = Path::new(env!("CARGO_BIN_EXE_dgstereo"));
+    std::fs::write(&script, dgstereo_study::slurm::collect_script(exe, &study)).unwrap();
+    let collector = slurm(&conf, "sbatch", &["--parsable", script.to_str().unwrap(), &held]).trim().to_string();
+    let state = || slurm(&conf, "squeue", &["-h", "-j", &collector, "-o", "%T"]).trim().to_string();
+    let started = Instant::now();
+    // Until it runs (or, collecting at once, has already ended).
+    while !matches!(state().as_str(), "RUNNING" | "") {
+        assert!(started.elapsed() < Duration::from_secs(60), "the collecting job did not start in 60 s: {}", state());
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    std::thread::sleep(Duration::from_secs(3));
+    assert!(!table.exists(), "the collecting job wrote the tables while a task was queued");
+    slurm(&conf, "scancel", &[&held]);
+    let started = Instant::now();
+    while !table.is_file() {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the tables were not written in 60 s after the task ended"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
 }

@@ -4,8 +4,8 @@
 //! Design decision: a task is `dgstereo ablate --task I` on the same files and output folder, so
 //! it trains exactly what the local loop trains (with `--resume` semantics: a requeued task
 //! continues from its checkpoint) and stores its scores in its own run folder; the collecting job
-//! (`--collect`, dependency `afterany`) builds the tables from those folders as the local loop
-//! does ([`mod@crate::collect`]). Preemption and a time limit's warning (`--signal=B:USR1@120`) reach
+//! (`--collect`, dependency `afterany`, then waiting while a requeued task is queued) builds the
+//! tables from those folders as the local loop does ([`mod@crate::collect`]). Preemption and a time limit's warning (`--signal=B:USR1@120`) reach
 //! the batch shell, which passes USR1 to the trainer; the trainer finishes its step, writes a
 //! checkpoint and exits 138 (SIGTERM: 143), and the shell turns either into `scontrol requeue`.
 //! The scripts are written into `slurm/` of the study's folder beside the task logs, so a study
@@ -117,10 +117,18 @@ exit "$status"
     )
 }
 
-/// The batch script of the collecting job: `ablate --collect`.
+/// The batch script of the collecting job: `ablate --collect`, once no task of the array job
+/// given as its argument is queued or running.
+///
+/// `afterany` alone is not enough: a task that requeues itself can count as ended for a moment,
+/// and the dependency then lets this job start while the task waits to run again, so the tables
+/// would miss its run. `squeue` on an ended (or purged) array prints nothing.
 pub fn collect_script(exe: &Path, out: &Path) -> String {
     format!(
-        "#!/bin/bash\n#SBATCH --job-name=dgstereo-collect\n#SBATCH --output={}\n{} ablate --collect --out {}\n",
+        "#!/bin/bash\n#SBATCH --job-name=dgstereo-collect\n#SBATCH --output={}\n\
+         # $1: the array job. Wait while any of its tasks is queued or running (a requeued one too).\n\
+         while [ -n \"${{1:-}}\" ] && [ -n \"$(squeue -h -j \"$1\" -o %i 2> /dev/null)\" ]; do sleep 5; done\n\
+         {} ablate --collect --out {}\n",
         out.join("slurm").join("collect.out").display(),
         quoted(&exe.display().to_string()),
         quoted(&out.display().to_string()),
@@ -179,6 +187,7 @@ pub fn submit(runs: &[ResolvedRun], a: &Submission<'_>, submitted: impl FnOnce(&
         args.push("--wait".into());
     }
     args.push(collect.display().to_string());
+    args.push(array.id.clone());
     submitted(&array);
     let collected = sbatch(&args)?;
     if !a.wait && !collected.status.success() {
@@ -216,6 +225,7 @@ mod tests {
         );
         let collect = collect_script(&a.exe, out);
         assert!(collect.ends_with("'/bin/dgstereo' ablate --collect --out '/runs/study'\n"), "{collect}");
+        assert!(collect.contains("squeue -h -j \"$1\""), "{collect}");
         assert_eq!(sbatch_options(&[], Some("--partition=gpu  --time=1:00:00")), ["--partition=gpu", "--time=1:00:00"]);
     }
 }
