@@ -5,7 +5,8 @@
 //! - Exactness: two ranks with a global batch of 2 take the steps one process takes with a batch
 //!   of 2. The ranks are this test binary started again by `mpirun`, running the ignored test
 //!   `rank_of_the_exactness_run`, which writes what rank 0 saw; the numbers compared with are
-//!   the same trainer's in this process.
+//!   the same trainer's in this process. The same for IGEV-Stereo and DEFOM-Stereo with their
+//!   official losses, at smoke size.
 //! - Failure: `mpirun -np 2 dgstereo train` where the sample rank 1 reads at step 2 is corrupt
 //!   ends every rank with an error naming rank 1, well within 30 s, and leaves step 1's
 //!   checkpoint readable; repaired, the run resumes on both ranks and finishes.
@@ -18,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use common::{SYNTHETIC_SOURCE, TINY_VALIDATION, text, tiny_train, write_experiment};
+use common::{SYNTHETIC_SOURCE, TINY_VALIDATION, text, tiny_train, write_experiment, write_zoo_experiment};
 use dgstereo_collective::{Collective, SingleProcess};
 use dgstereo_train::gradient_exchange::{flat_gradients, flat_weights};
 use dgstereo_train::{StepInternals, TrainParts, Trainer};
@@ -103,37 +104,63 @@ fn rank_of_the_exactness_run() {
     }
 }
 
-#[test]
-fn two_ranks_take_the_single_process_steps() {
+/// Two ranks with a global batch of 2 against one process with a batch of 2, three steps of
+/// `experiment`: the same start, the first gradient within 1e-5 and the updates within
+/// `updates_within` (relative L2), every loss within `losses_within` (relative).
+fn two_ranks_take_the_single_process_steps_of(experiment: &Path, updates_within: f64, losses_within: f64) {
     let Some(mpirun) = mpirun() else { return };
-    let dir = tempfile::tempdir().unwrap();
-    let experiment = experiment(dir.path(), SYNTHETIC_SOURCE);
-    let out = dir.path().join("rank0.json");
+    let out = experiment.with_extension("rank0.json");
     let ranks = two_ranks(&mpirun)
         .args(["-x", "DGSTEREO_MPI_TEST_OUT", "-x", "DGSTEREO_MPI_TEST_EXPERIMENT"])
         .arg(std::env::current_exe().unwrap())
         .args(["--exact", "rank_of_the_exactness_run", "--ignored", "--nocapture", "--test-threads=1"])
         .env("DGSTEREO_MPI_TEST_OUT", &out)
-        .env("DGSTEREO_MPI_TEST_EXPERIMENT", &experiment)
+        .env("DGSTEREO_MPI_TEST_EXPERIMENT", experiment)
         .output()
         .unwrap();
     assert!(ranks.status.success(), "{}", text(&ranks));
     let two: Steps = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-    let one = three_steps(&experiment, &SingleProcess);
+    let one = three_steps(experiment, &SingleProcess);
 
     assert_eq!(two.initial, one.initial, "both start from the seed's weights");
     let gradient = relative_l2(&two.gradient, &one.gradient);
     assert!(gradient <= 1e-5, "first step's gradient: relative L2 {gradient:e}");
     let update = |s: &Steps| s.last.iter().zip(&s.initial).map(|(a, b)| a - b).collect::<Vec<f32>>();
     let updates = relative_l2(&update(&two), &update(&one));
-    assert!(updates <= 1e-3, "weight updates after 3 steps: relative L2 {updates:e}");
+    assert!(updates <= updates_within, "weight updates after 3 steps: relative L2 {updates:e}");
     eprintln!(
         "two ranks against one process: gradient {gradient:e}, updates {updates:e}, losses {:?} / {:?}",
         two.losses, one.losses
     );
     for (step, (a, b)) in two.losses.iter().zip(&one.losses).enumerate() {
-        assert!((a - b).abs() <= 1e-6 * b.abs(), "step {}: loss {a} on two ranks, {b} in one process", step + 1);
+        let close = (a - b).abs() <= losses_within * b.abs();
+        assert!(close, "step {}: loss {a} on two ranks, {b} in one process", step + 1);
     }
+}
+
+#[test]
+fn two_ranks_take_the_single_process_steps() {
+    let dir = tempfile::tempdir().unwrap();
+    two_ranks_take_the_single_process_steps_of(&experiment(dir.path(), SYNTHETIC_SOURCE), 1e-3, 1e-6);
+}
+
+#[test]
+fn two_ranks_take_the_single_process_steps_of_igev_stereo() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = format!("{TINY_VALIDATION}{SYNTHETIC_SOURCE}");
+    let experiment = write_zoo_experiment(dir.path(), "igev", "mpi-igev", 3, 2, 11, &data);
+    two_ranks_take_the_single_process_steps_of(&experiment, 1e-3, 1e-6);
+}
+
+#[test]
+fn two_ranks_take_the_single_process_steps_of_defom_stereo() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = format!("{TINY_VALIDATION}{SYNTHETIC_SOURCE}");
+    let experiment = write_zoo_experiment(dir.path(), "defom", "mpi-defom", 3, 2, 11, &data);
+    // The first gradient agrees as closely as RAFT-Stereo's (2.3e-7 measured), but DEFOM-Stereo
+    // amplifies the summation order's last bits from step to step more: losses 3.4e-8 apart
+    // at step 2 and 1.4e-6 at step 3, updates 1.8e-3 after three steps (measured on this test).
+    two_ranks_take_the_single_process_steps_of(&experiment, 5e-3, 1e-5);
 }
 
 /// Eight pairs in a `folder` layout, one folder each (`pair-K/pair-K_left.png`, `_right.png`,

@@ -1,7 +1,8 @@
 //! Studies on Slurm, against a real single-node cluster (`scripts/slurm-local.sh start`; where
 //! Slurm cannot be started the tests fail under `CI=true` and skip with a notice elsewhere).
 //!
-//! - Two tiny runs (a sweep of two seeds) submitted with `--launcher slurm --wait` write tables
+//! - Two tiny runs (a sweep of two seeds), IGEV-Stereo and DEFOM-Stereo (their official losses,
+//!   at smoke size) submitted with `--launcher slurm --wait` write tables and models
 //!   byte-identical to a local `ablate`'s.
 //! - A task signalled with `scancel --signal=USR1 --batch` mid-run checkpoints, requeues, resumes
 //!   and ends with a `model.safetensors` byte-identical to an uninterrupted local run's.
@@ -16,7 +17,7 @@ use std::process::{Command, Output};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use common::{SYNTHETIC_SOURCE, TINY_VALIDATION, text, tiny_train, write_experiment};
+use common::{SYNTHETIC_SOURCE, TINY_VALIDATION, text, tiny_train, write_experiment, write_zoo_experiment};
 
 /// The tests share one cluster of two CPUs: one at a time.
 static CLUSTER: Mutex<()> = Mutex::new(());
@@ -55,19 +56,39 @@ fn experiment(dir: &Path, name: &str, steps: usize, extra: &str) -> PathBuf {
     write_experiment(dir, &format!("{name}.toml"), name, &tiny_train(steps, 1, 3, 1000, ""), &data, extra)
 }
 
+/// Every `model.safetensors` under `dir`, relative to it.
+fn models_under(dir: &Path, root: &Path, found: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            models_under(&path, root, found);
+        } else if path.file_name().is_some_and(|n| n == "model.safetensors") {
+            found.push(path.strip_prefix(root).unwrap().to_path_buf());
+        }
+    }
+}
+
 #[test]
 fn a_slurm_study_writes_the_tables_of_a_local_one() {
     let _one = CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
     let Some(conf) = local_slurm() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let exp = experiment(dir.path(), "pair", 3, "[sweep]\n\"train.seed\" = [1, 2]\n");
+    let data = format!("{SYNTHETIC_SOURCE}{TINY_VALIDATION}");
+    let files = [
+        experiment(dir.path(), "pair", 3, "[sweep]\n\"train.seed\" = [1, 2]\n"),
+        write_zoo_experiment(dir.path(), "igev", "igev", 2, 1, 3, &data),
+        write_zoo_experiment(dir.path(), "defom", "defom", 2, 1, 3, &data),
+    ];
+    let files: Vec<&str> = files.iter().map(|f| f.to_str().unwrap()).collect();
     let (local, cluster) = (dir.path().join("local"), dir.path().join("cluster"));
-    let o = dgstereo(&conf, &["ablate", exp.to_str().unwrap(), "--out", local.to_str().unwrap(), "--quiet"]);
+    let ablate = |out: &Path, more: &[&str]| {
+        let args: Vec<&str> =
+            ["ablate"].into_iter().chain(files.iter().copied()).chain(["--out", out.to_str().unwrap()]).collect();
+        dgstereo(&conf, &[&args[..], more].concat())
+    };
+    let o = ablate(&local, &["--quiet"]);
     assert!(o.status.success(), "{}", text(&o));
-    let o = dgstereo(
-        &conf,
-        &["ablate", exp.to_str().unwrap(), "--out", cluster.to_str().unwrap(), "--launcher", "slurm", "--wait"],
-    );
+    let o = ablate(&cluster, &["--launcher", "slurm", "--wait"]);
     let said = text(&o);
     assert!(o.status.success(), "{said}");
     assert!(said.contains("submitted array job"), "{said}");
@@ -75,7 +96,14 @@ fn a_slurm_study_writes_the_tables_of_a_local_one() {
         let (a, b) = (std::fs::read(local.join(table)).unwrap(), std::fs::read(cluster.join(table)).unwrap());
         assert!(a == b, "{table} differs between the local and the Slurm study:\n{}", String::from_utf8_lossy(&b));
     }
-    assert!(cluster.join("slurm/task-0.out").is_file() && cluster.join("slurm/task-1.out").is_file());
+    let mut models = Vec::new();
+    models_under(&local, &local, &mut models);
+    assert_eq!(models.len(), 4, "a model for each run: {models:?}");
+    for model in &models {
+        let (a, b) = (std::fs::read(local.join(model)).unwrap(), std::fs::read(cluster.join(model)).unwrap());
+        assert!(a == b, "{} differs between the local and the Slurm study", model.display());
+    }
+    assert!((0..4).all(|task| cluster.join(format!("slurm/task-{task}.out")).is_file()));
 }
 
 #[test]

@@ -92,3 +92,34 @@ pub fn assert_verify_refused(out: &Output, file_name: &str) -> String {
     assert!(stderr.contains(file_name), "{stderr}");
     stderr
 }
+
+/// Writes `dir/<name>.toml`: run `name`, the zoo's `model` (`igev`, `defom`) trained with its
+/// official recipe at smoke size: `base` is the zoo's architecture file
+/// (`experiments/zoo/{model}.toml`), `[loss]` and `train.frozen` are read from the recipe file
+/// (`{model}-train.toml`, whose ImageNet and Depth Anything starts and SceneFlow paths do not
+/// exist here), then `steps` steps of batch `batch` ([`tiny_train`], seed `seed`, a checkpoint
+/// at the end) on `data`. DEFOM-Stereo takes one scale iteration of its two.
+pub fn write_zoo_experiment(
+    dir: &Path,
+    model: &str,
+    name: &str,
+    steps: usize,
+    batch: usize,
+    seed: u64,
+    data: &str,
+) -> PathBuf {
+    let zoo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments/zoo");
+    let (architecture, recipe, scale_iters) = match model {
+        "igev" => ("igev.toml", "igev-train.toml", ""),
+        "defom" => ("defom-vits.toml", "defom-vits-train.toml", "[model.updater.scale_update]\niters = 1\n"),
+        _ => panic!("no zoo model {model}"),
+    };
+    let recipe: toml::Table = std::fs::read_to_string(zoo.join(recipe)).unwrap().parse().unwrap();
+    let loss = toml::Table::from_iter([("loss".to_string(), recipe["loss"].clone())]);
+    let frozen = recipe["train"].get("frozen").map(|f| format!("frozen = {f}\n")).unwrap_or_default();
+    let path = dir.join(format!("{name}.toml"));
+    let base = zoo.join(architecture).display().to_string();
+    let train = tiny_train(steps, batch, seed, steps, &frozen);
+    std::fs::write(&path, format!("base = {base:?}\nname = \"{name}\"\n{scale_iters}{loss}{train}{data}")).unwrap();
+    path
+}
