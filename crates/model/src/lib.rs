@@ -43,6 +43,7 @@ pub use config::{EncoderConfig, ModelConfig};
 pub use inference::{StereoModel, TrainingDisparities, padded_disparities, padded_training_disparities};
 pub use initial_disparity::InitialDisparity;
 pub use network::{FlowOutput, ForwardOptions, Probe, RaftStereo, Trace};
+pub use stored_config::name_the_encoder_layout;
 /// The stage crates, re-exported so benchmarks and tools can drive single stages of a model
 /// (their traits included) through this crate alone.
 pub use {

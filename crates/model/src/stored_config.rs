@@ -4,8 +4,10 @@
 //! builds the network from it. The encoder layout is one key, `encoder.layout`; checkpoints that
 //! name it by the two keys `encoder.shared_backbone` (a bool) and `encoder.feature_network`
 //! (`residual` or `mobilenet-pyramid`), the bundled weights among them, name the same three
-//! layouts, and [`ModelConfig::from_checkpoint_json`] reads them as the layout they name. An
-//! experiment file has no such reading: there either key is an unknown key.
+//! layouts, and [`ModelConfig::from_checkpoint_json`] reads them as the layout they name. A run
+//! folder's `config.toml` written before the rename is read the same way when a run resumes
+//! ([`name_the_encoder_layout`]). An experiment file has no such reading: there either key is an
+//! unknown key.
 
 use serde::de::Error as _;
 use serde_json::{Map, Value};
@@ -21,10 +23,21 @@ impl ModelConfig {
     /// MobileNetV2 pyramid).
     pub fn from_checkpoint_json(json: &str) -> serde_json::Result<Self> {
         let mut value: Value = serde_json::from_str(json)?;
-        if let Some(encoder) = value.get_mut("encoder").and_then(Value::as_object_mut) {
-            name_the_layout(encoder)?;
-        }
+        name_the_encoder_layout(&mut value)?;
         serde_json::from_value(value)
+    }
+}
+
+/// Replaces `encoder.shared_backbone` and `encoder.feature_network` of a stored model
+/// configuration (a checkpoint's, or a run folder's `config.toml` read as a value) by the
+/// `encoder.layout` they name; a configuration without them is left as it is.
+///
+/// # Errors
+/// The encoder names its layout by both forms, or by a pair that is no layout.
+pub fn name_the_encoder_layout(model: &mut Value) -> serde_json::Result<()> {
+    match model.get_mut("encoder").and_then(Value::as_object_mut) {
+        Some(encoder) => name_the_layout(encoder),
+        None => Ok(()),
     }
 }
 

@@ -50,10 +50,26 @@ fn training_leaves(text: &str, what: &str) -> Result<Vec<(String, Value)>> {
 /// keys added since), or `table` as it is where it is not a configuration the schema reads today
 /// (a key renamed or removed since): its keys are then compared as written.
 fn with_defaults(table: toml::Table) -> toml::Table {
+    let table = with_layout_named(table);
     let Ok(config) = ExperimentConfig::deserialize(Value::Table(table.clone())) else {
         return table;
     };
     toml::from_str(&config.to_toml()).unwrap_or(table)
+}
+
+/// `table` with its encoder layout named by `model.encoder.layout` where it was written before
+/// that key replaced `shared_backbone` and `feature_network` (a run trained then), as a
+/// checkpoint's stored configuration is read ([`dgstereo_model::name_the_encoder_layout`]); a
+/// table whose keys name no layout stays as it is, and so differs.
+fn with_layout_named(mut table: toml::Table) -> toml::Table {
+    let Some(model) = table.get_mut("model") else { return table };
+    let Ok(mut json) = serde_json::to_value(&*model) else { return table };
+    if dgstereo_model::name_the_encoder_layout(&mut json).is_ok()
+        && let Ok(named) = Value::try_from(json)
+    {
+        *model = named;
+    }
+    table
 }
 
 /// The training keys that differ between the configuration a run was trained with (`run`) and
@@ -177,5 +193,27 @@ root = "/x"
         assert!(d.iter().all(|k| k.starts_with("model.initial_disparity.")), "{d:?}");
         let kind = "model.initial_disparity.kind: \"scaled-inverse-depth\" here, \"zero\" in the run";
         assert!(d.iter().any(|k| k == kind), "{d:?}");
+    }
+
+    /// A run trained before `encoder.layout` named the layout by `shared_backbone` and
+    /// `feature_network`; it is the same run as a configuration whose layout they name.
+    #[test]
+    fn a_run_stored_under_the_two_layout_keys_is_the_run_its_layout_names() {
+        let here: ExperimentConfig =
+            toml::from_str("name = \"a\"\n[model.encoder]\nlayout = \"shared-backbone\"").unwrap();
+        let mut table: toml::Table = toml::from_str(&here.to_toml()).unwrap();
+        let encoder = table["model"].get_mut("encoder").and_then(Value::as_table_mut).unwrap();
+        assert!(encoder.remove("layout").is_some());
+        encoder.insert("shared_backbone".into(), Value::Boolean(true));
+        encoder.insert("feature_network".into(), Value::String("residual".into()));
+        let old = toml::to_string(&table).unwrap();
+        assert!(training_differences(&old, &here.to_toml()).unwrap().is_empty());
+        let separate = here.to_toml().replace("layout = \"shared-backbone\"", "layout = \"separate\"");
+        let d = training_differences(&old, &separate).unwrap();
+        assert_eq!(d, vec!["model.encoder.layout: \"separate\" here, \"shared-backbone\" in the run"]);
+        // A pair that names no layout is compared as written.
+        let none = old.replace("feature_network = \"residual\"", "feature_network = \"mobilenet-pyramid\"");
+        let d = training_differences(&none, &here.to_toml()).unwrap();
+        assert!(d.iter().any(|k| k.starts_with("model.encoder.shared_backbone")), "{d:?}");
     }
 }
