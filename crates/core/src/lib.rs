@@ -20,6 +20,7 @@ pub mod key_notation;
 pub mod layers;
 pub mod padding;
 pub mod probe;
+pub mod random_values;
 pub mod serde_names;
 pub mod shared;
 pub mod tensor;

@@ -12,7 +12,8 @@
 
 use std::time::Instant;
 
-use burn::tensor::{Distribution, Tensor};
+use burn::tensor::Tensor;
+use dgstereo_core::random_values::RandomValues;
 use dgstereo_core::timing::process_cpu_seconds;
 use dgstereo_core::{DepthPrior, InputPadder, Result};
 use dgstereo_costvolume::CorrelationImplementation;
@@ -71,10 +72,15 @@ impl<'a> TimedInference<'a> {
         provider: Option<&'a Prior>,
     ) -> Self {
         let ([h, w], device) = (size, &model.device);
-        let image = || Tensor::<4>::random([1, 3, h, w], Distribution::Uniform(0.0, 255.0), device);
-        let map = || Tensor::<4>::random([1, 1, h, w], Distribution::Uniform(0.1, 1.0), device);
-        let given_prior = model.config.needs_prior().then(|| DepthPrior { left: map(), right: map() });
-        let (left, right) = (image(), image());
+        // From a generator of their own: the backend's is process-wide, and a draw from it
+        // while another thread initialises a seeded run would change that run's weights.
+        let mut random = RandomValues::new(0);
+        let (left, right) =
+            (random.uniform([1, 3, h, w], [0.0, 255.0], device), random.uniform([1, 3, h, w], [0.0, 255.0], device));
+        let given_prior = model.config.needs_prior().then(|| DepthPrior {
+            left: random.uniform([1, 1, h, w], [0.1, 1.0], device),
+            right: random.uniform([1, 1, h, w], [0.1, 1.0], device),
+        });
         Self { model, size, iters, implementation, products, provider, left, right, given_prior }
     }
 

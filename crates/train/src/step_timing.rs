@@ -1,11 +1,9 @@
 //! What the parts of a training step took, and random pairs to time steps on.
 
 use burn::tensor::{Device, Tensor};
-use dgstereo_core::tensor::from_vec;
+use dgstereo_core::random_values::RandomValues;
 use dgstereo_loss::LossTarget;
 pub use dgstereo_model::stage_backward::{StageBackward, profile_backward};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 
 use crate::batch::TensorBatch;
 
@@ -33,17 +31,14 @@ impl StepSeconds {
 /// disparity`, every pixel valid, on `device` (the trainer's autodiff device): what a step
 /// costs does not depend on the values.
 ///
-/// The values come from a generator of its own (ChaCha8, seed 0), not from the backend's
-/// process-wide one: a draw from that generator while another thread initialises a seeded run
-/// would change that run's initial weights.
+/// The values come from a generator of their own ([`RandomValues`], seed 0), not from the
+/// backend's process-wide one: a draw from that generator while another thread initialises a
+/// seeded run would change that run's initial weights.
 pub fn random_batch(n: usize, [h, w]: [usize; 2], max_disparity: f32, device: &Device) -> TensorBatch {
-    let mut rng = ChaCha8Rng::seed_from_u64(0);
-    let mut uniform = |shape: [usize; 4], high: f32| {
-        let values = (0..shape.iter().product()).map(|_| rng.r#gen::<f32>() * high).collect();
-        from_vec(values, shape, device)
-    };
-    let (left, right) = (uniform([n, 3, h, w], 255.0), uniform([n, 3, h, w], 255.0));
-    let disparity = uniform([n, 1, h, w], max_disparity);
+    let mut random = RandomValues::new(0);
+    let left = random.uniform([n, 3, h, w], [0.0, 255.0], device);
+    let right = random.uniform([n, 3, h, w], [0.0, 255.0], device);
+    let disparity = random.uniform([n, 1, h, w], [0.0, max_disparity], device);
     TensorBatch {
         left,
         right,
