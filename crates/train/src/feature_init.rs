@@ -6,8 +6,8 @@
 //! ImageNet checkpoint `mobilenetv2_100_ra-b33bc2c4.pth`, or `.safetensors`): `conv_stem`, `bn1`
 //! and `blocks.{stage}.{block}`. IGEV-Stereo regroups timm's stages (`layers = [1, 2, 3, 5, 6]`):
 //! `block0` is stage 0, `block1` stage 1, `block2` stage 2, `block3` stages 3 and 4 and `block4`
-//! stage 5 (the official-key table [`TIMM_MOBILENET_TRUNK`]). Stage 6, `conv_head`, `bn2`, the classifier and the batch norms'
-//! `num_batches_tracked` are not in the network and are ignored. Every tensor of the trunk must
+//! stage 5 (the official-key table [`TIMM_MOBILENET_TRUNK`]). Stage 6, `conv_head`, `bn2`, the
+//! classifier and the batch norms' `num_batches_tracked` are not in the network and are ignored. Every tensor of the trunk must
 //! come from the file with its shape, so a file that does not fit is an error naming
 //! `train.feature_init`, the file and the timm key; the decoder (`deconv*`, `conv4`) keeps its
 //! initialisation, as in the official code.
