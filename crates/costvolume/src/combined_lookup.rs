@@ -14,9 +14,11 @@
 //! stores the pooled right features and takes the dot products at each lookup. Pooling the
 //! volume along the right view's columns and pooling the right features are the same sums (the
 //! correlation is linear in the right features), so both give the reference's lookup. The
-//! geometry half has no such form: it is the 3D network's output, stored.
+//! geometry half has no such form: it is the 3D network's output, stored, and sampled by the
+//! kernels crate's [`GeometryPyramid`] (a hand-written loop in CPU inference).
 
-use burn::tensor::{Int, Tensor};
+use burn::tensor::Tensor;
+use dgstereo_kernels::GeometryPyramid;
 
 use crate::{CorrelationImplementation, CorrelationPyramid, OnTheFlyCorrelation};
 
@@ -30,16 +32,12 @@ enum AllPairs {
 }
 
 /// The two pyramids of one pass.
-///
-/// # Shapes
-/// - `geometry[i]`: `[N·H·W, C, D / 2^i]`
 #[derive(Debug, Clone)]
 pub struct CombinedGeometryVolume {
-    geometry: Vec<Tensor<3>>,
+    /// Boxed: its host storage holds a device, which would make every `Correlation` that large.
+    geometry: Box<GeometryPyramid>,
     correlation: AllPairs,
     radius: usize,
-    /// `[N, H, W]` of the grid.
-    grid: [usize; 3],
 }
 
 impl CombinedGeometryVolume {
@@ -57,17 +55,8 @@ impl CombinedGeometryVolume {
         radius: usize,
         implementation: CorrelationImplementation,
     ) -> Self {
-        let [n, g, d, h, w] = volume.dims();
         let c = match_left.dims()[1];
-        let mut level = volume.permute([0, 3, 4, 1, 2]).reshape([n * h * w, g, d]);
-        let mut geometry = Vec::with_capacity(levels);
-        for _ in 1..levels {
-            let half = level.dims()[2] / 2;
-            let pooled = level.clone().narrow(2, 0, 2 * half).reshape([n * h * w, g, half, 2]).mean_dim(3);
-            geometry.push(level);
-            level = pooled.squeeze_dim::<3>(3);
-        }
-        geometry.push(level);
+        let geometry = Box::new(GeometryPyramid::new(volume, levels));
         let scaled = match_left.mul_scalar((c as f32).sqrt());
         let correlation = match implementation {
             CorrelationImplementation::Reg => {
@@ -77,12 +66,12 @@ impl CombinedGeometryVolume {
                 AllPairs::OnTheFly(OnTheFlyCorrelation::new(scaled, match_right, levels, radius))
             }
         };
-        Self { geometry, correlation, radius, grid: [n, h, w] }
+        Self { geometry, correlation, radius }
     }
 
     /// Channels of a lookup: per level `(G + 1) · (2r + 1)`.
     pub fn channels(&self) -> usize {
-        self.geometry.iter().map(|v| (v.dims()[1] + 1) * (2 * self.radius + 1)).sum()
+        self.geometry.levels() * (self.geometry.groups() + 1) * (2 * self.radius + 1)
     }
 
     /// The lookup at the disparity `disparity` of each pixel at column `coords0`: per level the
@@ -91,48 +80,20 @@ impl CombinedGeometryVolume {
     /// # Shapes
     /// - `coords0`, `disparity`: `[N, 1, H, W]`; output `[N, levels · (G + 1) · (2r + 1), H, W]`
     pub fn lookup(&self, coords0: Tensor<4>, disparity: Tensor<4>) -> Tensor<4> {
-        let [n, h, w] = self.grid;
         let taps = 2 * self.radius + 1;
-        let levels = self.geometry.len();
+        let levels = self.geometry.levels();
         let at = coords0 - disparity.clone();
         let correlation = match &self.correlation {
             AllPairs::Stored(pyramid) => pyramid.lookup_levels(at, levels, self.radius),
             AllPairs::OnTheFly(on_the_fly) => on_the_fly.lookup_levels(at, levels, self.radius),
         };
-        let flat = disparity.reshape([n * h * w, 1]);
         let mut parts = Vec::with_capacity(2 * levels);
-        for (i, volume) in self.geometry.iter().enumerate() {
-            let at = flat.clone().div_scalar((1u32 << i) as f32);
-            let sampled = sample_linear(volume, at, self.radius);
-            let g = volume.dims()[1];
-            parts.push(sampled.reshape([n, h, w, g * taps]).permute([0, 3, 1, 2]));
+        for (i, sampled) in self.geometry.lookup(disparity, self.radius).into_iter().enumerate() {
+            parts.push(sampled);
             parts.push(correlation.clone().narrow(1, i * taps, taps));
         }
         Tensor::cat(parts, 1)
     }
-}
-
-/// Linear interpolation of each row of `volume` at `at + dx`, `dx = -radius..=radius`, zero
-/// outside the row.
-///
-/// # Shapes
-/// - `volume`: `[M, G, D]`; `at`: `[M, 1]`; output `[M, G, 2·radius + 1]`
-fn sample_linear(volume: &Tensor<3>, at: Tensor<2>, radius: usize) -> Tensor<3> {
-    let [m, g, d] = volume.dims();
-    let taps = 2 * radius + 1;
-    let device = volume.device();
-    let offsets = Tensor::<1, Int>::arange(0..taps as i64, &device).float().sub_scalar(radius as f32);
-    let x = at + offsets.reshape([1, taps]);
-    let x0 = x.clone().floor();
-    let w1 = x - x0.clone();
-    let w0 = w1.clone().neg().add_scalar(1.0);
-    let tap = |corner: Tensor<2>, weight: Tensor<2>| {
-        let inside = corner.clone().greater_equal_elem(0.0).bool_and(corner.clone().lower_equal_elem((d - 1) as f32));
-        let weight = weight * inside.float();
-        let index = corner.clamp(0.0, (d - 1) as f32).int().reshape([m, 1, taps]).expand([m, g, taps]);
-        volume.clone().gather(2, index) * weight.reshape([m, 1, taps])
-    };
-    tap(x0.clone(), w0) + tap(x0.add_scalar(1.0), w1)
 }
 
 #[cfg(test)]
@@ -142,25 +103,6 @@ mod tests {
     use dgstereo_core::tensor::{from_vec, to_vec};
 
     use super::*;
-
-    /// A geometry row sampled between its entries is their linear blend, and past either end
-    /// it fades to zero over one step.
-    #[test]
-    fn the_geometry_samples_interpolate_with_zeros_outside() {
-        let device = default_device();
-        let row: Vec<f32> = (0..6).map(|i| (i * i) as f32).collect();
-        let volume = from_vec(row.clone(), [1, 1, 6], &device);
-        let sampled = to_vec(sample_linear(&volume, from_vec(vec![1.25], [1, 1], &device), 2));
-        let expected = |x: f32| {
-            let x0 = x.floor();
-            let v = |i: f32| if (0.0..6.0).contains(&i) { row[i as usize] } else { 0.0 };
-            v(x0) * (1.0 - (x - x0)) + v(x0 + 1.0) * (x - x0)
-        };
-        for (k, got) in sampled.iter().enumerate() {
-            let x = 1.25 + k as f32 - 2.0;
-            assert!((got - expected(x)).abs() < 1e-6, "tap {k}: {got} vs {}", expected(x));
-        }
-    }
 
     /// The lookup holds, per level, the geometry samples then the correlation samples; the
     /// correlation is the plain dot product of the match features (not divided by `sqrt(C)`).

@@ -46,7 +46,7 @@ pub use ops::conv::{
 pub use ops::deform::deform_conv2d_forward;
 pub use ops::gru::conv_gru_step;
 pub use ops::linear::linear_forward;
-pub use ops::lookup::{CorrelationPyramid, OnTheFlyCorrelation, all_pairs};
+pub use ops::lookup::{CorrelationPyramid, GeometryPyramid, OnTheFlyCorrelation, all_pairs};
 pub use ops::norm::{Normalization, add_relu, affine_planes, normalize_planes, rectify};
 pub use ops::resample::{average_pool_half, linear_matrix, linear_weights, resize_bilinear};
 pub use ops::upsample::convex_upsample;

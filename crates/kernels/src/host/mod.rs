@@ -10,6 +10,7 @@ pub(crate) mod deform;
 pub(crate) mod deform_backward;
 pub(crate) mod few_outputs;
 pub(crate) mod fresh;
+pub(crate) mod geometry_lookup;
 pub(crate) mod gru;
 pub(crate) mod gru_backward;
 pub(crate) mod linear;
