@@ -201,7 +201,7 @@ fn the_collecting_job_waits_while_a_task_of_its_array_is_queued() {
     let started = Instant::now();
     // Until it runs (or, collecting at once, has already ended).
     while !matches!(state().as_str(), "RUNNING" | "") {
-        assert!(started.elapsed() < Duration::from_secs(60), "the collecting job did not start in 60 s: {}", state());
+        assert!(started.elapsed() < Duration::from_secs(180), "the collecting job did not start in 180 s: {}", state());
         std::thread::sleep(Duration::from_millis(200));
     }
     std::thread::sleep(Duration::from_secs(3));
@@ -210,8 +210,8 @@ fn the_collecting_job_waits_while_a_task_of_its_array_is_queued() {
     let started = Instant::now();
     while !table.is_file() {
         assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "the tables were not written in 60 s after the task ended"
+            started.elapsed() < Duration::from_secs(180),
+            "the tables were not written in 180 s after the task ended"
         );
         std::thread::sleep(Duration::from_millis(200));
     }

@@ -124,10 +124,13 @@ exit "$status"
 /// and the dependency then lets this job start while the task waits to run again, so the tables
 /// would miss its run. `squeue` on an ended (or purged) array prints nothing.
 pub fn collect_script(exe: &Path, out: &Path) -> String {
+    // Slurm's states of a job that has not ended (squeue's short names).
+    const ACTIVE: &str = "PD,R,S,CG,CF,RQ,RH,RF,SI,SO,ST";
     format!(
         "#!/bin/bash\n#SBATCH --job-name=dgstereo-collect\n#SBATCH --output={}\n\
-         # $1: the array job. Wait while any of its tasks is queued or running (a requeued one too).\n\
-         while [ -n \"${{1:-}}\" ] && [ -n \"$(squeue -h -j \"$1\" -o %i 2> /dev/null)\" ]; do sleep 5; done\n\
+         # $1: the array job. Wait while any of its tasks is queued or running (a requeued one too;\n\
+         # the states are named, as some versions list ended jobs too when given their ids).\n\
+         while [ -n \"${{1:-}}\" ] && [ -n \"$(squeue -h -j \"$1\" -t {ACTIVE} -o %i 2> /dev/null)\" ]; do sleep 5; done\n\
          {} ablate --collect --out {}\n",
         out.join("slurm").join("collect.out").display(),
         quoted(&exe.display().to_string()),
