@@ -1,8 +1,8 @@
 //! Random tensors drawn from a generator of their own.
 //!
 //! Design decision: burn's `Tensor::random` draws from the backend's generator, which is
-//! process-wide on the CPU, and a seeded initialisation ([`burn::prelude::Backend::seed`], then
-//! every parameter drawn) only gives its weights when nothing else draws in between. Tensors
+//! process-wide on the CPU, and a seeded initialisation (`Device::seed`, then every parameter
+//! drawn) only gives its weights when nothing else draws in between. Tensors
 //! that are only inputs (the images `bench` times, the batch `bench --train` steps on) come from
 //! [`RandomValues`] instead, a ChaCha8 generator owned by the caller, so timing one model while
 //! another thread initialises a seeded run changes neither.
