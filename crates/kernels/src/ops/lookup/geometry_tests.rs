@@ -7,14 +7,13 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};
 
 use super::GeometryPyramid;
+use super::tests::features;
 use crate::dispatch::{Path, with_path};
 
-/// Deterministic pseudo-random volume `[N, G, D, H, W]` of unit scale.
-fn volume(dims: [usize; 5], seed: u64) -> Tensor<5> {
-    let count = dims.iter().product::<usize>();
-    let v: Vec<f32> =
-        (0..count).map(|i| (((i as u64 + 1) * 2654435761 + seed * 97) % 1000) as f32 / 500.0 - 1.0).collect();
-    from_vec(v, dims, &Device::flex())
+/// Deterministic pseudo-random volume `[N, G, D, H, W]` of unit scale: the lookup tests'
+/// features, regrouped.
+fn volume([n, g, d, h, w]: [usize; 5], seed: u64) -> Tensor<5> {
+    features(n * g, d, h, w, seed).reshape([n, g, d, h, w])
 }
 
 /// `[N, 1, H, W]` disparities from `low` up to `low + span`, fractional.

@@ -23,7 +23,7 @@ fn on_the_fly(pinned: Path, f1: Tensor<4>, f2: Tensor<4>, levels: usize, radius:
 }
 
 /// Deterministic pseudo-random features of unit scale.
-fn features(n: usize, c: usize, h: usize, w: usize, seed: u64) -> Tensor<4> {
+pub(super) fn features(n: usize, c: usize, h: usize, w: usize, seed: u64) -> Tensor<4> {
     let v: Vec<f32> =
         (0..n * c * h * w).map(|i| (((i as u64 + 1) * 2654435761 + seed * 97) % 1000) as f32 / 500.0 - 1.0).collect();
     from_vec(v, [n, c, h, w], &Device::flex())
